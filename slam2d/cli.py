@@ -1,0 +1,99 @@
+"""The slam2d command line: run, ablate, dump-config, frontends.
+
+Heavy imports happen inside the commands so that ``slam2d --help`` is instant.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from slam2d.errors import InputError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, help="2D laser SLAM research framework.")
+
+CONFIG_ARG = typer.Argument(None, help="experiment YAML; omitted: the built-in simulator default")
+SET_OPT = typer.Option([], "--set", "-s", help="override a config key, e.g. --set frontend.name=odometry")
+QUIET_OPT = typer.Option(False, "--quiet", "-q", help="no progress bars, warnings and errors only")
+
+
+def _setup_logging(quiet: bool) -> None:
+    from rich.logging import RichHandler
+
+    logger = logging.getLogger("slam2d")
+    logger.handlers[:] = [h for h in logger.handlers if not isinstance(h, RichHandler)]
+    handler = RichHandler(show_path=False, show_time=False, level=logging.WARNING if quiet else logging.INFO)
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+
+
+def _fail(err: Exception) -> None:
+    typer.secho(f"error: {err}", fg=typer.colors.RED, err=True)
+    raise typer.Exit(2)
+
+
+@app.command()
+def run(config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, quiet: bool = QUIET_OPT) -> None:
+    """Run one experiment; print the results folder."""
+    from slam2d import config as config_mod
+    from slam2d.experiment import run_experiment
+
+    _setup_logging(quiet)
+    try:
+        cfg = config_mod.load(config, set_)
+        folder = run_experiment(cfg, quiet=quiet)
+    except InputError as err:
+        _fail(err)
+    typer.echo(f"results: {folder}")
+
+
+@app.command()
+def ablate(
+    sweep: Path = typer.Argument(..., help="sweep YAML: base config + grid or list of overrides"),
+    workers: Optional[int] = typer.Option(None, "--workers", "-j", help="parallel processes (default: sweep's)"),
+    executor: str = typer.Option("local", help="local (processes) or ray"),
+    quiet: bool = QUIET_OPT,
+) -> None:
+    """Run every variant of a sweep in parallel; write one table (Markdown + CSV)."""
+    from slam2d.experiment import run_sweep
+
+    _setup_logging(quiet)
+    try:
+        folder, rows = run_sweep(sweep, workers=workers, executor=executor, quiet=quiet)
+    except InputError as err:
+        _fail(err)
+    if not quiet:
+        typer.echo((folder / "table.md").read_text())
+    failed = [r["variant"] for r in rows if r["error"]]
+    typer.echo(f"table: {folder / 'table.md'} and {folder / 'table.csv'}")
+    if failed:
+        typer.secho(f"{len(failed)} of {len(rows)} variants failed: {', '.join(failed)}", fg="red", err=True)
+        raise typer.Exit(1)
+
+
+@app.command("dump-config")
+def dump_config(config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT) -> None:
+    """Print the fully resolved config (defaults included) as YAML."""
+    from slam2d import config as config_mod
+
+    try:
+        typer.echo(config_mod.dump(config_mod.load(config, set_)), nl=False)
+    except InputError as err:
+        _fail(err)
+
+
+@app.command()
+def frontends() -> None:
+    """List the registered frontends."""
+    from slam2d.frontends import available_frontends
+
+    for name in available_frontends():
+        typer.echo(name)
+
+
+if __name__ == "__main__":
+    app()

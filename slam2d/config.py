@@ -1,0 +1,186 @@
+"""Experiment configuration: pydantic models for every section, YAML in and out.
+
+Unknown keys are an error naming the key. ``apply_overrides`` implements the
+CLI's ``--set a.b=c``; values are parsed as YAML (``--set mapping.resolution=0.1``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from slam2d.errors import InputError
+
+
+class Section(BaseModel):
+    """Base of all config sections: unknown keys are rejected."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class LaserModel(Section):
+    """Simulated laser: beams spread evenly over the field of view."""
+
+    beams: int = Field(360, gt=0)
+    fov_deg: float = Field(360.0, gt=0, le=360)
+    range_min: float = Field(0.05, ge=0)
+    range_max: float = Field(12.0, gt=0)
+    range_noise: float = Field(0.01, ge=0, description="Gaussian range noise std, m")
+    dropout: float = Field(0.01, ge=0, le=1, description="probability a beam returns nothing")
+
+
+class OdometryNoise(Section):
+    """Odometry motion-model noise (Probabilistic Robotics, sample_motion_model_odometry).
+
+    alpha1: rotation from rotation, alpha2: rotation from translation,
+    alpha3: translation from translation, alpha4: translation from rotation.
+    """
+
+    alpha1: float = Field(0.05, ge=0)
+    alpha2: float = Field(0.01, ge=0)
+    alpha3: float = Field(0.05, ge=0)
+    alpha4: float = Field(0.01, ge=0)
+
+
+class SimulatorConfig(Section):
+    """The embedded default dataset: a world, a scripted route, a laser, odometry."""
+
+    world: str = Field("office", description="built-in world name, or path to an occupancy PNG")
+    resolution: float = Field(0.05, gt=0, description="m per pixel of a PNG world")
+    route: list[tuple[float, float]] | None = Field(
+        None, description="waypoints (x, y) in m; None takes the world's scripted route"
+    )
+    speed: float = Field(0.5, gt=0, description="m/s")
+    turn_rate: float = Field(1.0, gt=0, description="rad/s")
+    scan_rate: float = Field(5.0, gt=0, description="Hz")
+    laser: LaserModel = LaserModel()
+    odometry: OdometryNoise = OdometryNoise()
+
+
+class DatasetConfig(Section):
+    kind: Literal["simulator", "rosbag", "carmen"] = "simulator"
+    path: str | None = Field(None, description="log file; relative paths resolve against SLAM2D_DATA")
+    scan_topic: str | None = Field(None, description="rosbag LaserScan topic (default: the only one, or /scan)")
+    odom_topic: str | None = Field(None, description="rosbag Odometry topic (default: the only one, or /odom)")
+    max_scans: int | None = Field(None, gt=0, description="stop after this many scans")
+    simulator: SimulatorConfig = SimulatorConfig()
+
+
+class FrontendConfig(Section):
+    name: str = Field("odometry", description="registered frontend name")
+
+
+class BackendConfig(Section):
+    name: Literal["none"] = Field("none", description="'none' keeps the frontend's poses as they are")
+
+
+class MappingConfig(Section):
+    """Log-odds occupancy grid."""
+
+    resolution: float = Field(0.05, gt=0, description="m per cell")
+    log_odds_hit: float = Field(0.85, gt=0)
+    log_odds_miss: float = Field(-0.4, lt=0)
+    log_odds_min: float = Field(-2.0, lt=0)
+    log_odds_max: float = Field(3.5, gt=0)
+    max_range: float | None = Field(None, gt=0, description="ignore hits farther than this, m")
+    every_nth_scan: int = Field(1, gt=0, description="integrate every n-th scan")
+    occupied_thresh: float = Field(0.65, gt=0, lt=1)
+    free_thresh: float = Field(0.196, gt=0, lt=1)
+
+
+class EvaluationConfig(Section):
+    relations: str | None = Field(None, description="relations file (Kümmerle 2009); relative to SLAM2D_DATA")
+    relation_tolerance: float = Field(1e-3, gt=0, description="s; a relation stamp must match a scan this closely")
+    align: bool = Field(True, description="align the estimate to ground truth (SE(2)) before ATE")
+    rpe_delta: float = Field(1.0, gt=0, description="RPE pair spacing, m travelled")
+
+
+class OutputConfig(Section):
+    root: str = Field("results", description="results folders are created under this directory")
+    figures: bool = True
+
+
+class ExperimentConfig(Section):
+    name: str = "sim"
+    seed: int = 0
+    dataset: DatasetConfig = DatasetConfig()
+    frontend: FrontendConfig = FrontendConfig()
+    backend: BackendConfig = BackendConfig()
+    mapping: MappingConfig = MappingConfig()
+    evaluation: EvaluationConfig = EvaluationConfig()
+    output: OutputConfig = OutputConfig()
+
+
+def _format_error(err: ValidationError, source: str) -> InputError:
+    e = err.errors()[0]
+    key = ".".join(str(p) for p in e["loc"]) or "<root>"
+    if e["type"] == "extra_forbidden":
+        return InputError(source, f"unknown key '{key}'")
+    return InputError(source, f"key '{key}': {e['msg']} (got {e.get('input')!r})")
+
+
+def validate(data: dict[str, Any], source: str = "config") -> ExperimentConfig:
+    """Build an ExperimentConfig from a plain dict, with one-line errors."""
+    try:
+        return ExperimentConfig.model_validate(data or {})
+    except ValidationError as err:
+        raise _format_error(err, source) from None
+
+
+def load_dict(path: str | Path) -> dict[str, Any]:
+    """Read a YAML mapping from ``path`` (clear error if missing or malformed)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "config file not found")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark else str(path)
+        raise InputError(where, f"malformed YAML ({getattr(err, 'problem', err)})") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise InputError(path, "a config must be a YAML mapping")
+    return data
+
+
+def set_key(data: dict[str, Any], dotted: str, value: Any) -> None:
+    """Set ``data['a']['b'] = value`` for ``dotted == 'a.b'``, creating sections."""
+    *parents, last = dotted.split(".")
+    node = data
+    for p in parents:
+        child = node.setdefault(p, {})
+        if not isinstance(child, dict):
+            raise InputError(dotted, f"'{p}' is a value, not a section")
+        node = child
+    node[last] = value
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """Split ``'a.b=value'`` into the key and the YAML-parsed value."""
+    if "=" not in text:
+        raise InputError(f"--set {text}", "expected KEY=VALUE, e.g. frontend.name=icp")
+    key, raw = text.split("=", 1)
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError:
+        value = raw
+    return key.strip(), value
+
+
+def load(path: str | Path | None = None, overrides: list[str] | dict[str, Any] = ()) -> ExperimentConfig:
+    """Load a config from YAML (or defaults when ``path`` is None), then apply overrides."""
+    data = load_dict(path) if path else {}
+    items = overrides.items() if isinstance(overrides, dict) else map(parse_override, overrides)
+    for key, value in items:
+        set_key(data, key, value)
+    return validate(data, str(path) if path else "config")
+
+
+def dump(cfg: ExperimentConfig) -> str:
+    """The fully resolved config as YAML."""
+    return yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False)

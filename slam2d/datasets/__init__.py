@@ -1,0 +1,1 @@
+"""Readers and the simulator, all yielding the same Scan stream."""

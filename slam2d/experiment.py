@@ -1,0 +1,342 @@
+"""Run one experiment config into its own results folder; expand and run sweeps.
+
+A results folder is built under a hidden temporary name and renamed into place
+only when everything in it is written, so a failed run leaves no half-written
+folder, and an existing folder is never overwritten.
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+import json
+import logging
+import resource
+import shutil
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from slam2d import config as config_mod
+from slam2d.config import ExperimentConfig
+from slam2d.errors import InputError
+
+log = logging.getLogger("slam2d")
+
+
+# --------------------------------------------------------------------------- one run
+
+
+def run_experiment(cfg: ExperimentConfig, quiet: bool = False) -> Path:
+    """Run ``cfg`` end to end; return the results folder."""
+    root = Path(cfg.output.root)
+    root.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f".{cfg.name}-", dir=root))
+    try:
+        with _log_to(work / "run.log"):
+            log.info("slam2d run '%s' -> %s", cfg.name, root)
+            metrics = _run_into(cfg, work, quiet)
+            log.info("done in %.1f s", metrics["runtime_s"])
+        return _publish(work, root, cfg.name)
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+
+
+def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
+    from slam2d.datasets.registry import open_dataset
+    from slam2d.pipeline import SlamPipeline
+
+    t0 = time.perf_counter()
+    (out / "config.yaml").write_text(config_mod.dump(cfg))
+    source = open_dataset(cfg.dataset, seed=cfg.seed)
+    relations = _load_relations(cfg)
+    pipeline = SlamPipeline(cfg)
+    with _progress(source, quiet) as advance:
+        result = pipeline.run(source, on_scan=advance)
+    t_slam = time.perf_counter()
+    log.info("%d scans processed in %.1f s", len(result.scans), t_slam - t0)
+
+    metrics: dict[str, Any] = {"scans": len(result.scans), "skipped": dict(result.skipped)}
+    metrics.update(_evaluate(cfg, result, relations))
+    t_eval = time.perf_counter()
+    _write_outputs(cfg, result, out)
+    t_end = time.perf_counter()
+    metrics["timings_s"] = {"slam": t_slam - t0, "evaluation": t_eval - t_slam, "outputs": t_end - t_eval}
+    metrics["runtime_s"] = t_end - t0
+    metrics["peak_rss_mb"] = _peak_rss_mb()
+    (out / "metrics.json").write_text(json.dumps(_jsonable(metrics), indent=2))
+    _log_summary(metrics)
+    return metrics
+
+
+def _load_relations(cfg: ExperimentConfig):
+    if not cfg.evaluation.relations:
+        return None
+    from slam2d.datasets.registry import resolve_data_path
+    from slam2d.evaluation.relations import read_relations
+
+    return read_relations(resolve_data_path(cfg.evaluation.relations, key="evaluation.relations"))
+
+
+def _evaluate(cfg: ExperimentConfig, result, relations) -> dict[str, Any]:
+    """ATE/RPE against ground truth, relations metric; each also for raw odometry."""
+    from slam2d.evaluation.trajectory import ate, rpe
+
+    ev = cfg.evaluation
+    out: dict[str, Any] = {}
+    if result.ground_truth is not None:
+        for label, est in (("", result.poses), ("odometry_", result.odometry)):
+            out[f"{label}ate"] = ate(est, result.ground_truth, align=ev.align)
+            out[f"{label}rpe"] = rpe(est, result.ground_truth, delta_m=ev.rpe_delta)
+    if relations is not None:
+        from slam2d.evaluation.relations import relations_metric
+
+        for label, est in (("", result.poses), ("odometry_", result.odometry)):
+            m = relations_metric(result.stamps, est, relations, tolerance=ev.relation_tolerance)
+            out[f"{label}relations"] = m
+        if out["relations"]["unmatched"]:
+            log.warning(
+                "%d of %d relations match no scan stamp within %g s and are not scored",
+                out["relations"]["unmatched"],
+                out["relations"]["unmatched"] + out["relations"]["matched"],
+                ev.relation_tolerance,
+            )
+    return out
+
+
+def _write_outputs(cfg: ExperimentConfig, result, out: Path) -> None:
+    from slam2d.evaluation.trajectory import write_tum
+    from slam2d.mapping.export import save_map_png, save_map_server
+    from slam2d.mapping.occupancy import build_grid
+    from slam2d.types import Trajectory
+
+    write_tum(out / "trajectory.tum", Trajectory(result.stamps, result.poses))
+    write_tum(out / "odometry.tum", Trajectory(result.stamps, result.odometry))
+    if result.ground_truth is not None:
+        write_tum(out / "ground_truth.tum", Trajectory(result.stamps, result.ground_truth))
+    grid = build_grid(result.poses, result.scans, cfg.mapping)
+    save_map_server(grid, out / "map", cfg.mapping)
+    if cfg.output.figures:
+        trajectories = {"estimate": result.poses, "odometry": result.odometry}
+        if result.ground_truth is not None:
+            trajectories["ground truth"] = result.ground_truth
+        save_map_png(grid, out / "map.png", trajectories, title=cfg.name)
+
+
+def _publish(work: Path, root: Path, name: str) -> Path:
+    """Rename the finished temporary folder to ``root/name-YYYYmmdd-HHMMSS[-k]``."""
+    stem = f"{name}-{datetime.now():%Y%m%d-%H%M%S}"
+    for k in itertools.count(1):
+        target = root / (stem if k == 1 else f"{stem}-{k}")
+        try:
+            work.rename(target)  # fails if target exists and is not empty
+            return target
+        except OSError:
+            if not target.exists():
+                raise
+    raise AssertionError("unreachable")
+
+
+def _peak_rss_mb() -> float:
+    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return kb / 1024.0
+
+
+def _log_summary(metrics: dict[str, Any]) -> None:
+    for key in ("ate", "odometry_ate"):
+        if key in metrics:
+            log.info("%s: RMSE %.3f m", key.replace("_", " "), metrics[key]["rmse"])
+    for key in ("relations", "odometry_relations"):
+        if key in metrics:
+            m = metrics[key]
+            log.info(
+                "%s: translational %.4f ± %.4f m, rotational %.3f ± %.3f deg (%d relations)",
+                key.replace("_", " "),
+                m["trans_abs_mean"],
+                m["trans_abs_std"],
+                m["rot_abs_mean"],
+                m["rot_abs_std"],
+                m["matched"],
+            )
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return obj
+
+
+@contextmanager
+def _log_to(path: Path):
+    handler = logging.FileHandler(path)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    logger = logging.getLogger("slam2d")
+    logger.addHandler(handler)
+    if logger.level == logging.NOTSET or logger.level > logging.INFO:
+        logger.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        handler.close()
+
+
+@contextmanager
+def _progress(source, quiet: bool):
+    """Yield a callable that advances a progress bar by one scan."""
+    if quiet:
+        yield None
+        return
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    try:
+        total = len(source)
+    except (TypeError, NotImplementedError):
+        total = None
+    with Progress(
+        "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn()
+    ) as bar:
+        task = bar.add_task(getattr(source, "name", "scans"), total=total)
+        yield lambda: bar.advance(task)
+
+
+# --------------------------------------------------------------------------- sweeps
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One row of an ablation: a name and the overrides applied to the base config."""
+
+    name: str
+    overrides: dict[str, Any]
+
+
+def load_sweep(path: str | Path) -> tuple[dict[str, Any], list[Variant], int]:
+    """Read a sweep file: (base config dict, variants, workers).
+
+    Keys: ``base`` (config path relative to the sweep file) or ``config`` (inline
+    mapping); ``grid`` ({dotted key: [values]}, Cartesian product) and/or
+    ``variants`` ([{name, set: {dotted key: value}}]); ``workers`` (default 2).
+    """
+    path = Path(path)
+    sweep = config_mod.load_dict(path)
+    unknown = set(sweep) - {"base", "config", "grid", "variants", "workers", "name"}
+    if unknown:
+        raise InputError(path, f"unknown sweep key '{sorted(unknown)[0]}'")
+    if "base" in sweep:
+        base = config_mod.load_dict(path.parent / sweep["base"])
+    else:
+        base = dict(sweep.get("config") or {})
+    variants = _expand(sweep, path)
+    if not variants:
+        raise InputError(path, "a sweep needs 'grid' or 'variants'")
+    names = [v.name for v in variants]
+    if len(set(names)) != len(names):
+        raise InputError(path, "variant names must be unique")
+    for v in variants:  # validate every variant before running any
+        config_mod.validate(_apply(base, v.overrides), f"{path} (variant '{v.name}')")
+    return base, variants, int(sweep.get("workers", 2))
+
+
+def _expand(sweep: dict[str, Any], path: Path) -> list[Variant]:
+    variants = []
+    for i, item in enumerate(sweep.get("variants") or []):
+        if not isinstance(item, dict) or "set" not in item:
+            raise InputError(f"{path}: variants[{i}]", "each variant needs 'set' (and optionally 'name')")
+        variants.append(Variant(str(item.get("name", f"v{i}")), dict(item["set"])))
+    grid = sweep.get("grid") or {}
+    if grid:
+        keys = list(grid)
+        for key in keys:
+            if not isinstance(grid[key], list):
+                raise InputError(f"{path}: grid.{key}", "grid values must be lists")
+        for combo in itertools.product(*(grid[k] for k in keys)):
+            name = ",".join(f"{k.split('.')[-1]}={v}" for k, v in zip(keys, combo))
+            variants.append(Variant(name, dict(zip(keys, combo))))
+    return variants
+
+
+def _apply(data: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    """A deep copy of ``data`` with the dotted-key ``overrides`` set."""
+    data = copy.deepcopy(data)
+    for key, value in overrides.items():
+        config_mod.set_key(data, key, value)
+    return data
+
+
+def variant_config(base: dict[str, Any], variant: Variant, root: Path) -> ExperimentConfig:
+    data = _apply(base, {**variant.overrides, "name": variant.name.replace("/", "_"), "output.root": str(root)})
+    return config_mod.validate(data, f"variant '{variant.name}'")
+
+
+def _run_variant(cfg: ExperimentConfig) -> tuple[str, dict[str, Any] | None, str | None]:
+    """Worker: (folder, metrics, error)."""
+    try:
+        folder = run_experiment(cfg, quiet=True)
+        return str(folder), json.loads((folder / "metrics.json").read_text()), None
+    except Exception as err:  # reported in the table, the sweep goes on
+        return "", None, f"{type(err).__name__}: {err}"
+
+
+def run_sweep(path: str | Path, workers: int | None = None, executor: str = "local", quiet: bool = False):
+    """Run every variant of a sweep file; write table.md/.csv; return (folder, rows)."""
+    from slam2d.evaluation.tables import flatten_metrics, write_table
+
+    base, variants, sweep_workers = load_sweep(path)
+    name = config_mod.load_dict(path).get("name") or Path(path).stem
+    root = Path(base.get("output", {}).get("root", "results")) / f"ablate-{name}-{datetime.now():%Y%m%d-%H%M%S}"
+    root.mkdir(parents=True, exist_ok=False)
+    cfgs = [variant_config(base, v, root / "runs") for v in variants]
+    outcomes = _execute(cfgs, workers or sweep_workers, executor, quiet)
+    rows = []
+    for v, (folder, metrics, error) in zip(variants, outcomes):
+        row: dict[str, Any] = {"variant": v.name}
+        row.update({k: v2 for k, v2 in v.overrides.items()})
+        if metrics is not None:
+            row.update(flatten_metrics(metrics))
+        row["error"] = error or ""
+        row["folder"] = str(Path(folder).relative_to(root)) if folder else ""
+        rows.append(row)
+    write_table(rows, root / "table", leading=["variant", *dict.fromkeys(k for v in variants for k in v.overrides)])
+    return root, rows
+
+
+def _execute(cfgs: list[ExperimentConfig], workers: int, executor: str, quiet: bool):
+    if executor == "ray":
+        try:
+            import ray
+        except ImportError:
+            raise InputError("--executor ray", "ray is not installed: pip install 'slam2d[ray]'") from None
+        ray.init(ignore_reinit_error=True, log_to_driver=False)
+        remote = ray.remote(_run_variant)
+        return ray.get([remote.remote(c) for c in cfgs])
+    if executor != "local":
+        raise InputError("--executor", f"unknown executor '{executor}' (local, ray)")
+    bar = nullcontext(None)
+    if not quiet:
+        from rich.progress import Progress
+
+        bar = Progress()
+    results: list[Any] = [None] * len(cfgs)
+    with bar as progress, ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+        task = progress.add_task("variants", total=len(cfgs)) if progress else None
+        futures = {pool.submit(_run_variant, c): i for i, c in enumerate(cfgs)}
+        for fut in as_completed(futures):
+            results[futures[fut]] = fut.result()
+            if progress:
+                progress.advance(task)
+    return results

@@ -1,0 +1,88 @@
+"""Frontend protocol, result type and registry.
+
+A frontend turns each scan, with the odometry delta since the previous scan,
+into a :class:`FrontendResult`. It never touches GTSAM. A new frontend is one
+class decorated with ``@register_frontend("name")``; other packages register
+through the ``slam2d.frontends`` entry-point group.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from slam2d.errors import InputError
+from slam2d.types import LandmarkObservation, Scan
+
+
+@dataclass(frozen=True, eq=False)
+class FrontendResult:
+    """Relative base motion from the previous scan to this one.
+
+    delta: (3,) pose of this scan's base in the previous scan's base frame.
+    information: (3, 3) inverse covariance of ``delta`` (x, y, theta order).
+    confidence: in [0, 1]; how much the frontend trusts ``delta``.
+    landmarks: landmark observations made in this scan.
+    """
+
+    delta: np.ndarray
+    information: np.ndarray
+    confidence: float = 1.0
+    landmarks: tuple[LandmarkObservation, ...] = field(default_factory=tuple)
+
+
+@runtime_checkable
+class Frontend(Protocol):
+    def process(self, scan: Scan, odom_delta: np.ndarray) -> FrontendResult:
+        """Estimate the motion since the previous scan (``odom_delta`` for the first: zeros)."""
+        ...
+
+
+_REGISTRY: dict[str, Callable[..., Frontend]] = {}
+
+
+def register_frontend(name: str):
+    """Class decorator: make a frontend available under ``name`` in configs."""
+
+    def decorate(cls):
+        _REGISTRY[name] = cls
+        return cls
+
+    return decorate
+
+
+def available_frontends() -> list[str]:
+    """Names of all registered frontends, entry points included."""
+    _load_entry_points()
+    return sorted(_REGISTRY)
+
+
+def create_frontend(name: str, **options) -> Frontend:
+    """Instantiate the frontend registered as ``name``."""
+    if name not in _REGISTRY:
+        _load_entry_points()
+    if name not in _REGISTRY:
+        raise InputError("frontend.name", f"unknown frontend '{name}' (available: {', '.join(available_frontends())})")
+    return _REGISTRY[name](**options)
+
+
+def _load_entry_points() -> None:
+    for ep in entry_points(group="slam2d.frontends"):
+        if ep.name not in _REGISTRY:
+            _REGISTRY[ep.name] = ep.load()
+
+
+# Odometry noise used as the pass-through frontend's information: 2 cm, 1 deg per step.
+ODOMETRY_INFORMATION = np.diag([1 / 0.02**2, 1 / 0.02**2, 1 / np.deg2rad(1.0) ** 2])
+
+
+@register_frontend("odometry")
+class OdometryFrontend:
+    """Pass-through: the wheel odometry delta is the estimate."""
+
+    def process(self, scan: Scan, odom_delta: np.ndarray) -> FrontendResult:
+        return FrontendResult(delta=np.asarray(odom_delta, float), information=ODOMETRY_INFORMATION, confidence=1.0)

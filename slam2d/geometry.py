@@ -1,0 +1,104 @@
+"""SE(2) on numpy arrays: the one place for pose maths.
+
+A pose is ``(x, y, theta)`` (metres, metres, radians) as a float64 array of
+shape ``(3,)``; N poses are ``(N, 3)``. Every function broadcasts over leading
+dimensions, so ``compose(a, b)`` works for one pose with many or many with many.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "wrap_angle",
+    "compose",
+    "inverse",
+    "between",
+    "transform_points",
+    "interpolate",
+    "rotation",
+    "as_pose",
+]
+
+
+def as_pose(p) -> np.ndarray:
+    """Return ``p`` as a float64 array whose last dimension is 3."""
+    a = np.asarray(p, dtype=np.float64)
+    if a.shape[-1:] != (3,):
+        raise ValueError(f"a pose needs 3 values (x, y, theta), got shape {a.shape}")
+    return a
+
+
+def wrap_angle(a):
+    """Wrap angles (rad) to [-pi, pi)."""
+    return (np.asarray(a, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def rotation(theta) -> np.ndarray:
+    """2x2 rotation matrices for angles ``theta`` (rad), shape ``(..., 2, 2)``."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+
+
+def compose(a, b) -> np.ndarray:
+    """a ⊕ b: pose ``b`` expressed in frame ``a``, mapped to the world frame."""
+    a, b = as_pose(a), as_pose(b)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], -1)
+
+
+def inverse(a) -> np.ndarray:
+    """⊖a, so that compose(a, inverse(a)) is the identity."""
+    a = as_pose(a)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = -c * a[..., 0] - s * a[..., 1]
+    y = s * a[..., 0] - c * a[..., 1]
+    return np.stack([x, y, wrap_angle(-a[..., 2])], -1)
+
+
+def between(a, b) -> np.ndarray:
+    """Relative pose of ``b`` seen from ``a``: ⊖a ⊕ b (as gtsam.Pose2.between)."""
+    a, b = as_pose(a), as_pose(b)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
+    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], -1)
+
+
+def transform_points(pose, points) -> np.ndarray:
+    """Map points ``(M, 2)`` from the frame of ``pose`` (3,) to its parent frame."""
+    pose = as_pose(pose)
+    pts = np.asarray(points, dtype=np.float64)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    out = np.empty_like(pts)
+    out[..., 0] = pose[0] + c * pts[..., 0] - s * pts[..., 1]
+    out[..., 1] = pose[1] + s * pts[..., 0] + c * pts[..., 1]
+    return out
+
+
+def interpolate(stamps, poses, query) -> np.ndarray:
+    """Poses at times ``query`` by linear interpolation of ``(stamps, poses)``.
+
+    ``stamps`` (N,) must be non-decreasing. Translation is interpolated linearly
+    and heading along the shortest arc. Queries outside the span are clamped to
+    the first or last pose.
+    """
+    stamps = np.asarray(stamps, dtype=np.float64)
+    poses = as_pose(poses)
+    q = np.atleast_1d(np.asarray(query, dtype=np.float64))
+    if len(stamps) == 0:
+        raise ValueError("cannot interpolate an empty trajectory")
+    if len(stamps) == 1:
+        out = np.repeat(poses[None, 0], len(q), axis=0)
+        return out if np.ndim(query) else out[0]
+    i = np.clip(np.searchsorted(stamps, q, side="right") - 1, 0, len(stamps) - 2)
+    t0, t1 = stamps[i], stamps[i + 1]
+    dt = t1 - t0
+    w = np.where(dt > 0, (q - t0) / np.where(dt > 0, dt, 1.0), 0.0)
+    w = np.clip(w, 0.0, 1.0)
+    p0, p1 = poses[i], poses[i + 1]
+    xy = p0[:, :2] + w[:, None] * (p1[:, :2] - p0[:, :2])
+    th = wrap_angle(p0[:, 2] + w * wrap_angle(p1[:, 2] - p0[:, 2]))
+    out = np.column_stack([xy, th])
+    return out if np.ndim(query) else out[0]

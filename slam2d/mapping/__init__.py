@@ -1,0 +1,1 @@
+"""slam2d.mapping."""

@@ -1,0 +1,83 @@
+"""The data every part of slam2d passes around."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from slam2d import geometry
+
+
+@dataclass(frozen=True, eq=False)
+class Scan:
+    """One laser scan with everything known at its time.
+
+    ranges: (n,) metres; invalid beams (no return, NaN, inf, negative) are NaN.
+    angles: (n,) beam angles in the sensor frame, radians.
+    range_min, range_max: the sensor's limits in metres; a range >= range_max
+        is "no return" (free up to range_max, no hit).
+    sensor_pose: mounting pose of the laser in the robot base frame (3,).
+    odom: odometry pose of the robot base at ``stamp`` (3,).
+    ground_truth: true base pose (3,) when known (simulator), else None.
+    index: position of the scan in its stream, 0-based.
+    """
+
+    stamp: float
+    ranges: np.ndarray
+    angles: np.ndarray
+    range_min: float
+    range_max: float
+    sensor_pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    odom: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    ground_truth: np.ndarray | None = None
+    index: int = 0
+
+    def hit_mask(self) -> np.ndarray:
+        """Beams that returned a hit: finite and within [range_min, range_max)."""
+        r = self.ranges
+        with np.errstate(invalid="ignore"):
+            return np.isfinite(r) & (r >= self.range_min) & (r < self.range_max)
+
+    def points(self) -> np.ndarray:
+        """Hit points (M, 2) in the sensor frame, metres."""
+        m = self.hit_mask()
+        r, a = self.ranges[m], self.angles[m]
+        return np.column_stack([r * np.cos(a), r * np.sin(a)])
+
+    def points_in_base(self) -> np.ndarray:
+        """Hit points (M, 2) in the robot base frame, metres."""
+        return geometry.transform_points(self.sensor_pose, self.points())
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Timed poses: ``stamps`` (N,) seconds, ``poses`` (N, 3)."""
+
+    stamps: np.ndarray
+    poses: np.ndarray
+
+    def __post_init__(self):
+        stamps = np.asarray(self.stamps, dtype=np.float64).reshape(-1)
+        poses = geometry.as_pose(self.poses).reshape(-1, 3)
+        if len(stamps) != len(poses):
+            raise ValueError(f"{len(stamps)} stamps but {len(poses)} poses")
+        object.__setattr__(self, "stamps", stamps)
+        object.__setattr__(self, "poses", poses)
+
+    def __len__(self) -> int:
+        return len(self.stamps)
+
+    def at(self, query) -> np.ndarray:
+        """Poses at times ``query`` (interpolated, clamped at the ends)."""
+        return geometry.interpolate(self.stamps, self.poses, query)
+
+
+@dataclass(frozen=True, eq=False)
+class LandmarkObservation:
+    """A landmark seen from the robot base: range (m), bearing (rad), 2x2 covariance."""
+
+    landmark_id: int
+    range: float
+    bearing: float
+    covariance: np.ndarray = field(default_factory=lambda: np.diag([0.05**2, np.deg2rad(2.0) ** 2]))

@@ -1,0 +1,72 @@
+"""SE(2) maths against gtsam.Pose2 (property tests)."""
+
+import gtsam
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from slam2d import geometry
+
+coord = st.floats(-50, 50, allow_nan=False)
+angle = st.floats(-10, 10, allow_nan=False)
+pose = st.tuples(coord, coord, angle).map(np.array)
+
+
+def P(p):
+    return gtsam.Pose2(*p)
+
+
+def arr(g):
+    return np.array([g.x(), g.y(), g.theta()])
+
+
+def close_pose(a, b, tol=1e-9):
+    assert np.allclose(a[..., :2], b[..., :2], atol=tol)
+    assert np.allclose(geometry.wrap_angle(a[..., 2] - b[..., 2]), 0, atol=tol)
+
+
+@settings(max_examples=200, deadline=None)
+@given(pose, pose)
+def test_compose_between_inverse_match_gtsam(a, b):
+    close_pose(geometry.compose(a, b), arr(P(a).compose(P(b))))
+    close_pose(geometry.between(a, b), arr(P(a).between(P(b))))
+    close_pose(geometry.inverse(a), arr(P(a).inverse()))
+
+
+@settings(max_examples=100, deadline=None)
+@given(pose, st.lists(st.tuples(coord, coord), min_size=1, max_size=5))
+def test_transform_points_matches_gtsam(a, pts):
+    pts = np.array(pts, float)
+    expected = np.array([P(a).transformFrom(gtsam.Point2(*p)) for p in pts])
+    assert np.allclose(geometry.transform_points(a, pts), expected, atol=1e-9)
+
+
+def test_vectorised_equals_loop():
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(size=(50, 3)) * 5, rng.normal(size=(50, 3)) * 5
+    batch = geometry.compose(a, b)
+    for i in range(50):
+        close_pose(batch[i], geometry.compose(a[i], b[i]))
+    close_pose(geometry.compose(a[0], b), np.array([geometry.compose(a[0], bi) for bi in b]))
+
+
+def test_wrap_angle_range():
+    a = geometry.wrap_angle(np.linspace(-20, 20, 1001))
+    assert a.min() >= -np.pi and a.max() < np.pi
+    assert np.allclose(np.sin(a), np.sin(np.linspace(-20, 20, 1001)))
+
+
+def test_interpolate_midpoint_and_shortest_arc():
+    stamps = np.array([0.0, 1.0])
+    poses = np.array([[0, 0, np.pi - 0.1], [2, 4, -np.pi + 0.1]])
+    mid = geometry.interpolate(stamps, poses, 0.5)
+    assert np.allclose(mid[:2], [1, 2])
+    assert abs(abs(mid[2]) - np.pi) < 1e-9  # through pi, not through 0
+    clamped = geometry.interpolate(stamps, poses, [-1.0, 5.0])
+    assert np.allclose(clamped, poses)
+
+
+def test_bad_pose_shape():
+    with pytest.raises(ValueError, match="3 values"):
+        geometry.compose([1, 2], [0, 0, 0])
