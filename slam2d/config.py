@@ -39,10 +39,10 @@ class OdometryNoise(Section):
     alpha3: translation from translation, alpha4: translation from rotation.
     """
 
-    alpha1: float = Field(0.05, ge=0)
-    alpha2: float = Field(0.01, ge=0)
-    alpha3: float = Field(0.05, ge=0)
-    alpha4: float = Field(0.01, ge=0)
+    alpha1: float = Field(0.004, ge=0)
+    alpha2: float = Field(0.001, ge=0)
+    alpha3: float = Field(0.01, ge=0)
+    alpha4: float = Field(0.001, ge=0)
 
 
 class SimulatorConfig(Section):

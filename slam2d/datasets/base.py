@@ -17,14 +17,16 @@ class ScanSource:
     """A stream of :class:`Scan` with a name, an expected length and skip counts.
 
     Subclasses implement :meth:`_raw_scans`; iteration passes every scan through
-    :meth:`_checked`, which replaces invalid ranges with NaN and skips empty or
-    out-of-order scans, counting each reason in ``self.skipped``.
+    :meth:`_checked`, which replaces invalid ranges with NaN (counted in
+    ``self.invalid_beams``) and skips empty or out-of-order scans, counting
+    each reason in ``self.skipped``.
     """
 
     name: str = "scans"
 
     def __init__(self) -> None:
         self.skipped: Counter[str] = Counter()
+        self.invalid_beams = 0
 
     def __len__(self) -> int:
         """Number of scans the source expects to yield (before skips)."""
@@ -35,6 +37,7 @@ class ScanSource:
 
     def __iter__(self) -> Iterator[Scan]:
         self.skipped = Counter()
+        self.invalid_beams = 0
         yield from self._checked(self._raw_scans())
         self.log_skips()
 
@@ -47,7 +50,7 @@ class ScanSource:
                 bad = ~np.isfinite(ranges) | (ranges < 0)
             n_bad = int(bad.sum())
             if n_bad:
-                self.skipped["invalid beams (NaN, inf or negative range)"] += n_bad
+                self.invalid_beams += n_bad
                 ranges = np.where(bad, np.nan, ranges)
             if not np.isfinite(scan.stamp) or scan.stamp < last_stamp:
                 self.skipped["scans with out-of-order or invalid timestamp"] += 1
@@ -70,6 +73,8 @@ class ScanSource:
             index += 1
 
     def log_skips(self) -> None:
-        """Log one line per skip reason with its count."""
+        """Log one line per skip reason with its count, and the invalid-beam count."""
         for reason, count in sorted(self.skipped.items()):
             log.warning("%s: skipped %d %s", self.name, count, reason)
+        if self.invalid_beams:
+            log.info("%s: %d beams had no valid range (NaN, inf or negative) and were ignored", self.name, self.invalid_beams)

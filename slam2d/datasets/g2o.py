@@ -1,0 +1,155 @@
+"""2D pose graphs in g2o and TORO format: read and write.
+
+g2o:  ``VERTEX_SE2 id x y theta`` and ``EDGE_SE2 i j dx dy dtheta I11 I12 I13 I22 I23 I33``
+TORO: ``VERTEX2 id x y theta`` and ``EDGE2 i j dx dy dtheta I11 I12 I22 I33 I13 I23``
+
+An edge's measurement is pose j seen from pose i (``geometry.between``) with
+its 3x3 information matrix (inverse covariance, units 1/m^2 and 1/rad^2).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from slam2d import geometry
+from slam2d.errors import InputError
+
+log = logging.getLogger(__name__)
+
+# Position of each file value in the row-major 3x3 information matrix.
+_G2O_ORDER = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)]
+_TORO_ORDER = [(0, 0), (0, 1), (1, 1), (2, 2), (0, 2), (1, 2)]
+_VERTEX_TAGS = ("VERTEX_SE2", "VERTEX2")
+_EDGE_TAGS = {"EDGE_SE2": _G2O_ORDER, "EDGE2": _TORO_ORDER}
+_IGNORED_TAGS = ("FIX",)
+
+
+@dataclass(eq=False)
+class PoseGraphFile:
+    """A 2D pose graph: vertices ``ids`` (N,) with ``poses`` (N, 3), and M edges
+    ``i``, ``j`` (M,) with ``measurements`` (M, 3) and ``information`` (M, 3, 3)."""
+
+    ids: np.ndarray
+    poses: np.ndarray
+    i: np.ndarray
+    j: np.ndarray
+    measurements: np.ndarray
+    information: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+def _symmetric(values, order) -> np.ndarray:
+    """3x3 symmetric matrix from 6 upper-triangle values in ``order``."""
+    m = np.zeros((3, 3))
+    for v, (r, c) in zip(values, order):
+        m[r, c] = m[c, r] = v
+    return m
+
+
+def _parse_line(tokens, where: str):
+    """One vertex or edge line -> ('v', id, pose) or ('e', i, j, measurement, information)."""
+    tag = tokens[0]
+    n = 5 if tag in _VERTEX_TAGS else 12
+    if len(tokens) != n:
+        raise InputError(where, f"{tag} needs {n - 1} values, got {len(tokens) - 1}")
+    try:
+        ids = [int(t) for t in tokens[1:2 if n == 5 else 3]]
+        v = np.array(tokens[2 if n == 5 else 3:], dtype=np.float64)
+    except ValueError:
+        raise InputError(where, f"non-numeric field in {tag} line") from None
+    if not np.all(np.isfinite(v)):
+        raise InputError(where, f"non-finite value in {tag} line")
+    if n == 5:
+        return ("v", ids[0], v)
+    return ("e", ids[0], ids[1], v[:3], _symmetric(v[3:], _EDGE_TAGS[tag]))
+
+
+def read_g2o(path) -> PoseGraphFile:
+    """Read a g2o or TORO 2D pose graph (FIX, blank and # lines ignored).
+
+    A file with no vertex lines (e.g. CSAIL.g2o) gets vertices for every id
+    in its edges, initialised by chaining measurements along a spanning tree.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "file not found")
+    vertices: dict[int, np.ndarray] = {}
+    edges, lines = [], []
+    with open(path, encoding="ascii", errors="replace") as f:
+        for lineno, line in enumerate(f, 1):
+            tokens = line.split()
+            if not tokens or tokens[0].startswith("#") or tokens[0] in _IGNORED_TAGS:
+                continue
+            where = f"{path}:{lineno}"
+            if tokens[0] not in _VERTEX_TAGS and tokens[0] not in _EDGE_TAGS:
+                raise InputError(where, f"unsupported line type {tokens[0]!r}")
+            rec = _parse_line(tokens, where)
+            if rec[0] == "v":
+                if rec[1] in vertices:
+                    raise InputError(where, f"duplicate vertex {rec[1]}")
+                vertices[rec[1]] = rec[2]
+            else:
+                edges.append(rec[1:])
+                lines.append(lineno)
+    if not vertices and not edges:
+        raise InputError(path, "no vertices or edges")
+    if edges:
+        i, j, meas, info = (np.array(a) for a in zip(*edges))
+    else:
+        i = j = np.zeros(0, int)
+        meas, info = np.zeros((0, 3)), np.zeros((0, 3, 3))
+    not_pd = np.linalg.eigvalsh(info)[:, 0] <= 0  # eigenvalues ascend
+    if not_pd.any():
+        k = int(np.argmax(not_pd))
+        raise InputError(f"{path}:{lines[k]}", "information matrix is not positive definite")
+    if vertices:
+        unknown = ~np.isin(i, list(vertices)) | ~np.isin(j, list(vertices))
+        if unknown.any():
+            k = int(np.argmax(unknown))
+            raise InputError(f"{path}:{lines[k]}", f"edge {i[k]} -> {j[k]} to an unknown vertex")
+        ids = np.array(sorted(vertices))
+        poses = np.array([vertices[k] for k in ids]).reshape(-1, 3)
+    else:
+        ids = np.unique(np.r_[i, j])
+        poses = _chain_poses(ids, i, j, meas)
+        log.info("%s: no vertex lines; %d poses initialised from the edges", path, len(ids))
+    return PoseGraphFile(ids, poses, i, j, meas, info)
+
+
+def _chain_poses(ids, i, j, meas) -> np.ndarray:
+    """Poses for ``ids`` composed along a breadth-first spanning tree of the edges.
+
+    The first id sits at the origin; ids not connected to it stay at the origin.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import breadth_first_order
+
+    a, b = np.searchsorted(ids, i), np.searchsorted(ids, j)
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(len(ids),) * 2).tocsr()
+    order, pred = breadth_first_order(graph, 0, directed=False)
+    edge = {(x, y): k for k, (x, y) in enumerate(zip(a, b))}
+    poses = np.zeros((len(ids), 3))
+    for v in order[1:]:
+        p = pred[v]
+        if (p, v) in edge:
+            poses[v] = geometry.compose(poses[p], meas[edge[p, v]])
+        else:
+            poses[v] = geometry.compose(poses[p], geometry.inverse(meas[edge[v, p]]))
+    if len(order) < len(ids):
+        log.warning("%d poses not connected to pose %d; left at the origin", len(ids) - len(order), ids[0])
+    return poses
+
+
+def write_g2o(path, graph: PoseGraphFile) -> None:
+    """Write ``graph`` in g2o format with full float64 precision (round-trips exactly)."""
+    rows = [f"VERTEX_SE2 {k} {x!r} {y!r} {t!r}" for k, (x, y, t) in zip(graph.ids.tolist(), graph.poses.tolist())]
+    upper = graph.information[:, [r for r, _ in _G2O_ORDER], [c for _, c in _G2O_ORDER]]
+    for a, b, m, u in zip(graph.i.tolist(), graph.j.tolist(), graph.measurements.tolist(), upper.tolist()):
+        rows.append(f"EDGE_SE2 {a} {b} " + " ".join(map(repr, m + u)))
+    Path(path).write_text("\n".join(rows) + "\n")

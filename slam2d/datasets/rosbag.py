@@ -1,0 +1,173 @@
+"""ROS 1 and ROS 2 bags: sensor_msgs/LaserScan + nav_msgs/Odometry + /tf_static.
+
+Read with the pure-Python ``rosbags`` package; no ROS installation needed.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from slam2d import geometry
+from slam2d.datasets.base import ScanSource
+from slam2d.errors import InputError
+from slam2d.types import Scan
+
+log = logging.getLogger(__name__)
+
+LASER_TYPE = "sensor_msgs/msg/LaserScan"
+ODOM_TYPE = "nav_msgs/msg/Odometry"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+
+
+def _stamp(t) -> float:
+    """ROS time -> seconds (float64)."""
+    return t.sec + 1e-9 * t.nanosec
+
+
+def _yaw(q) -> float:
+    """Heading (rad) of a quaternion about z."""
+    return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
+
+
+def _pick_topic(path, topics, msgtype: str, name: str | None, default: str) -> str:
+    """The topic to read: ``name`` if given, else the only one of ``msgtype``, else ``default``."""
+    listing = ", ".join(f"{t} ({info.msgtype})" for t, info in sorted(topics.items())) or "none"
+    if name is not None:
+        if name not in topics:
+            raise InputError(path, f"topic {name!r} not in bag; topics: {listing}")
+        if topics[name].msgtype != msgtype:
+            raise InputError(path, f"topic {name!r} is {topics[name].msgtype}, expected {msgtype}")
+        return name
+    typed = [t for t, info in topics.items() if info.msgtype == msgtype]
+    if len(typed) == 1:
+        return typed[0]
+    if default in typed:
+        return default
+    if not typed:
+        raise InputError(path, f"no {msgtype} topics; topics: {listing}")
+    raise InputError(path, f"several {msgtype} topics and none is {default!r}; name one of: {listing}")
+
+
+class RosbagSource(ScanSource):
+    """Laser scans from a ROS 1 ``.bag`` file or a ROS 2 bag (directory, .mcap, .db3).
+
+    Each scan's odometry is the base pose interpolated at the scan's header
+    stamp (s); the laser mounting pose comes from /tf_static (identity if absent).
+    Ranges in metres, angles in radians, limits from the message.
+    """
+
+    name = "rosbag"
+
+    def __init__(self, path, scan_topic: str | None = None, odom_topic: str | None = None,
+                 max_scans: int | None = None):
+        super().__init__()
+        self.path = Path(path)
+        self.max_scans = max_scans
+        self.notes: Counter[str] = Counter()
+        if not self.path.exists():
+            raise InputError(self.path, "file not found")
+        with self._open() as reader:
+            topics = reader.topics
+            self.scan_topic = _pick_topic(self.path, topics, LASER_TYPE, scan_topic, "/scan")
+            self.odom_topic = _pick_topic(self.path, topics, ODOM_TYPE, odom_topic, "/odom")
+            self._count = topics[self.scan_topic].msgcount
+            self.odom = self._read_odometry(reader)
+            self._static_tf = self._read_static_tf(reader, topics)
+        self._mounts: dict[str, np.ndarray] = {}
+
+    def __len__(self) -> int:
+        return self._count if self.max_scans is None else min(self._count, self.max_scans)
+
+    @contextmanager
+    def _open(self):
+        """The bag opened with AnyReader; unreadable input becomes an InputError."""
+        from rosbags.highlevel import AnyReader
+
+        try:
+            reader = AnyReader([self.path])
+            reader.open()
+        except Exception as err:  # rosbags raises many types for a corrupt file
+            raise InputError(self.path, f"not a readable ROS bag ({err})") from err
+        try:
+            yield reader
+        finally:
+            reader.close()
+
+    def _messages(self, reader, topic: str):
+        """Deserialised messages of ``topic`` in bag order."""
+        conns = [c for c in reader.connections if c.topic == topic]
+        for conn, _, raw in reader.messages(connections=conns):
+            yield reader.deserialize(raw, conn.msgtype)
+
+    def _read_odometry(self, reader):
+        """All odometry as (stamps (N,) s, poses (N, 3)), sorted by stamp; sets the base frame."""
+        stamps, poses, child = [], [], ""
+        for msg in self._messages(reader, self.odom_topic):
+            p = msg.pose.pose
+            stamps.append(_stamp(msg.header.stamp))
+            poses.append((p.position.x, p.position.y, _yaw(p.orientation)))
+            child = msg.child_frame_id
+        if not stamps:
+            raise InputError(self.path, f"no messages on odometry topic {self.odom_topic!r}")
+        self.base_frame = child.lstrip("/") or "base_link"
+        stamps, poses = np.asarray(stamps), np.asarray(poses, dtype=np.float64)
+        order = np.argsort(stamps, kind="stable")
+        return stamps[order], poses[order]
+
+    def _read_static_tf(self, reader, topics) -> dict[str, tuple[str, np.ndarray]]:
+        """child frame -> (parent frame, planar pose of child in parent) from /tf_static."""
+        tf = {}
+        for topic in ("/tf_static", "tf_static"):
+            if topic in topics and topics[topic].msgtype == TF_TYPE:
+                for msg in self._messages(reader, topic):
+                    for t in msg.transforms:
+                        tr = t.transform
+                        pose = np.array([tr.translation.x, tr.translation.y, _yaw(tr.rotation)])
+                        tf[t.child_frame_id.lstrip("/")] = (t.header.frame_id.lstrip("/"), pose)
+        return tf
+
+    def mounting_pose(self, frame: str) -> np.ndarray:
+        """Pose (3,) of ``frame`` in the base frame, chained through /tf_static; identity if unknown."""
+        frame = frame.lstrip("/")
+        if frame not in self._mounts:
+            pose, f = np.zeros(3), frame
+            for _ in range(64):  # bounded: a cyclic tree must not hang
+                if f == self.base_frame or f not in self._static_tf:
+                    break
+                parent, p = self._static_tf[f]
+                pose, f = geometry.compose(p, pose), parent
+            if f != self.base_frame:
+                log.info("%s: no /tf_static chain %s -> %r; laser at the base origin",
+                         self.path, self.base_frame, frame)
+                pose = np.zeros(3)
+            self._mounts[frame] = pose
+        return self._mounts[frame]
+
+    def _raw_scans(self) -> Iterator[Scan]:
+        self.notes = Counter()
+        t_odom, p_odom = self.odom
+        with self._open() as reader:
+            for i, msg in enumerate(self._messages(reader, self.scan_topic)):
+                if self.max_scans is not None and i >= self.max_scans:
+                    break
+                stamp = _stamp(msg.header.stamp)
+                if not t_odom[0] <= stamp <= t_odom[-1]:
+                    self.notes["scans outside the odometry time span (odometry clamped)"] += 1
+                ranges = np.asarray(msg.ranges, dtype=np.float64)
+                yield Scan(
+                    stamp=stamp,
+                    ranges=ranges,
+                    angles=msg.angle_min + msg.angle_increment * np.arange(len(ranges)),
+                    range_min=float(msg.range_min),
+                    range_max=float(msg.range_max),
+                    sensor_pose=self.mounting_pose(msg.header.frame_id),
+                    odom=geometry.interpolate(t_odom, p_odom, stamp),
+                )
+        for what, count in self.notes.items():
+            log.warning("%s: %d %s", self.path, count, what)
