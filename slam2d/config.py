@@ -70,11 +70,36 @@ class DatasetConfig(Section):
 
 
 class FrontendConfig(Section):
-    name: str = Field("odometry", description="registered frontend name")
+    name: str = Field("odometry", description="registered frontend name (slam2d frontends lists them)")
+    options: dict[str, Any] = Field(
+        default_factory=dict, description="the frontend's own parameters, checked against its Config model"
+    )
+
+
+class LoopClosureConfig(Section):
+    """Candidate search over the optimised keyframes and scan-to-submap verification."""
+
+    enabled: bool = True
+    search_radius: float = Field(4.0, gt=0, description="m; candidates within this distance of the new keyframe")
+    min_travel: float = Field(10.0, ge=0, description="m travelled between a candidate and the new keyframe")
+    submap_keyframes: int = Field(10, ge=0, description="neighbouring keyframes on each side forming the submap")
+    window_xy: float = Field(1.0, gt=0, description="m; half-width of the translational search window")
+    window_theta_deg: float = Field(20.0, gt=0, description="half-width of the rotational search window")
+    resolution: float = Field(0.05, gt=0, description="m; finest grid of the correlative matcher")
+    min_score: float = Field(0.55, ge=0, le=1, description="fraction of scan points on submap cells to accept")
+    max_candidates: int = Field(3, gt=0, description="candidates verified per new keyframe")
 
 
 class BackendConfig(Section):
-    name: Literal["none"] = Field("none", description="'none' keeps the frontend's poses as they are")
+    name: Literal["none", "pose_graph"] = Field(
+        "none", description="'none' chains the frontend's deltas; 'pose_graph' optimises with GTSAM"
+    )
+    keyframe_distance: float = Field(0.2, ge=0, description="m travelled before a new keyframe")
+    keyframe_angle_deg: float = Field(10.0, ge=0, description="rotation before a new keyframe")
+    robust: Literal["none", "huber", "cauchy", "dcs"] = Field("cauchy", description="kernel on loop-closure factors")
+    robust_param: float = Field(1.0, gt=0, description="kernel width (whitened units)")
+    gnc: bool = Field(False, description="graduated non-convexity in the final batch optimisation")
+    loop_closure: LoopClosureConfig = LoopClosureConfig()
 
 
 class MappingConfig(Section):

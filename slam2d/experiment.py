@@ -64,7 +64,11 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
     t_slam = time.perf_counter()
     log.info("%d scans processed in %.1f s", len(result.scans), t_slam - t0)
 
-    metrics: dict[str, Any] = {"scans": len(result.scans), "skipped": dict(result.skipped)}
+    metrics: dict[str, Any] = {
+        "scans": len(result.scans),
+        "skipped": dict(result.skipped),
+        "invalid_beams": getattr(source, "invalid_beams", 0),
+    }
     metrics.update(_evaluate(cfg, result, relations))
     t_eval = time.perf_counter()
     _write_outputs(cfg, result, out)

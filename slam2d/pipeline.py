@@ -33,7 +33,7 @@ class SlamPipeline:
 
     def __init__(self, cfg: ExperimentConfig):
         self.cfg = cfg
-        self.frontend = create_frontend(cfg.frontend.name)
+        self.frontend = create_frontend(cfg.frontend.name, cfg.frontend.options)
 
     def run(self, scans: Iterable[Scan], on_scan: Callable[[], None] | None = None) -> SlamResult:
         """Process every scan; ``on_scan`` is called after each one (progress)."""

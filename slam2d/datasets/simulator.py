@@ -434,7 +434,7 @@ def route_poses(waypoints, speed: float, turn_rate: float, scan_rate: float) -> 
 
 
 def sample_odometry(poses, noise: OdometryNoise, rng: np.random.Generator) -> np.ndarray:
-    """Odometry poses (N, 3) starting at the origin, from ground-truth poses (N, 3).
+    """Odometry poses (N, 3) starting at the true start pose, from ground-truth poses (N, 3).
 
     Every step between consecutive poses is split into (rot1, trans, rot2) and
     perturbed as in ``sample_motion_model_odometry``: var(rot1) = a1 rot1^2 + a2 trans^2,
@@ -450,13 +450,14 @@ def sample_odometry(poses, noise: OdometryNoise, rng: np.random.Generator) -> np
     rot2 = geometry.wrap_angle(np.diff(poses[:, 2]) - rot1)
     a1, a2, a3, a4 = noise.alpha1, noise.alpha2, noise.alpha3, noise.alpha4
     e = rng.standard_normal((3, len(d)))
-    rot1 = rot1 - e[0] * np.sqrt(a1 * rot1**2 + a2 * trans**2)
-    trans = trans - e[1] * np.sqrt(a3 * trans**2 + a4 * (rot1**2 + rot2**2))
-    rot2 = rot2 - e[2] * np.sqrt(a1 * rot2**2 + a2 * trans**2)
-    theta = np.concatenate([[0.0], np.cumsum(rot1 + rot2)])
+    sd_rot1 = np.sqrt(a1 * rot1**2 + a2 * trans**2)
+    sd_trans = np.sqrt(a3 * trans**2 + a4 * (rot1**2 + rot2**2))
+    sd_rot2 = np.sqrt(a1 * rot2**2 + a2 * trans**2)
+    rot1, trans, rot2 = rot1 - e[0] * sd_rot1, trans - e[1] * sd_trans, rot2 - e[2] * sd_rot2
+    theta = poses[0, 2] + np.concatenate([[0.0], np.cumsum(rot1 + rot2)])
     direction = theta[:-1] + rot1
     steps = trans[:, None] * np.column_stack([np.cos(direction), np.sin(direction)])
-    xy = np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
+    xy = poses[0, :2] + np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
     return np.column_stack([xy, geometry.wrap_angle(theta)])
 
 

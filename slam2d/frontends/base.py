@@ -11,9 +11,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
+from pydantic import BaseModel, ValidationError
 
 from slam2d.errors import InputError
 from slam2d.types import LandmarkObservation, Scan
@@ -61,13 +62,41 @@ def available_frontends() -> list[str]:
     return sorted(_REGISTRY)
 
 
-def create_frontend(name: str, **options) -> Frontend:
-    """Instantiate the frontend registered as ``name``."""
+def frontend_class(name: str):
+    """The class registered as ``name`` (entry points included)."""
     if name not in _REGISTRY:
         _load_entry_points()
     if name not in _REGISTRY:
         raise InputError("frontend.name", f"unknown frontend '{name}' (available: {', '.join(available_frontends())})")
-    return _REGISTRY[name](**options)
+    return _REGISTRY[name]
+
+
+def resolve_options(name: str, options: dict[str, Any] | None = None) -> BaseModel | None:
+    """The frontend's ``Config`` model filled from ``options`` (None if it takes none)."""
+    cls = frontend_class(name)
+    model = getattr(cls, "Config", None)
+    if model is None:
+        if options:
+            raise InputError("frontend.options", f"frontend '{name}' takes no options, got {sorted(options)}")
+        return None
+    try:
+        return model.model_validate(options or {})
+    except ValidationError as err:
+        e = err.errors()[0]
+        key = "frontend.options." + ".".join(str(p) for p in e["loc"])
+        what = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
+        raise InputError(key, what) from None
+
+
+def create_frontend(name: str, options: dict[str, Any] | None = None) -> Frontend:
+    """Instantiate the frontend registered as ``name`` with its checked options.
+
+    A frontend with parameters declares them as a nested pydantic ``Config``
+    class and takes an instance of it as its only constructor argument.
+    """
+    cls = frontend_class(name)
+    params = resolve_options(name, options)
+    return cls() if params is None else cls(params)
 
 
 def _load_entry_points() -> None:

@@ -1,0 +1,114 @@
+"""The relations metric of Kümmerle et al. 2009, computed as Cartographer's
+``compute_relations_metrics`` does.
+
+A relations file holds one relation a line, ``t1 t2 x y z roll pitch yaw``:
+the true pose of the scan at ``t2`` seen from the scan at ``t1`` (m, rad). In
+2D only x, y and yaw are used. ``t1 < t2`` is not guaranteed (Intel has 6
+relations with ``t1 > t2``); relations are used as written, never swapped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from slam2d import geometry
+from slam2d.errors import InputError
+from slam2d.evaluation.trajectory import _parse_row
+
+__all__ = ["Relations", "read_relations", "relations_metric", "format_relations"]
+
+
+@dataclass(frozen=True, eq=False)
+class Relations:
+    """Relations: stamps ``t1``, ``t2`` (M,) s and ``delta`` (M, 3) = between(pose(t1), pose(t2))."""
+
+    t1: np.ndarray
+    t2: np.ndarray
+    delta: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t1)
+
+
+def read_relations(path) -> Relations:
+    """Read a relations file; blank lines and ``#`` comments are skipped.
+
+    A malformed line raises InputError naming ``file:line``; so does a file
+    without relations.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "relations file not found")
+    rows = [
+        _parse_row(text, f"{path}:{n}", 8)
+        for n, line in enumerate(path.read_text().splitlines(), start=1)
+        if (text := line.strip()) and not text.startswith("#")
+    ]
+    if not rows:
+        raise InputError(path, "no relations found")
+    a = np.array(rows, dtype=np.float64)
+    return Relations(a[:, 0], a[:, 1], np.column_stack([a[:, 2], a[:, 3], geometry.wrap_angle(a[:, 7])]))
+
+
+def _match(stamps: np.ndarray, query: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the nearest stamp (sorted ``stamps``) to each query and whether it is within ``tolerance``."""
+    if len(stamps) == 1:
+        k = np.zeros(len(query), dtype=np.int64)
+    else:
+        k = np.clip(np.searchsorted(stamps, query), 1, len(stamps) - 1)
+        k = np.where(np.abs(query - stamps[k - 1]) <= np.abs(stamps[k] - query), k - 1, k)
+    return k, np.abs(stamps[k] - query) <= tolerance
+
+
+def _mean_std(values: np.ndarray) -> tuple[float, float]:
+    """Mean and sample std (n - 1, as Cartographer); NaN when undefined."""
+    mean = float(np.mean(values)) if len(values) else float("nan")
+    std = float(np.std(values, ddof=1)) if len(values) > 1 else float("nan")
+    return mean, std
+
+
+def relations_metric(stamps, poses, relations: Relations, tolerance: float = 1e-3) -> dict:
+    """Relations metric of the trajectory ``(stamps (N,) s, poses (N, 3))``.
+
+    Each relation endpoint is matched to the nearest trajectory stamp; a
+    relation with an endpoint farther than ``tolerance`` s from every stamp is
+    not scored and counted in ``unmatched``. For the others the error is
+    ``compose(between(p1, p2), inverse(delta))``; its translation norm (m) and
+    |angle| (deg) are summarised as mean and sample std (n - 1) of the absolute
+    and squared values: ``trans_abs_*`` (m), ``trans_sq_*`` (m^2),
+    ``rot_abs_*`` (deg), ``rot_sq_*`` (deg^2), plus ``matched``, ``unmatched``.
+    """
+    stamps = np.asarray(stamps, dtype=np.float64).reshape(-1)
+    poses = geometry.as_pose(poses).reshape(-1, 3)
+    if len(stamps) != len(poses):
+        raise ValueError(f"{len(stamps)} stamps but {len(poses)} poses")
+    if len(stamps) == 0:
+        raise ValueError("empty trajectory")
+    order = np.argsort(stamps, kind="stable")
+    k1, ok1 = _match(stamps[order], relations.t1, tolerance)
+    k2, ok2 = _match(stamps[order], relations.t2, tolerance)
+    ok = ok1 & ok2
+    p1, p2 = poses[order[k1[ok]]], poses[order[k2[ok]]]
+    err = geometry.compose(geometry.between(p1, p2), geometry.inverse(relations.delta[ok]))
+    trans = np.hypot(err[:, 0], err[:, 1])
+    rot = np.rad2deg(np.abs(err[:, 2]))
+    out: dict = {}
+    for name, values in (("trans_abs", trans), ("trans_sq", trans**2), ("rot_abs", rot), ("rot_sq", rot**2)):
+        out[f"{name}_mean"], out[f"{name}_std"] = _mean_std(values)
+    out["matched"], out["unmatched"] = int(ok.sum()), int((~ok).sum())
+    return out
+
+
+def format_relations(metrics: dict) -> str:
+    """The metric as Cartographer prints it (mean +/- std, 5 decimals), plus the match counts."""
+    lines = [
+        f"Abs translational error {metrics['trans_abs_mean']:.5f} +/- {metrics['trans_abs_std']:.5f} m",
+        f"Sqr translational error {metrics['trans_sq_mean']:.5f} +/- {metrics['trans_sq_std']:.5f} m^2",
+        f"Abs rotational error {metrics['rot_abs_mean']:.5f} +/- {metrics['rot_abs_std']:.5f} deg",
+        f"Sqr rotational error {metrics['rot_sq_mean']:.5f} +/- {metrics['rot_sq_std']:.5f} deg^2",
+        f"Relations scored {metrics['matched']}, unmatched {metrics['unmatched']}",
+    ]
+    return "\n".join(lines)
