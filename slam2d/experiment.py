@@ -63,11 +63,14 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
         result = pipeline.run(source, on_scan=advance)
     t_slam = time.perf_counter()
     log.info("%d scans processed in %.1f s", len(result.scans), t_slam - t0)
+    for key, count in result.stats.items():
+        log.info("%s: %d", key, count)
 
     metrics: dict[str, Any] = {
         "scans": len(result.scans),
         "skipped": dict(result.skipped),
         "invalid_beams": getattr(source, "invalid_beams", 0),
+        "slam": result.stats,
     }
     metrics.update(_evaluate(cfg, result, relations))
     t_eval = time.perf_counter()
@@ -126,6 +129,8 @@ def _write_outputs(cfg: ExperimentConfig, result, out: Path) -> None:
     write_tum(out / "odometry.tum", Trajectory(result.stamps, result.odometry))
     if result.ground_truth is not None:
         write_tum(out / "ground_truth.tum", Trajectory(result.stamps, result.ground_truth))
+    if result.graph is not None:
+        result.graph.write_g2o(out / "graph.g2o")
     grid = build_grid(result.poses, result.scans, cfg.mapping)
     save_map_server(grid, out / "map", cfg.mapping)
     if cfg.output.figures:

@@ -18,6 +18,8 @@ __all__ = [
     "interpolate",
     "rotation",
     "as_pose",
+    "adjoint",
+    "compose_covariance",
 ]
 
 
@@ -102,3 +104,20 @@ def interpolate(stamps, poses, query) -> np.ndarray:
     th = wrap_angle(p0[:, 2] + w * wrap_angle(p1[:, 2] - p0[:, 2]))
     out = np.column_stack([xy, th])
     return out if np.ndim(query) else out[0]
+
+
+def adjoint(pose) -> np.ndarray:
+    """Adjoint (3, 3) of an SE(2) pose in (x, y, theta) tangent order, as gtsam.Pose2.AdjointMap."""
+    x, y, th = as_pose(pose)
+    c, s = np.cos(th), np.sin(th)
+    return np.array([[c, -s, y], [s, c, -x], [0.0, 0.0, 1.0]])
+
+
+def compose_covariance(cov_a, b, cov_b) -> np.ndarray:
+    """Covariance (3, 3) of a ⊕ b in the local frame of the result.
+
+    ``cov_a`` and ``cov_b`` are the covariances of relative poses a and b, each
+    in its own local tangent space (gtsam's convention), assumed independent.
+    """
+    ad = adjoint(inverse(b))
+    return ad @ cov_a @ ad.T + cov_b

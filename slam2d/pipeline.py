@@ -1,10 +1,11 @@
-"""SlamPipeline: scans -> frontend -> (back end) -> poses for every scan."""
+"""SlamPipeline: scans -> frontend -> back end -> poses for every scan."""
 
 from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -12,6 +13,7 @@ from slam2d import geometry
 from slam2d.config import ExperimentConfig
 from slam2d.errors import InputError
 from slam2d.frontends import create_frontend
+from slam2d.frontends.base import FrontendResult
 from slam2d.types import Scan
 
 
@@ -26,39 +28,69 @@ class SlamResult:
     ground_truth: np.ndarray | None
     confidences: np.ndarray
     skipped: Counter = field(default_factory=Counter)
+    stats: dict[str, Any] = field(default_factory=dict)
+    graph: Any = None  # the PoseGraph when the back end is 'pose_graph'
+
+
+class ChainBackend:
+    """Back end 'none': the frontend's deltas chained from the first odometry pose."""
+
+    graph = None
+
+    def __init__(self) -> None:
+        self.poses: list[np.ndarray] = []
+
+    def add(self, scan: Scan, result: FrontendResult) -> None:
+        pose = scan.odom if not self.poses else geometry.compose(self.poses[-1], result.delta)
+        self.poses.append(np.asarray(pose, float))
+
+    def finish(self) -> np.ndarray:
+        return np.array(self.poses)
+
+    def summary(self) -> dict[str, int]:
+        return {}
 
 
 class SlamPipeline:
-    """Runs the configured frontend over a scan stream and chains its deltas."""
+    """Runs the configured frontend and back end over a scan stream."""
 
     def __init__(self, cfg: ExperimentConfig):
         self.cfg = cfg
         self.frontend = create_frontend(cfg.frontend.name, cfg.frontend.options)
+        if cfg.backend.name == "pose_graph":
+            from slam2d.backend.slam import GraphSlamBackend
+
+            self.backend = GraphSlamBackend(cfg.backend)
+        else:
+            self.backend = ChainBackend()
 
     def run(self, scans: Iterable[Scan], on_scan: Callable[[], None] | None = None) -> SlamResult:
         """Process every scan; ``on_scan`` is called after each one (progress)."""
         kept: list[Scan] = []
-        poses, confidences = [], []
-        prev: Scan | None = None
+        confidences = []
         for scan in scans:
-            odom_delta = np.zeros(3) if prev is None else geometry.between(prev.odom, scan.odom)
+            odom_delta = np.zeros(3) if not kept else geometry.between(kept[-1].odom, scan.odom)
             result = self.frontend.process(scan, odom_delta)
-            pose = scan.odom if prev is None else geometry.compose(poses[-1], result.delta)
-            poses.append(np.asarray(pose, float))
+            self.backend.add(scan, result)
             confidences.append(result.confidence)
             kept.append(scan)
-            prev = scan
             if on_scan:
                 on_scan()
         if not kept:
-            raise InputError(getattr(scans, "name", "dataset"), f"no usable scan (skipped: {dict(getattr(scans, 'skipped', {}))})")
+            skipped = dict(getattr(scans, "skipped", {}))
+            raise InputError(getattr(scans, "name", "dataset"), f"no usable scan (skipped: {skipped})")
+        poses = self.backend.finish()
         gts = [s.ground_truth for s in kept]
+        stats = dict(self.backend.summary())
+        stats.update({f"frontend {k}": v for k, v in getattr(self.frontend, "fallbacks", {}).items()})
         return SlamResult(
             scans=kept,
             stamps=np.array([s.stamp for s in kept]),
-            poses=np.array(poses),
+            poses=poses,
             odometry=np.array([s.odom for s in kept]),
             ground_truth=None if any(g is None for g in gts) else np.array(gts),
             confidences=np.array(confidences),
             skipped=Counter(getattr(scans, "skipped", {})),
+            stats=stats,
+            graph=self.backend.graph,
         )

@@ -70,3 +70,24 @@ def test_interpolate_midpoint_and_shortest_arc():
 def test_bad_pose_shape():
     with pytest.raises(ValueError, match="3 values"):
         geometry.compose([1, 2], [0, 0, 0])
+
+
+@settings(max_examples=50, deadline=None)
+@given(pose)
+def test_adjoint_matches_gtsam(a):
+    assert np.allclose(geometry.adjoint(a), P(a).AdjointMap(), atol=1e-9)
+
+
+def test_compose_covariance_matches_sampling():
+    rng = np.random.default_rng(0)
+    a, b = np.array([1.0, 0.5, 0.3]), np.array([0.8, -0.2, -0.5])
+    cov_a, cov_b = np.diag([0.01, 0.02, 0.03]) ** 2 * 10, np.diag([0.02, 0.01, 0.02]) ** 2 * 10
+    n = 40000
+    ea = rng.multivariate_normal(np.zeros(3), cov_a, n)
+    eb = rng.multivariate_normal(np.zeros(3), cov_b, n)
+    # perturb in the local tangent space (retract ~ compose with the small pose)
+    pa = np.array([P(a).compose(gtsam.Pose2.Expmap(e)) for e in ea[:4000]])
+    pb = np.array([P(b).compose(gtsam.Pose2.Expmap(e)) for e in eb[:4000]])
+    c = P(a).compose(P(b))
+    errs = np.array([gtsam.Pose2.Logmap(c.between(x.compose(y))) for x, y in zip(pa, pb)])
+    assert np.allclose(np.cov(errs.T), geometry.compose_covariance(cov_a, b, cov_b), atol=2e-4)
