@@ -79,9 +79,10 @@ def ablate(
 def dump_config(config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT) -> None:
     """Print the fully resolved config (defaults included) as YAML."""
     from slam2d import config as config_mod
+    from slam2d.experiment import resolved
 
     try:
-        typer.echo(config_mod.dump(config_mod.load(config, set_)), nl=False)
+        typer.echo(config_mod.dump(resolved(config_mod.load(config, set_))), nl=False)
     except InputError as err:
         _fail(err)
 

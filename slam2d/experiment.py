@@ -55,7 +55,7 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
     from slam2d.pipeline import SlamPipeline
 
     t0 = time.perf_counter()
-    (out / "config.yaml").write_text(config_mod.dump(cfg))
+    (out / "config.yaml").write_text(config_mod.dump(resolved(cfg)))
     source = open_dataset(cfg.dataset, seed=cfg.seed)
     relations = _load_relations(cfg)
     pipeline = SlamPipeline(cfg)
@@ -82,6 +82,16 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
     (out / "metrics.json").write_text(json.dumps(_jsonable(metrics), indent=2))
     _log_summary(metrics)
     return metrics
+
+
+def resolved(cfg: ExperimentConfig) -> ExperimentConfig:
+    """``cfg`` with the frontend's options completed by its defaults."""
+    from slam2d.frontends.base import resolve_options
+
+    params = resolve_options(cfg.frontend.name, cfg.frontend.options)
+    if params is None:
+        return cfg
+    return cfg.model_copy(update={"frontend": cfg.frontend.model_copy(update={"options": params.model_dump()})})
 
 
 def _load_relations(cfg: ExperimentConfig):
