@@ -1,0 +1,393 @@
+"""Correlative scan-to-submap matching that survives a poor initial guess.
+
+A submap becomes a :class:`ProbabilityGrid`: a likelihood field
+``exp(-d^2 / 2 sigma^2)`` (d: distance in metres to the nearest submap point)
+on a regular grid, plus max-pooled levels for branch and bound. :func:`match`
+sweeps every rotation of the angular window (step ``resolution / range``,
+Olson 2009, "Real-time correlative scan matching") and searches translations
+by branch and bound over the pooled levels (Hess et al. 2016, "Real-time loop
+closure in 2D LIDAR SLAM"), one vectorised gather per level. The best cell
+is then refined by point-to-line Gauss-Newton against the submap points,
+whose Hessian gives the covariance.
+
+The score is the mean likelihood of the scan points (decimated to one per
+cell) at the matched pose: 1 when every point lies on a submap point, about
+0.6 one cell away, 0 far from the submap.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+from scipy.spatial import cKDTree
+
+from slam2d import geometry
+
+__all__ = ["ProbabilityGrid", "MatchResult", "match", "voxel_filter", "angular_step"]
+
+SIGMA_CELLS = 1.0  # std of the likelihood field, in cells
+MAX_DEPTH = 4  # pooled levels of branch and bound; top cells are 2^depth cells wide
+RANGE_PERCENTILE = 95.0  # the scan's "max range" for the angular step ignores rare far points
+MIN_RANGE = 1.0  # m; floor of that range, so close-up scans do not get huge angular steps
+GATHER_BATCH = 2_000_000  # grid values gathered per numpy batch
+NORMAL_NEIGHBOURS = 8  # submap points per normal estimate
+NORMAL_RADIUS_CELLS = 3.0  # neighbourhood radius of a normal estimate, in cells
+REFINE_ITERATIONS = 20
+REFINE_MAX_DIST_CELLS = 4.0  # point-to-line correspondences farther than this are dropped
+REFINE_HUBER_CELLS = 0.5  # Huber threshold on point-to-line residuals, in cells
+REFINE_REVERT_SCORE = 0.02  # keep the search pose if refinement loses more score than this
+REFINE_MAX_STEPS = 3.0  # ... or moves it more than this many cells or angular steps
+COV_FLOOR_XY_CELLS = 0.5  # std floor added to the covariance, in cells
+COV_FLOOR_THETA = np.deg2rad(0.25)  # rad; std floor added to the covariance
+
+
+@dataclass(frozen=True, eq=False)
+class MatchResult:
+    """Outcome of :func:`match`.
+
+    pose: (3,) pose of the scan in the submap frame (m, m, rad).
+    score: mean likelihood in [0, 1] of the scan points at ``pose``.
+    covariance: (3, 3) of ``pose``.
+    search_score: best grid score of branch and bound, before refinement.
+    evaluated: number of (rotation, translation) candidates scored.
+    """
+
+    pose: np.ndarray
+    score: float
+    covariance: np.ndarray
+    search_score: float
+    evaluated: int
+
+
+def voxel_filter(points, cell: float) -> np.ndarray:
+    """One point (the first) per ``cell`` x ``cell`` square (m) of finite points (M, 2)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    if len(pts) == 0:
+        return pts
+    ij = np.floor(pts / cell).astype(np.int64)
+    ij -= ij.min(axis=0)
+    _, first = np.unique(ij[:, 0] * (ij[:, 1].max() + 1) + ij[:, 1], return_index=True)
+    return pts[np.sort(first)]
+
+
+def angular_step(points, resolution: float) -> float:
+    """Rotation step (rad) that moves a far scan point by about one cell of ``resolution`` m."""
+    r = np.hypot(points[:, 0], points[:, 1])
+    far = max(float(np.percentile(r, RANGE_PERCENTILE)), MIN_RANGE) if len(r) else MIN_RANGE
+    return float(np.arccos(1.0 - resolution**2 / (2.0 * far**2)))
+
+
+# --------------------------------------------------------------------------- the grid
+
+
+@dataclass(frozen=True, eq=False)
+class _Pyramid:
+    """Zero-padded likelihood field and its max-pooled levels, flattened.
+
+    ``levels[k][r * width + c]`` is the maximum of the padded field over rows
+    [r, r + 2^k) and columns [c, c + 2^k). ``origin`` (2,) is the corner (m) of
+    cell (0, 0); ``window`` the translational half-window in cells it is padded for.
+    """
+
+    levels: list[np.ndarray]
+    origin: np.ndarray
+    shape: tuple[int, int]
+    resolution: float
+    window: int
+    depth: int
+
+
+class ProbabilityGrid:
+    """Likelihood field of submap points (M, 2) in the submap frame (m).
+
+    resolution: cell size (m); sigma: field std (m), default one cell.
+    Keeps the points (voxel-filtered at half a cell), a k-d tree over them
+    and their normals for refinement and scoring.
+    """
+
+    def __init__(self, points, resolution: float = 0.05, sigma: float | None = None):
+        if not resolution > 0:
+            raise ValueError(f"resolution must be > 0 m, got {resolution}")
+        pts = voxel_filter(points, resolution / 2)
+        if len(pts) == 0:
+            raise ValueError("a probability grid needs at least one finite submap point")
+        self.resolution = float(resolution)
+        self.sigma = float(sigma if sigma is not None else SIGMA_CELLS * resolution)
+        margin = 3.0 * self.sigma + resolution
+        self.origin = pts.min(axis=0) - margin
+        cells = np.floor((pts - self.origin) / resolution).astype(np.int64)
+        nx, ny = np.floor((pts.max(axis=0) + margin - self.origin) / resolution).astype(np.int64) + 1
+        occupied = np.zeros((ny, nx), dtype=bool)
+        occupied[cells[:, 1], cells[:, 0]] = True
+        d = distance_transform_edt(~occupied, sampling=resolution)
+        self.field = np.exp(-0.5 * (d / self.sigma) ** 2).astype(np.float32)
+        self.points = pts
+        self.tree = cKDTree(pts)
+        self.normals, self.has_normal = _normals(self.tree, pts, NORMAL_RADIUS_CELLS * resolution)
+        self._pyramids: dict[tuple[int, int], _Pyramid] = {}
+
+    def __repr__(self) -> str:
+        ny, nx = self.field.shape
+        return f"ProbabilityGrid({len(self.points)} points, {nx} x {ny} cells of {self.resolution:g} m)"
+
+    def pyramid(self, window: int, depth: int) -> _Pyramid:
+        """The padded, pooled levels for a half-window of ``window`` cells (cached)."""
+        key = (window, depth)
+        if key not in self._pyramids:
+            self._pyramids[key] = self._build_pyramid(window, depth)
+        return self._pyramids[key]
+
+    def _build_pyramid(self, window: int, depth: int) -> _Pyramid:
+        pad = 2 * window + 2 ** (depth + 1) + 2
+        level = np.pad(self.field, pad)
+        levels = [level]
+        for k in range(1, depth + 1):
+            h = 2 ** (k - 1)
+            nxt = level.copy()
+            np.maximum(nxt[:-h], level[h:], out=nxt[:-h])
+            np.maximum(nxt[:, :-h], nxt[:, h:].copy(), out=nxt[:, :-h])
+            level = nxt
+            levels.append(level)
+        return _Pyramid(
+            levels=[lv.ravel() for lv in levels],
+            origin=self.origin - pad * self.resolution,
+            shape=level.shape,
+            resolution=self.resolution,
+            window=window,
+            depth=depth,
+        )
+
+    def score(self, points_in_submap) -> float:
+        """Mean likelihood in [0, 1] of points (N, 2) given in the submap frame (exact distances)."""
+        pts = np.asarray(points_in_submap, dtype=np.float64).reshape(-1, 2)
+        if len(pts) == 0:
+            return 0.0
+        d, _ = self.tree.query(pts, distance_upper_bound=5.0 * self.sigma)
+        return float(np.mean(np.exp(-0.5 * (np.minimum(d, 1e3) / self.sigma) ** 2)))
+
+
+def _normals(tree: cKDTree, pts: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals (M, 2) of points from their neighbours' scatter, and where they are reliable (M,).
+
+    A normal is reliable with at least 3 neighbours within ``radius`` (m) spread
+    along a line (smaller scatter eigenvalue <= 10 % of the larger).
+    """
+    k = min(NORMAL_NEIGHBOURS, len(pts))
+    d, j = tree.query(pts, k=k, distance_upper_bound=radius)
+    d, j = d.reshape(len(pts), k), j.reshape(len(pts), k)
+    ok = np.isfinite(d)
+    count = ok.sum(axis=1)
+    nb = pts[np.minimum(j, len(pts) - 1)]
+    mean = (nb * ok[..., None]).sum(axis=1) / np.maximum(count, 1)[:, None]
+    dx, dy = ((nb - mean[:, None]) * ok[..., None]).transpose(2, 0, 1)
+    sxx, syy, sxy = (dx * dx).sum(1), (dy * dy).sum(1), (dx * dy).sum(1)
+    along = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)  # direction of the larger eigenvalue
+    half_gap = np.hypot(0.5 * (sxx - syy), sxy)
+    small, large = 0.5 * (sxx + syy) - half_gap, 0.5 * (sxx + syy) + half_gap
+    normals = np.column_stack([-np.sin(along), np.cos(along)])
+    return normals, (count >= 3) & (small <= 0.1 * large)
+
+
+# --------------------------------------------------------------------------- branch and bound
+
+
+def _discretise(pyr: _Pyramid, points: np.ndarray, start: np.ndarray, thetas: np.ndarray) -> np.ndarray:
+    """Flat cell indices (A, N) of the points rotated by each angle (A,) and moved to ``start`` (2,).
+
+    Points that could leave the padded grid anywhere in the window are sent to
+    a cell deep in the zero padding: they score 0 for every candidate.
+    """
+    c, s = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
+    x = c * points[:, 0] - s * points[:, 1] + start[0]
+    y = s * points[:, 0] + c * points[:, 1] + start[1]
+    col = np.floor((x - pyr.origin[0]) / pyr.resolution).astype(np.int64)
+    row = np.floor((y - pyr.origin[1]) / pyr.resolution).astype(np.int64)
+    w, reach = pyr.window, pyr.window + 2**pyr.depth
+    ny, nx = pyr.shape
+    inside = (col >= w) & (row >= w) & (col + reach < nx) & (row + reach < ny)
+    return np.where(inside, row * nx + col, w * nx + w)
+
+
+def _scores(level: np.ndarray, flat: np.ndarray, cands: np.ndarray, width: int) -> np.ndarray:
+    """Mean of ``level`` over the points of each candidate (C, 3) = (angle index, dx, dy) cells."""
+    out = np.empty(len(cands), dtype=np.float64)
+    batch = max(1, GATHER_BATCH // max(flat.shape[1], 1))
+    for i in range(0, len(cands), batch):
+        c = cands[i : i + batch]
+        idx = flat[c[:, 0]] + (c[:, 2] * width + c[:, 1])[:, None]
+        out[i : i + batch] = level.take(idx).mean(axis=1, dtype=np.float64)
+    return out
+
+
+def _children(cands: np.ndarray, level: int, window: int) -> np.ndarray:
+    """The four sub-blocks at ``level - 1`` of candidates (C, 3) at ``level``, inside the window."""
+    h = 2 ** (level - 1)
+    steps = np.array([[0, 0, 0], [0, h, 0], [0, 0, h], [0, h, h]], dtype=np.int64)
+    kids = (cands[:, None, :] + steps[None]).reshape(-1, 3)
+    return kids[(kids[:, 1] <= window) & (kids[:, 2] <= window)]
+
+
+def _greedy(pyr: _Pyramid, flat: np.ndarray, cand: np.ndarray, level: int) -> tuple[np.ndarray, float, int]:
+    """Descend from ``cand`` at ``level`` to level 0 through the best child: (candidate, score, evaluated)."""
+    width, evaluated, score = pyr.shape[1], 0, 0.0
+    for k in range(level, 0, -1):
+        kids = _children(cand[None], k, pyr.window)
+        s = _scores(pyr.levels[k - 1], flat, kids, width)
+        evaluated += len(kids)
+        cand, score = kids[np.argmax(s)], float(s.max())
+    if level == 0:
+        score = float(_scores(pyr.levels[0], flat, cand[None], width)[0])
+        evaluated += 1
+    return cand, score, evaluated
+
+
+def _branch_and_bound(pyr: _Pyramid, flat: np.ndarray, min_score: float) -> tuple[np.ndarray, float, int]:
+    """Best (angle index, dx, dy) over all angles and the translational window, its score, evaluations.
+
+    Level-synchronous branch and bound: every level's surviving blocks are
+    scored in one gather; a block survives while its pooled upper bound beats
+    the best exact score so far (found by greedy descents) and ``min_score``.
+    """
+    w, depth, width = pyr.window, pyr.depth, pyr.shape[1]
+    offs = np.arange(-w, w + 1, 2**depth, dtype=np.int64)
+    a, dx, dy = np.meshgrid(np.arange(len(flat), dtype=np.int64), offs, offs, indexing="ij")
+    cands = np.column_stack([a.ravel(), dx.ravel(), dy.ravel()])
+    bound = _scores(pyr.levels[depth], flat, cands, width)
+    evaluated = len(cands)
+    best, best_score = None, -np.inf
+    for k in range(depth, 0, -1):
+        if len(cands) == 0:
+            break
+        c, s, n = _greedy(pyr, flat, cands[np.argmax(bound)], k)
+        evaluated += n
+        if s > best_score:
+            best, best_score = c, s
+        keep = bound > max(best_score, min_score)
+        cands = _children(cands[keep], k, w)
+        bound = _scores(pyr.levels[k - 1], flat, cands, width)
+        evaluated += len(cands)
+    if len(cands) and (best is None or bound.max() > best_score):
+        best, best_score = cands[np.argmax(bound)], float(bound.max())
+    return best, best_score, evaluated
+
+
+# --------------------------------------------------------------------------- refinement
+
+
+def _point_to_line(grid: ProbabilityGrid, points: np.ndarray, pose: np.ndarray, max_dist: float):
+    """Residuals (K,), Jacobian (K, 3) w.r.t. (x, y, theta) and Huber weights (K,) at ``pose``."""
+    q = geometry.transform_points(pose, points)
+    d, j = grid.tree.query(q, distance_upper_bound=max_dist)
+    ok = np.isfinite(d)
+    ok[ok] = grid.has_normal[j[ok]]
+    j, q, p = j[ok], q[ok], points[ok]
+    n = grid.normals[j]
+    r = np.einsum("ki,ki->k", n, q - grid.points[j])
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    dqx, dqy = -s * p[:, 0] - c * p[:, 1], c * p[:, 0] - s * p[:, 1]
+    jac = np.column_stack([n[:, 0], n[:, 1], n[:, 0] * dqx + n[:, 1] * dqy])
+    k = REFINE_HUBER_CELLS * grid.resolution
+    weights = np.minimum(1.0, k / np.maximum(np.abs(r), 1e-12))
+    return r, jac, weights
+
+
+def _refine(grid: ProbabilityGrid, points: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Gauss-Newton point-to-line refinement of ``pose`` (3,) against the submap points."""
+    max_dist = REFINE_MAX_DIST_CELLS * grid.resolution
+    pose = pose.copy()
+    for _ in range(REFINE_ITERATIONS):
+        r, jac, wgt = _point_to_line(grid, points, pose, max_dist)
+        if len(r) < 3:
+            break
+        h = jac.T @ (wgt[:, None] * jac)
+        g = jac.T @ (wgt * r)
+        damping = 1e-6 * np.trace(h) + 1e-12
+        step = -np.linalg.solve(h + damping * np.eye(3), g)
+        pose += step
+        if np.hypot(step[0], step[1]) < 1e-5 and abs(step[2]) < 1e-6:
+            break
+    pose[2] = geometry.wrap_angle(pose[2])
+    return pose
+
+
+def _covariance(grid: ProbabilityGrid, points: np.ndarray, pose: np.ndarray, window: np.ndarray) -> np.ndarray:
+    """Covariance (3, 3) of ``pose`` (m^2, rad^2) from the point-to-line fit.
+
+    (J^T W J / sigma^2 + diag(1 / window^2))^-1 plus a floor: sigma is the
+    residual std (at least a tenth of a cell); the window (3,) prior (m, m, rad)
+    bounds the variance along directions the scan does not constrain, as in a
+    featureless corridor.
+    """
+    res = grid.resolution
+    floor = np.diag([(COV_FLOOR_XY_CELLS * res) ** 2] * 2 + [COV_FLOOR_THETA**2])
+    info = np.diag(1.0 / np.asarray(window, dtype=np.float64) ** 2)
+    r, jac, wgt = _point_to_line(grid, points, pose, REFINE_MAX_DIST_CELLS * res)
+    if len(r) > 3:
+        sigma2 = max(float(np.sum(wgt * r**2) / (np.sum(wgt) - 3)), (0.1 * res) ** 2)
+        info = info + jac.T @ (wgt[:, None] * jac) / sigma2
+    cov = np.linalg.inv(info)
+    return 0.5 * (cov + cov.T) + floor
+
+
+# --------------------------------------------------------------------------- matching
+
+
+def match(
+    grid: ProbabilityGrid,
+    points,
+    initial,
+    window_xy: float,
+    window_theta: float,
+    *,
+    min_score: float = 0.0,
+    depth: int | None = None,
+) -> MatchResult:
+    """Match scan points (N, 2) in the scan's base frame against ``grid``.
+
+    initial: (3,) guess of the scan's pose in the submap frame; the search
+    covers +-``window_xy`` m in x and y and +-``window_theta`` rad around it.
+    min_score: prune blocks whose bound is below it (a faster search when the
+    caller rejects lower scores anyway; the result may then be a greedy one
+    below ``min_score``). depth: pooled levels (default: enough for the window,
+    at most ``MAX_DEPTH``).
+    """
+    initial = geometry.as_pose(initial).reshape(3)
+    pts = voxel_filter(points, grid.resolution)
+    if len(pts) == 0:
+        raise ValueError("match needs at least one finite scan point")
+    found, step, search_score, evaluated = _search(grid, pts, initial, window_xy, window_theta, min_score, depth)
+    pose, score = _polish(grid, pts, found, step)
+    cov = _covariance(grid, pts, pose, np.array([window_xy, window_xy, window_theta]))
+    return MatchResult(pose, score, cov, search_score, evaluated)
+
+
+def _search(grid, pts, initial, window_xy, window_theta, min_score, depth) -> tuple[np.ndarray, float, float, int]:
+    """Branch and bound around ``initial``: (best pose (3,), angular step (rad), its grid score, evaluations)."""
+    res = grid.resolution
+    window = int(np.ceil(window_xy / res - 1e-9))
+    if depth is None:
+        depth = int(min(MAX_DEPTH, max(0, np.ceil(np.log2(2 * window + 1)) - 1)))
+    step = angular_step(pts, res)
+    n_steps = int(np.ceil(window_theta / step - 1e-9))
+    thetas = initial[2] + step * np.arange(-n_steps, n_steps + 1)
+    pyr = grid.pyramid(window, depth)
+    flat = _discretise(pyr, pts, initial[:2], thetas)
+    best, score, evaluated = _branch_and_bound(pyr, flat, min_score)
+    pose = np.array([*(initial[:2] + res * best[1:]), geometry.wrap_angle(thetas[best[0]])])
+    return pose, step, score, evaluated
+
+
+def _polish(grid: ProbabilityGrid, pts: np.ndarray, found: np.ndarray, step: float) -> tuple[np.ndarray, float]:
+    """Refined pose and its exact score; the search pose if refinement strays or loses score."""
+    refined = _refine(grid, pts, found)
+    score = grid.score(geometry.transform_points(refined, pts))
+    found_score = grid.score(geometry.transform_points(found, pts))
+    moved = geometry.between(found, refined)
+    limit = REFINE_MAX_STEPS * np.array([grid.resolution, step])
+    strayed = np.hypot(moved[0], moved[1]) > limit[0] or abs(moved[2]) > limit[1]
+    if strayed or score < found_score - REFINE_REVERT_SCORE:
+        return found, found_score
+    return refined, score

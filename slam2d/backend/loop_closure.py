@@ -1,0 +1,195 @@
+"""Loop-closure candidates over the optimised keyframe poses, verified by scan-to-submap matching.
+
+:class:`LoopCloser` keeps every keyframe's points (decimated) and travelled
+distance. :meth:`LoopCloser.candidates` finds earlier keyframes near a new
+one; :meth:`LoopCloser.verify` matches the new keyframe's scan against the
+submap around a candidate with the correlative matcher and accepts on score.
+Consistency with the graph (a Mahalanobis gate) is the pose graph's job.
+
+Keys index the ``poses`` arrays: ``poses[k]`` is the pose of keyframe ``k``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter, OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from slam2d import geometry
+from slam2d.backend.correlative import ProbabilityGrid, match, voxel_filter
+from slam2d.config import LoopClosureConfig
+
+__all__ = ["LoopClosure", "LoopCloser"]
+
+log = logging.getLogger(__name__)
+
+KEYFRAME_VOXEL_CELLS = 0.5  # keyframe points are kept one per half cell of the matcher's grid
+MIN_POINTS = 20  # a keyframe scan with fewer points is not verified
+SEARCH_MARGIN = 0.05  # the search prunes below min_score minus this (its grid score only approximates the final one)
+SUBMAP_CACHE = 16  # submap grids kept for reuse while their keyframes' poses stay put
+SUBMAP_REUSE_XY_CELLS = 0.25  # a cached submap is rebuilt once a member moves more than this (cells)
+SUBMAP_REUSE_THETA = np.deg2rad(0.1)  # ... or turns more than this (rad)
+
+
+@dataclass(frozen=True, eq=False)
+class LoopClosure:
+    """A verified loop closure: pose ``delta`` (3,) of keyframe ``j`` in the frame of keyframe ``i``.
+
+    information: (3, 3) inverse covariance of ``delta`` (1/m^2, 1/rad^2);
+    score: the matcher's score in [0, 1].
+    """
+
+    i: int
+    j: int
+    delta: np.ndarray
+    information: np.ndarray
+    score: float
+
+
+@dataclass(frozen=True, eq=False)
+class _Submap:
+    members: tuple[int, ...]
+    relative: np.ndarray  # (n, 3) member poses in the anchor's frame when built
+    grid: ProbabilityGrid
+
+
+class LoopCloser:
+    """Candidate search and verification for loop closures.
+
+    ``stats`` counts candidates proposed, pairs verified, accepted, and
+    rejections by reason (``rejected_score``, ``rejected_points``).
+    """
+
+    def __init__(self, cfg: LoopClosureConfig | None = None):
+        self.cfg = cfg if cfg is not None else LoopClosureConfig()
+        self.stats: Counter[str] = Counter()
+        self._keys: list[int] = []
+        self._order: dict[int, int] = {}
+        self._travelled: list[float] = []
+        self._points: dict[int, np.ndarray] = {}
+        self._submaps: OrderedDict[int, _Submap] = OrderedDict()
+
+    def __len__(self) -> int:
+        return len(self._keys)
+
+    def add_keyframe(self, key: int, points, travelled: float) -> None:
+        """Store keyframe ``key``: its points (M, 2) in the base frame (m) and the distance travelled so far (m)."""
+        key = int(key)
+        if key in self._order:
+            raise ValueError(f"keyframe {key} was already added")
+        if self._travelled and travelled < self._travelled[-1]:
+            raise ValueError(f"keyframe {key}: travelled {travelled} m is less than the previous keyframe's")
+        self._order[key] = len(self._keys)
+        self._keys.append(key)
+        self._travelled.append(float(travelled))
+        self._points[key] = voxel_filter(points, KEYFRAME_VOXEL_CELLS * self.cfg.resolution)
+
+    def travelled(self, key: int) -> float:
+        """Distance travelled (m) when keyframe ``key`` was taken."""
+        return self._travelled[self._position(key)]
+
+    def _position(self, key: int) -> int:
+        try:
+            return self._order[int(key)]
+        except KeyError:
+            raise KeyError(f"keyframe {key} was never added") from None
+
+    def candidates(self, key: int, poses) -> list[int]:
+        """Keyframes within ``search_radius`` of ``key`` and at least ``min_travel`` away along the path.
+
+        poses: (K, 3) current keyframe poses, indexed by key. Nearest first, at
+        most ``max_candidates``; a candidate within ``submap_keyframes`` of one
+        already chosen is skipped, as its submap would be nearly the same.
+        """
+        poses = geometry.as_pose(poses).reshape(-1, 3)
+        keys = np.asarray(self._keys, dtype=np.int64)
+        trav = np.asarray(self._travelled)
+        here = self.travelled(key)
+        eligible = (keys < len(poses)) & (np.abs(trav - here) >= self.cfg.min_travel)
+        if not eligible.any():
+            return []
+        positions = np.flatnonzero(eligible)
+        tree = cKDTree(poses[keys[positions], :2])
+        near = np.asarray(tree.query_ball_point(poses[key, :2], self.cfg.search_radius), dtype=np.int64)
+        if len(near) == 0:
+            return []
+        dist = np.hypot(*(poses[keys[positions[near]], :2] - poses[key, :2]).T)
+        chosen: list[int] = []
+        for pos in positions[near[np.argsort(dist, kind="stable")]]:
+            if all(abs(pos - self._order[c]) > self.cfg.submap_keyframes for c in chosen):
+                chosen.append(int(keys[pos]))
+                if len(chosen) == self.cfg.max_candidates:
+                    break
+        self.stats["candidates"] += len(chosen)
+        return chosen
+
+    def verify(self, key: int, cand: int, poses) -> LoopClosure | None:
+        """Match keyframe ``key``'s scan against the submap around ``cand``; a LoopClosure if the score passes.
+
+        The submap holds keyframes ``cand - n .. cand + n`` (n = ``submap_keyframes``,
+        in insertion order, leaving out any within ``min_travel`` of ``key``) in
+        ``cand``'s frame; the initial guess is ``between(poses[cand], poses[key])``.
+        """
+        cfg = self.cfg
+        poses = geometry.as_pose(poses).reshape(-1, 3)
+        self.stats["verified"] += 1
+        self._position(key)  # a clear KeyError for a keyframe never added
+        points = self._points[int(key)]
+        submap = self._submap(key, cand, poses) if len(points) >= MIN_POINTS else None
+        if submap is None:
+            self.stats["rejected_points"] += 1
+            log.debug("loop %d -> %d rejected: too few points", cand, key)
+            return None
+        guess = geometry.between(poses[cand], poses[key])
+        window_theta = np.deg2rad(cfg.window_theta_deg)
+        prune = max(0.0, cfg.min_score - SEARCH_MARGIN)
+        result = match(submap.grid, points, guess, cfg.window_xy, window_theta, min_score=prune)
+        if result.score < cfg.min_score:
+            self.stats["rejected_score"] += 1
+            log.debug("loop %d -> %d rejected: score %.3f < %.3f", cand, key, result.score, cfg.min_score)
+            return None
+        self.stats["accepted"] += 1
+        moved = geometry.between(guess, result.pose)
+        log.debug(
+            "loop %d -> %d accepted: score %.3f, correction %.3f m %.2f deg",
+            cand, key, result.score, np.hypot(moved[0], moved[1]), np.rad2deg(moved[2]),
+        )  # fmt: skip
+        info = np.linalg.inv(result.covariance)
+        return LoopClosure(int(cand), int(key), result.pose, 0.5 * (info + info.T), result.score)
+
+    def _submap(self, key: int, cand: int, poses: np.ndarray) -> _Submap | None:
+        """The grid of keyframes around ``cand`` in its frame (cached while their poses hold), or None if empty."""
+        n, pos = self.cfg.submap_keyframes, self._position(cand)
+        here = self.travelled(key)
+        span = slice(max(0, pos - n), pos + n + 1)
+        members = tuple(
+            k
+            for k, t in zip(self._keys[span], self._travelled[span])
+            if abs(t - here) >= self.cfg.min_travel and k < len(poses)
+        )
+        if not members:
+            return None
+        relative = geometry.between(poses[cand], poses[list(members)])
+        cached = self._submaps.get(cand)
+        if cached is not None and cached.members == members and self._unmoved(cached.relative, relative):
+            self._submaps.move_to_end(cand)
+            return cached
+        pts = np.vstack([geometry.transform_points(p, self._points[k]) for k, p in zip(members, relative)])
+        if len(pts) < MIN_POINTS:
+            return None
+        submap = _Submap(members, relative, ProbabilityGrid(pts, self.cfg.resolution))
+        self._submaps[cand] = submap
+        if len(self._submaps) > SUBMAP_CACHE:
+            self._submaps.popitem(last=False)
+        return submap
+
+    def _unmoved(self, old: np.ndarray, new: np.ndarray) -> bool:
+        """Whether relative member poses changed less than the reuse tolerances."""
+        d = geometry.between(old, new)
+        return bool(
+            np.all(np.hypot(d[:, 0], d[:, 1]) < SUBMAP_REUSE_XY_CELLS * self.cfg.resolution)
+            and np.all(np.abs(d[:, 2]) < SUBMAP_REUSE_THETA)
+        )

@@ -1,0 +1,493 @@
+"""The pose graph: the only module that builds GTSAM factors.
+
+Keyframe ``k`` is the gtsam key ``symbol('x', k)``, landmark ``n`` is
+``symbol('l', n)``. Keyframe 0 carries a tight prior; each later keyframe a
+between factor from its predecessor (odometry or scan matching, no robust
+kernel); loop closures are between factors with the configured robust kernel;
+landmark observations are bearing-range factors. iSAM2 keeps the incremental
+estimate; ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors.
+
+Poses are numpy ``(x, y, theta)`` (m, m, rad); information matrices are 3x3
+inverse covariances in the frame of the measurement (GTSAM's tangent space,
+order x, y, theta). Errors follow GTSAM: 0.5 * sum of squared whitened residuals.
+
+``optimize_g2o`` and ``solve_g2o`` optimise a g2o file's graph in one batch.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from slam2d import geometry
+from slam2d.backend import robust as rb
+from slam2d.config import BackendConfig
+from slam2d.datasets import g2o
+from slam2d.errors import InputError
+
+log = logging.getLogger(__name__)
+
+RELINEARIZE_THRESHOLD = 0.01  # iSAM2: relinearise a variable whose delta exceeds this (m / rad)
+RELINEARIZE_SKIP = 1  # iSAM2: check for relinearisation at every update
+ISAM2_FACTORIZATION = "CHOLESKY"  # faster; an ill-conditioned update falls back to "QR" (see update)
+PRIOR_SIGMAS = np.array([1e-6, 1e-6, 1e-6])  # m, m, rad: anchors the first keyframe / vertex
+DEFAULT_ODOMETRY_SIGMAS = np.array([0.05, 0.05, np.deg2rad(2.0)])  # m, m, rad, when no information is given
+GNC_OUTLIER_WEIGHT = 0.5  # a loop whose final GNC weight is below this is rejected
+CHI2_3DOF_99 = 11.344866730144373  # chi-square 99% quantile, 3 degrees of freedom: a loop_consistency gate
+
+
+def pose_key(k: int) -> int:
+    """GTSAM key of keyframe ``k``."""
+    import gtsam
+
+    return gtsam.symbol("x", int(k))
+
+
+def landmark_key(n: int) -> int:
+    """GTSAM key of landmark ``n``."""
+    import gtsam
+
+    return gtsam.symbol("l", int(n))
+
+
+def _pose3(p, where: str) -> np.ndarray:
+    a = np.asarray(p, dtype=np.float64)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise InputError(where, f"expected a finite pose (x, y, theta), got {p!r}")
+    return a
+
+
+def _gtsam_pose(p):
+    import gtsam
+
+    return gtsam.Pose2(float(p[0]), float(p[1]), float(p[2]))
+
+
+def _lm_params():
+    import gtsam
+
+    return gtsam.LevenbergMarquardtParams()
+
+
+@dataclass(frozen=True)
+class _Factor:
+    """One factor and what it measures (for g2o export and GNC bookkeeping)."""
+
+    kind: str  # "prior" | "odometry" | "loop" | "landmark"
+    factor: object
+    i: int
+    j: int
+    measurement: np.ndarray | None = None
+    information: np.ndarray | None = None
+
+
+class PoseGraph:
+    """Keyframe pose graph with iSAM2 updates and a final batch optimisation."""
+
+    def __init__(self, cfg: BackendConfig | None = None):
+        import gtsam
+
+        self.cfg = cfg if cfg is not None else BackendConfig(name="pose_graph")
+        rb.m_estimator(self.cfg.robust, self.cfg.robust_param)  # fail early on a bad kernel
+        self._prior_model = gtsam.noiseModel.Diagonal.Sigmas(PRIOR_SIGMAS)
+        self._default_odometry_info = np.diag(1.0 / DEFAULT_ODOMETRY_SIGMAS**2)
+        self._default_odometry_model = rb.noise_model(self._default_odometry_info)
+        self._factors: list[_Factor] = []
+        self._active: list[bool] = []
+        self._initial: list[np.ndarray] = []  # poses given to add_keyframe
+        self._landmarks: set[int] = set()
+        self.factorization = ISAM2_FACTORIZATION
+        self._reset_isam()
+
+    # ----------------------------------------------------------------- building
+
+    def add_keyframe(self, pose, delta_from_previous=None, information=None) -> int:
+        """Add a keyframe with initial value ``pose`` (3,); return its key (0, 1, ...).
+
+        The first keyframe gets a tight prior at ``pose``. Later ones get a between
+        factor from the previous keyframe: ``delta_from_previous`` (3,) (default: the
+        relative pose between the poses given to this method) with ``information``
+        (3, 3) (default: ``DEFAULT_ODOMETRY_SIGMAS``).
+        """
+        import gtsam
+
+        pose = _pose3(pose, "add_keyframe pose")
+        k = len(self._initial)
+        if k == 0:
+            factor = gtsam.PriorFactorPose2(pose_key(0), _gtsam_pose(pose), self._prior_model)
+            self._add(_Factor("prior", factor, 0, 0, pose, np.diag(1.0 / PRIOR_SIGMAS**2)))
+        else:
+            if delta_from_previous is None:
+                delta = geometry.between(self._initial[-1], pose)
+            else:
+                delta = _pose3(delta_from_previous, "add_keyframe delta_from_previous")
+            if information is None:
+                info, model = self._default_odometry_info, self._default_odometry_model
+            else:
+                info = rb.check_information(information, f"odometry information {k - 1} -> {k}")
+                model = rb.noise_model(info)
+            factor = gtsam.BetweenFactorPose2(pose_key(k - 1), pose_key(k), _gtsam_pose(delta), model)
+            self._add(_Factor("odometry", factor, k - 1, k, delta, info))
+        self._new_values.insert(pose_key(k), _gtsam_pose(pose))
+        self._initial.append(pose)
+        return k
+
+    def add_loop(self, i: int, j: int, delta, information) -> int:
+        """Loop closure: pose of keyframe ``j`` seen from keyframe ``i`` is ``delta`` (3,)
+        with ``information`` (3, 3), under the configured robust kernel. Returns its factor index."""
+        import gtsam
+
+        i, j = self._check_key(i), self._check_key(j)
+        if i == j:
+            raise InputError("add_loop", f"a loop needs two different keyframes, got {i} twice")
+        delta = _pose3(delta, f"loop {i} -> {j} delta")
+        info = rb.check_information(information, f"loop {i} -> {j} information")
+        model = rb.noise_model(info, self.cfg.robust, self.cfg.robust_param)
+        factor = gtsam.BetweenFactorPose2(pose_key(i), pose_key(j), _gtsam_pose(delta), model)
+        return self._add(_Factor("loop", factor, i, j, delta, info))
+
+    def add_landmark_observation(self, key: int, landmark_id: int, bearing: float, range: float, covariance) -> int:
+        """Bearing (rad, sensor = keyframe frame) and range (m) of landmark ``landmark_id``
+        from keyframe ``key`` with 2x2 ``covariance`` (rad^2, m^2). A new landmark is
+        initialised from this observation. Returns the factor index."""
+        import gtsam
+
+        key = self._check_key(key)
+        if not (np.isfinite(bearing) and np.isfinite(range) and range > 0):
+            raise InputError("add_landmark_observation", f"need a finite bearing and range > 0, got {bearing}, {range}")
+        cov = rb.check_information(covariance, f"landmark {landmark_id} observation", kind="covariance")
+        lkey = landmark_key(landmark_id)
+        if landmark_id not in self._landmarks:
+            local = np.array([range * np.cos(bearing), range * np.sin(bearing)])
+            self._new_values.insert(lkey, self._pose_value(key).transformFrom(local))
+            self._landmarks.add(int(landmark_id))
+        model = gtsam.noiseModel.Gaussian.Covariance(cov)
+        factor = gtsam.BearingRangeFactor2D(pose_key(key), lkey, gtsam.Rot2(float(bearing)), float(range), model)
+        return self._add(_Factor("landmark", factor, key, int(landmark_id)))
+
+    # -------------------------------------------------------------- optimising
+
+    def update(self) -> None:
+        """One iSAM2 update with the factors and values added since the last one.
+
+        If Cholesky finds the system indeterminate (very anisotropic information
+        matrices, as in MIT.g2o, square the condition number), iSAM2 restarts with
+        QR factorisation from its last linearisation point and stays with QR.
+        """
+        import gtsam
+
+        try:
+            self._isam.update(self._new_graph, self._new_values)
+        except RuntimeError as err:
+            if self.factorization == "QR" or "Indeterminate" not in str(err):
+                raise
+            log.warning("iSAM2 Cholesky update failed (ill-conditioned system); restarting with QR")
+            values = gtsam.Values(self._new_values)
+            values.insert_or_assign(self._isam.getLinearizationPoint())
+            self.factorization = "QR"
+            self._reset_isam()
+            self._isam.update(self._batch_graph()[0], values)
+        self._new_graph, self._new_values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        self._n_in_isam = len(self._initial)
+        self._isam_poses = None
+
+    def estimate(self) -> np.ndarray:
+        """Current poses (K, 3) in key order; keyframes not yet updated keep their initial value."""
+        if self._isam_poses is None:
+            import gtsam
+
+            self._isam_poses = gtsam.utilities.extractPose2(self._isam.calculateEstimate()).reshape(-1, 3)
+        tail = np.array(self._initial[self._n_in_isam :]).reshape(-1, 3)
+        return np.vstack([self._isam_poses, tail])
+
+    def landmarks(self) -> tuple[np.ndarray, np.ndarray]:
+        """Landmark ids (L,) and their current positions (L, 2), m."""
+        ids = np.array(sorted(self._landmarks), dtype=int)
+        pts = [self._point_value(landmark_key(n)) for n in ids]
+        return ids, np.array(pts).reshape(-1, 2)
+
+    def marginal_covariance(self, key: int) -> np.ndarray:
+        """3x3 marginal covariance of keyframe ``key`` (m^2, rad^2) in its own frame."""
+        key = self._check_updated(key)
+        return np.asarray(self._isam.marginalCovariance(pose_key(key)))
+
+    def loop_consistency(self, i: int, j: int, delta, information) -> float:
+        """Squared Mahalanobis distance of a loop measurement ``delta`` (j seen from i)
+        from the current estimate; compare with ``CHI2_3DOF_99``.
+
+        The covariance is the measurement's plus that of the estimated relative pose,
+        propagated from the iSAM2 joint marginal of keyframes i and j.
+        """
+        import gtsam
+
+        i, j = self._check_updated(i), self._check_updated(j)
+        meas_cov = np.linalg.inv(rb.check_information(information, f"loop {i} -> {j} information"))
+        ki, kj = pose_key(i), pose_key(j)
+        rel = self._isam.calculateEstimatePose2(ki).between(self._isam.calculateEstimatePose2(kj))
+        err = gtsam.Pose2.Logmap(_gtsam_pose(_pose3(delta, f"loop {i} -> {j} delta")).between(rel))
+        joint = self._isam.jointMarginalCovariance([ki, kj])
+        a = -rel.inverse().AdjointMap()  # d(between)/d(x_i); d/d(x_j) is the identity
+        sij = joint.at(ki, kj)
+        rel_cov = a @ joint.at(ki, ki) @ a.T + a @ sij + sij.T @ a.T + joint.at(kj, kj)
+        return float(err @ np.linalg.solve(rel_cov + meas_cov, err))
+
+    def optimize_batch(self) -> np.ndarray:
+        """Levenberg-Marquardt over all factors from the current estimate (GNC when
+        ``cfg.gnc``, rejecting loops it weighs as outliers); the result replaces the
+        estimate and restarts iSAM2 from it. Returns the poses (K, 3)."""
+        import gtsam
+
+        graph, index = self._batch_graph()
+        initial = self._isam.calculateEstimate()
+        initial.insert(self._new_values)
+        t0 = time.perf_counter()
+        if self.cfg.gnc:
+            inliers = [g for g, f in enumerate(index) if self._factors[f].kind != "loop"]
+            opt = gtsam.GncLMOptimizer(graph, initial, rb.gnc_params(inliers, lm_params=_lm_params()))
+            result = opt.optimize()
+            self._reject_outliers(index, np.asarray(opt.getWeights()).ravel())
+        else:
+            opt = gtsam.LevenbergMarquardtOptimizer(graph, initial, _lm_params())
+            result = opt.optimize()
+            log.info("batch LM: %d iterations", opt.iterations())
+        log.info(
+            "batch %s: error %.6g -> %.6g in %.3f s",
+            "GNC" if self.cfg.gnc else "LM",
+            graph.error(initial),
+            graph.error(result),
+            time.perf_counter() - t0,
+        )
+        self._reset_isam()  # restart iSAM2 at the batch solution, without rejected loops
+        self._new_graph, self._new_values = self._batch_graph()[0], result
+        self.update()
+        self._isam_poses = gtsam.utilities.extractPose2(result).reshape(-1, 3)
+        return self.estimate()
+
+    # ---------------------------------------------------------------- exporting
+
+    def to_g2o(self) -> g2o.PoseGraphFile:
+        """Keyframes at their current estimate with all odometry and loop edges."""
+        edges = [f for f, a in zip(self._factors, self._active) if a and f.kind in ("odometry", "loop")]
+        return g2o.PoseGraphFile(
+            ids=np.arange(len(self._initial)),
+            poses=self.estimate(),
+            i=np.array([e.i for e in edges], dtype=int),
+            j=np.array([e.j for e in edges], dtype=int),
+            measurements=np.array([e.measurement for e in edges]).reshape(-1, 3),
+            information=np.array([e.information for e in edges]).reshape(-1, 3, 3),
+        )
+
+    def write_g2o(self, path) -> None:
+        """Write ``to_g2o()`` to ``path``."""
+        g2o.write_g2o(path, self.to_g2o())
+
+    # ----------------------------------------------------------------- counters
+
+    @property
+    def num_keyframes(self) -> int:
+        return len(self._initial)
+
+    @property
+    def num_odometry(self) -> int:
+        """Odometry (consecutive keyframe) factors."""
+        return self._count("odometry")
+
+    @property
+    def num_loops(self) -> int:
+        """Loop-closure factors in the graph (GNC-rejected ones excluded)."""
+        return self._count("loop")
+
+    @property
+    def num_landmark_observations(self) -> int:
+        return self._count("landmark")
+
+    def __len__(self) -> int:
+        return len(self._initial)
+
+    # ----------------------------------------------------------------- internals
+
+    def _reset_isam(self) -> None:
+        import gtsam
+
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(RELINEARIZE_THRESHOLD)
+        params.relinearizeSkip = RELINEARIZE_SKIP
+        params.setFactorization(self.factorization)
+        self._isam = gtsam.ISAM2(params)
+        self._new_graph, self._new_values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        self._n_in_isam = 0
+        self._isam_poses = None
+
+    def _add(self, f: _Factor) -> int:
+        self._factors.append(f)
+        self._active.append(True)
+        self._new_graph.add(f.factor)
+        return len(self._factors) - 1
+
+    def _count(self, kind: str) -> int:
+        return sum(a and f.kind == kind for f, a in zip(self._factors, self._active))
+
+    def _batch_graph(self):
+        """All active factors as one graph, and each graph position's factor index."""
+        import gtsam
+
+        graph, index = gtsam.NonlinearFactorGraph(), []
+        for n, (f, a) in enumerate(zip(self._factors, self._active)):
+            if a:
+                graph.add(f.factor)
+                index.append(n)
+        return graph, index
+
+    def _reject_outliers(self, index, weights) -> None:
+        for g, n in enumerate(index):
+            f = self._factors[n]
+            if f.kind == "loop" and weights[g] < GNC_OUTLIER_WEIGHT:
+                self._active[n] = False
+                log.info("GNC rejected loop %d -> %d (weight %.3g)", f.i, f.j, weights[g])
+
+    def _check_key(self, key) -> int:
+        k = int(key)
+        if not 0 <= k < len(self._initial):
+            raise InputError("pose graph", f"no keyframe {key} (have {len(self._initial)})")
+        return k
+
+    def _check_updated(self, key) -> int:
+        k = self._check_key(key)
+        if k >= self._n_in_isam:
+            raise InputError("pose graph", f"keyframe {k} is not optimised yet; call update() first")
+        return k
+
+    def _pose_value(self, k: int):
+        """Best current gtsam.Pose2 of keyframe ``k``."""
+        if k < self._n_in_isam:
+            return self._isam.calculateEstimatePose2(pose_key(k))
+        return _gtsam_pose(self._initial[k])
+
+    def _point_value(self, lkey: int) -> np.ndarray:
+        if self._isam.valueExists(lkey):
+            return np.asarray(self._isam.calculateEstimatePoint2(lkey)).ravel()
+        return np.asarray(self._new_values.atPoint2(lkey)).ravel()
+
+
+# ---------------------------------------------------------------- g2o graphs
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """Result of a batch optimisation: poses (N, 3) in the graph's vertex order,
+    errors (0.5 * sum of squared whitened residuals), LM iterations, wall time (s)."""
+
+    poses: np.ndarray
+    initial_error: float
+    final_error: float
+    iterations: int
+    seconds: float
+
+
+def _g2o_values(ids, poses):
+    """gtsam.Values with vertex ``ids[n]`` at ``poses[n]``."""
+    import gtsam
+
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if len(poses) != len(ids):
+        raise InputError("g2o graph", f"{len(ids)} vertices but {len(poses)} poses")
+    values = gtsam.Values()
+    for k, p in zip(np.asarray(ids).tolist(), poses):
+        values.insert(pose_key(k), _gtsam_pose(p))
+    return values
+
+
+def _g2o_factors(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0):
+    """gtsam graph of a g2o file's edges (no prior)."""
+    import gtsam
+
+    unknown = ~np.isin(graph.i, graph.ids) | ~np.isin(graph.j, graph.ids)
+    if unknown.any():
+        k = int(np.argmax(unknown))
+        raise InputError("g2o graph", f"edge {graph.i[k]} -> {graph.j[k]} to an unknown vertex")
+    fg = gtsam.NonlinearFactorGraph()
+    edges = zip(graph.i.tolist(), graph.j.tolist(), graph.measurements, graph.information)
+    for n, (a, b, m, info) in enumerate(edges):
+        model = rb.noise_model(rb.check_information(info, f"g2o edge {n} ({a} -> {b})"), robust, robust_param)
+        fg.add(gtsam.BetweenFactorPose2(pose_key(a), pose_key(b), _gtsam_pose(m), model))
+    return fg
+
+
+def _poses_in_vertex_order(values, ids) -> np.ndarray:
+    """(N, 3) poses of ``values`` ordered like ``ids`` (extractPose2 sorts by key)."""
+    import gtsam
+
+    sorted_poses = gtsam.utilities.extractPose2(values).reshape(-1, 3)
+    return sorted_poses[np.searchsorted(np.sort(ids), ids)]
+
+
+def g2o_error(graph: g2o.PoseGraphFile, poses=None) -> float:
+    """0.5 * sum of squared whitened edge residuals at ``poses`` (N, 3) (default: the file's)."""
+    values = _g2o_values(graph.ids, graph.poses if poses is None else poses)
+    return float(_g2o_factors(graph).error(values))
+
+
+def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0) -> BatchResult:
+    """Batch Levenberg-Marquardt (GTSAM defaults) on a g2o graph, the first vertex held
+    at its pose by a tight prior. Errors exclude the prior."""
+    import gtsam
+
+    fg, initial = _g2o_factors(graph, robust, robust_param), _g2o_values(graph.ids, graph.poses)
+    anchored = gtsam.NonlinearFactorGraph(fg)
+    anchor = pose_key(graph.ids[0])
+    prior_model = gtsam.noiseModel.Diagonal.Sigmas(PRIOR_SIGMAS)
+    anchored.add(gtsam.PriorFactorPose2(anchor, initial.atPose2(anchor), prior_model))
+    t0 = time.perf_counter()
+    opt = gtsam.LevenbergMarquardtOptimizer(anchored, initial, _lm_params())
+    result = opt.optimize()
+    seconds = time.perf_counter() - t0
+    poses = _poses_in_vertex_order(result, graph.ids)
+    out = BatchResult(poses, fg.error(initial), fg.error(result), opt.iterations(), seconds)
+    log.info("g2o LM: error %.6g -> %.6g, %d iterations, %.3f s",
+             out.initial_error, out.final_error, out.iterations, seconds)
+    return out
+
+
+def optimize_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0) -> np.ndarray:
+    """Optimised poses (N, 3) of a g2o graph (see ``solve_g2o``)."""
+    return solve_g2o(graph, robust, robust_param).poses
+
+
+def replay_g2o(graph: g2o.PoseGraphFile, cfg: BackendConfig | None = None, gate: float | None = None) -> PoseGraph:
+    """Feed a g2o graph into a PoseGraph as a SLAM run would: vertices 0..N-1 in order as
+    keyframes (edge k -> k+1 as odometry, the file's pose as initial value) with an iSAM2
+    update each; then every other edge ending there as a loop, skipped when ``gate`` is
+    set and its ``loop_consistency`` exceeds it, and one more update if any was added."""
+    n = len(graph.ids)
+    if not np.array_equal(graph.ids, np.arange(n)):
+        raise InputError("replay_g2o", "vertex ids must be 0..N-1")
+    odometry = {int(a): k for k, (a, b) in enumerate(zip(graph.i, graph.j)) if b == a + 1}
+    missing = sorted(set(range(n - 1)) - set(odometry))
+    if missing:
+        raise InputError("replay_g2o", f"no edge {missing[0]} -> {missing[0] + 1} to use as odometry")
+    loops: dict[int, list[int]] = {}
+    for k, (a, b) in enumerate(zip(graph.i.tolist(), graph.j.tolist())):
+        if k != odometry.get(a, -1):
+            loops.setdefault(max(a, b), []).append(k)
+    pg = PoseGraph(cfg)
+    for v in range(n):
+        if v == 0:
+            pg.add_keyframe(graph.poses[0])
+        else:
+            e = odometry[v - 1]
+            pg.add_keyframe(graph.poses[v], graph.measurements[e], graph.information[e])
+        pg.update()
+        added = 0
+        for k in loops.get(v, []):
+            a, b, m, info = graph.i[k], graph.j[k], graph.measurements[k], graph.information[k]
+            if gate is not None and pg.loop_consistency(a, b, m, info) > gate:
+                log.info("replay: loop %d -> %d fails the consistency gate", a, b)
+                continue
+            pg.add_loop(a, b, m, info)
+            added += 1
+        if added:
+            pg.update()
+    return pg

@@ -1,0 +1,80 @@
+"""Robust kernels and GNC choices: one vocabulary for configs.
+
+``robust`` names an M-estimator applied to a factor's whitened residual:
+
+- ``none``   plain Gaussian (least squares)
+- ``huber``  quadratic within ``param``, linear beyond (``param`` in whitened units, i.e. sigmas)
+- ``cauchy`` log(1 + (r/param)^2); heavy tails, outliers keep a small weight
+- ``dcs``    dynamic covariance scaling (Agarwal et al. 2013), ``param`` = Phi
+
+GNC (graduated non-convexity, Yang et al. 2020) replaces the kernel in batch
+optimisation; ``gnc_params`` builds its parameters with the known inliers
+(prior and odometry factors) fixed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from slam2d.errors import InputError
+
+ROBUST_KERNELS = ("none", "huber", "cauchy", "dcs")
+GNC_LOSSES = ("gm", "tls")  # Geman-McClure, truncated least squares
+GNC_INLIER_PROBABILITY = 0.99  # chi-square probability mass an inlier residual stays within
+
+
+def check_information(matrix, where: str = "information", kind: str = "information") -> np.ndarray:
+    """``matrix`` as a symmetric positive-definite float64 (n, n) array, else InputError
+    naming ``where`` and the ``kind`` of matrix ("information" or "covariance")."""
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.ndim != 2 or m.shape[0] != m.shape[1] or m.size == 0:
+        raise InputError(where, f"expected a square {kind} matrix, got shape {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise InputError(where, f"non-finite value in the {kind} matrix")
+    if np.abs(m - m.T).max() > 1e-8 * max(1.0, np.abs(m).max()):
+        raise InputError(where, f"{kind} matrix is not symmetric")
+    if np.linalg.eigvalsh(m)[0] <= 0:
+        raise InputError(where, f"{kind} matrix is not positive definite")
+    return 0.5 * (m + m.T)
+
+
+def m_estimator(robust: str, param: float):
+    """The gtsam mEstimator for ``robust`` with width ``param`` (whitened units); None for "none"."""
+    import gtsam
+
+    name = str(robust).lower()
+    if name not in ROBUST_KERNELS:
+        choices = ", ".join(ROBUST_KERNELS)
+        raise InputError("backend.robust", f"unknown robust kernel {robust!r} (choose from {choices})")
+    if name == "none":
+        return None
+    if not np.isfinite(param) or param <= 0:
+        raise InputError("backend.robust_param", f"must be positive, got {param!r}")
+    est = gtsam.noiseModel.mEstimator
+    return {"huber": est.Huber, "cauchy": est.Cauchy, "dcs": est.DCS}[name](float(param))
+
+
+def noise_model(information, robust: str = "none", param: float = 1.0):
+    """Gaussian noise model from an (n, n) ``information`` matrix (inverse covariance),
+    wrapped in the ``robust`` kernel of width ``param`` unless ``robust == "none"``."""
+    import gtsam
+
+    gaussian = gtsam.noiseModel.Gaussian.Information(check_information(information))
+    kernel = m_estimator(robust, param)
+    return gaussian if kernel is None else gtsam.noiseModel.Robust.Create(kernel, gaussian)
+
+
+def gnc_params(known_inliers, loss: str = "gm", lm_params=None):
+    """gtsam.GncLMParams with ``known_inliers`` (factor indices) fixed as inliers.
+
+    ``loss`` is "gm" (Geman-McClure) or "tls" (truncated least squares).
+    """
+    import gtsam
+
+    name = str(loss).lower()
+    if name not in GNC_LOSSES:
+        raise InputError("gnc loss", f"unknown GNC loss {loss!r} (choose from {', '.join(GNC_LOSSES)})")
+    params = gtsam.GncLMParams(lm_params) if lm_params is not None else gtsam.GncLMParams()
+    params.setLossType(gtsam.GncLossType.GM if name == "gm" else gtsam.GncLossType.TLS)
+    params.setKnownInliers([int(k) for k in known_inliers])
+    return params

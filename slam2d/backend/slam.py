@@ -1,0 +1,111 @@
+"""Keyframes, loop closures and optimisation over a frontend's results.
+
+Every scan arrives with its FrontendResult. Scans become keyframes after the
+configured travel or rotation; between keyframes the frontend's deltas are
+composed (with their covariances) into one between factor. Each new keyframe
+is checked for loop closures against the current estimate; a closure needs the
+matcher's score and a chi-square test against the graph. Poses for every scan
+are keyframe poses composed with the scan's offset from its keyframe.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+
+import numpy as np
+
+from slam2d import geometry
+from slam2d.config import BackendConfig
+from slam2d.frontends.base import FrontendResult
+from slam2d.types import Scan
+
+log = logging.getLogger(__name__)
+
+CHI2_3DOF_99 = 11.345  # 99% quantile of chi-square with 3 degrees of freedom
+
+
+class GraphSlamBackend:
+    """Builds and optimises the pose graph; returns a pose for every scan."""
+
+    def __init__(self, cfg: BackendConfig):
+        from slam2d.backend.loop_closure import LoopCloser
+        from slam2d.backend.pose_graph import PoseGraph
+
+        self.cfg = cfg
+        self.graph = PoseGraph(cfg)
+        self.loops = LoopCloser(cfg.loop_closure) if cfg.loop_closure.enabled else None
+        self.stats: Counter[str] = Counter()
+        self._scan_keyframe: list[int] = []  # keyframe key each scan hangs off
+        self._scan_offset: list[np.ndarray] = []  # scan pose in its keyframe's frame
+        self._delta = np.zeros(3)  # motion since the last keyframe
+        self._cov = np.zeros((3, 3))
+        self._travelled = 0.0
+        self._estimate = np.zeros((0, 3))
+
+    def add(self, scan: Scan, result: FrontendResult) -> None:
+        """Take one scan and its frontend result (``result.delta`` unused for the first)."""
+        if not self._scan_keyframe:
+            self._new_keyframe(scan, np.asarray(scan.odom, float), None, None)
+            return
+        cov = np.linalg.inv(result.information)
+        self._cov = geometry.compose_covariance(self._cov, result.delta, cov)
+        self._delta = geometry.compose(self._delta, result.delta)
+        self._travelled += float(np.hypot(*result.delta[:2]))
+        if self._is_keyframe(self._delta):
+            prev = self._scan_keyframe[-1]
+            pose = geometry.compose(self._estimate[prev], self._delta)
+            self._new_keyframe(scan, pose, self._delta, np.linalg.inv(self._cov))
+        else:
+            self._scan_keyframe.append(self._scan_keyframe[-1])
+            self._scan_offset.append(self._delta.copy())
+
+    def finish(self) -> np.ndarray:
+        """Final batch optimisation; poses (N, 3) for every scan added."""
+        kf = self.graph.optimize_batch() if len(self._estimate) > 1 else self._estimate
+        self._estimate = kf
+        return geometry.compose(kf[np.array(self._scan_keyframe)], np.array(self._scan_offset))
+
+    def _is_keyframe(self, delta: np.ndarray) -> bool:
+        return bool(
+            np.hypot(delta[0], delta[1]) >= self.cfg.keyframe_distance
+            or abs(delta[2]) >= np.deg2rad(self.cfg.keyframe_angle_deg)
+        )
+
+    def _new_keyframe(self, scan: Scan, pose, delta, information) -> None:
+        key = self.graph.add_keyframe(pose, delta, information)
+        self._scan_keyframe.append(key)
+        self._scan_offset.append(np.zeros(3))
+        self._delta, self._cov = np.zeros(3), np.zeros((3, 3))
+        self.stats["keyframes"] += 1
+        self.graph.update()
+        self._estimate = self.graph.estimate()
+        if self.loops is not None:
+            self.loops.add_keyframe(key, scan.points_in_base(), self._travelled)
+            if self._close_loops(key):
+                self.graph.update()
+                self._estimate = self.graph.estimate()
+
+    def _close_loops(self, key: int) -> int:
+        """Verify loop candidates for ``key``; add the accepted ones. Returns how many."""
+        added = 0
+        for cand in self.loops.candidates(key, self._estimate):
+            closure = self.loops.verify(key, cand, self._estimate)
+            if closure is None:
+                continue
+            d2 = self.graph.loop_consistency(closure.i, closure.j, closure.delta, closure.information)
+            if d2 > CHI2_3DOF_99:
+                self.stats["loops rejected by graph consistency"] += 1
+                log.debug("loop %d-%d rejected: Mahalanobis² %.1f", closure.i, closure.j, d2)
+                continue
+            self.graph.add_loop(closure.i, closure.j, closure.delta, closure.information)
+            self.stats["loops accepted"] += 1
+            added += 1
+        return added
+
+    def summary(self) -> dict[str, int]:
+        """Counts of keyframes and loop-closure outcomes (matcher and graph checks)."""
+        out = dict(self.stats)
+        if self.loops is not None:
+            out.update({f"loop {k}": v for k, v in self.loops.stats.items()})
+        return out

@@ -1,0 +1,197 @@
+"""Correlative scan-to-submap matcher and loop-closure search on the simulated office."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from slam2d import geometry
+from slam2d.backend.correlative import ProbabilityGrid, match
+from slam2d.backend.loop_closure import LoopCloser, LoopClosure
+from slam2d.config import LoopClosureConfig, SimulatorConfig
+from slam2d.datasets.simulator import SimulatorSource
+
+CFG = LoopClosureConfig()
+WINDOW_THETA = np.deg2rad(CFG.window_theta_deg)
+KEYFRAME_STEP = 0.5  # m between keyframes on the simulated route
+
+
+@pytest.fixture(scope="module")
+def office():
+    """Scans and ground truth of the whole default office route (two laps)."""
+    src = SimulatorSource(SimulatorConfig(), seed=0)
+    scans = list(src)
+    return src.ground_truth_poses, [s.points_in_base() for s in scans]
+
+
+@pytest.fixture(scope="module")
+def keyframes(office):
+    """Scan indices of keyframes every KEYFRAME_STEP m (or 30 deg) and the distance travelled at each."""
+    gt, _ = office
+    kf = [0]
+    for i in range(1, len(gt)):
+        d = geometry.between(gt[kf[-1]], gt[i])
+        if np.hypot(d[0], d[1]) >= KEYFRAME_STEP or abs(d[2]) >= np.deg2rad(30):
+            kf.append(i)
+    kf = np.array(kf)
+    travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(gt[kf, :2], axis=0).T))])
+    return kf, travelled
+
+
+def nearest_scan(gt, xy, after: int = 0) -> int:
+    """Index of the first-closest ground-truth pose to ``xy`` at or after scan ``after``."""
+    return after + int(np.argmin(np.hypot(*(gt[after:, :2] - np.asarray(xy)).T)))
+
+
+def submap_around(office, ref: int, half: int = 20, stride: int = 2) -> ProbabilityGrid:
+    """Grid of scans ref-half..ref+half (every ``stride``) in the frame of scan ``ref``, from ground truth."""
+    gt, points = office
+    idx = range(max(0, ref - half), min(len(gt), ref + half + 1), stride)
+    pts = [geometry.transform_points(geometry.between(gt[ref], gt[k]), points[k]) for k in idx]
+    return ProbabilityGrid(np.vstack(pts), CFG.resolution)
+
+
+def pose_error(a, b) -> tuple[float, float]:
+    """Translation (m) and absolute rotation (deg) between two poses."""
+    d = geometry.between(a, b)
+    return float(np.hypot(d[0], d[1])), float(np.rad2deg(abs(d[2])))
+
+
+# --------------------------------------------------------------------------- matcher
+
+
+@pytest.mark.parametrize("place", [(7.5, 4.225), (17.3, 7.0), (12.5, 1.9)])
+def test_match_recovers_offset_on_revisit(office, place):
+    """A second-lap scan against a first-lap submap, guess off by (0.6 m, 0.5 m, 15 deg)."""
+    gt, points = office
+    ref = nearest_scan(gt, place)
+    query = nearest_scan(gt, place, after=ref + 300)  # the same place on the second lap
+    truth = geometry.between(gt[ref], gt[query])
+    guess = truth + np.array([0.6, 0.5, np.deg2rad(15.0)])
+    result = match(submap_around(office, ref), points[query], guess, CFG.window_xy, WINDOW_THETA)
+    dxy, dth = pose_error(truth, result.pose)
+    assert dxy < 0.03 and dth < 1.0, (dxy, dth)
+    assert result.score > 0.8
+    cov = result.covariance
+    assert cov.shape == (3, 3) and np.allclose(cov, cov.T) and np.all(np.linalg.eigvalsh(cov) > 0)
+
+
+def test_match_rejects_a_different_room(office):
+    """A scan from meeting room T1 matched against a submap of room B4 scores below min_score.
+
+    (Rooms B1-B4 share their shape and door position and differ only in
+    furniture; between them the score reaches 0.5-0.65, so that aliasing is
+    left to the pose graph's consistency gate.)
+    """
+    gt, points = office
+    b4 = nearest_scan(gt, (17.3, 1.9))
+    t1 = nearest_scan(gt, (3.0, 9.5))
+    grid = submap_around(office, b4)
+    true_match = match(grid, points[b4 + 1], geometry.between(gt[b4], gt[b4 + 1]), CFG.window_xy, WINDOW_THETA)
+    assert true_match.score > 0.9
+    guess = np.array([0.0, 0.0, gt[t1, 2] - gt[b4, 2]])  # drift put T1 on top of B4, headings kept
+    false_match = match(grid, points[t1], guess, CFG.window_xy, WINDOW_THETA)
+    assert false_match.score < CFG.min_score
+
+
+def test_match_covariance_is_wide_along_a_featureless_corridor():
+    """Two long parallel walls constrain y and theta but not x."""
+    x = np.arange(-30.0, 30.0, 0.02)
+    walls = np.vstack([np.column_stack([x, np.full_like(x, 1.0)]), np.column_stack([x, np.full_like(x, -1.0)])])
+    a = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    a = a[np.abs(np.sin(a)) > 1.0 / 12.0]  # beams that hit a wall within 12 m
+    r = 1.0 / np.abs(np.sin(a))
+    scan = np.column_stack([r * np.cos(a), r * np.sin(a)])
+    result = match(ProbabilityGrid(walls, 0.05), scan, np.array([0.3, 0.2, 0.1]), 1.0, WINDOW_THETA)
+    std = np.sqrt(np.diag(result.covariance))
+    assert abs(result.pose[1]) < 0.01 and abs(result.pose[2]) < np.deg2rad(0.5)
+    assert std[0] > 0.5 and std[1] < 0.05
+
+
+def test_match_rejects_bad_input():
+    grid = ProbabilityGrid(np.array([[0.0, 0.0], [1.0, 0.0]]), 0.05)
+    with pytest.raises(ValueError, match="finite scan point"):
+        match(grid, np.full((3, 2), np.nan), np.zeros(3), 1.0, 0.3)
+    with pytest.raises(ValueError, match="at least one finite submap point"):
+        ProbabilityGrid(np.zeros((0, 2)))
+
+
+# --------------------------------------------------------------------------- loop closer
+
+
+def drifted(gt_poses, travelled, start: float, end: float, offset) -> np.ndarray:
+    """Ground truth plus a drift that ramps from 0 (before ``start`` m) to ``offset`` (3,) (after ``end`` m)."""
+    ramp = np.clip((travelled - start) / (end - start), 0.0, 1.0)
+    return gt_poses + ramp[:, None] * np.asarray(offset)
+
+
+@pytest.fixture(scope="module")
+def closer(office, keyframes):
+    gt, points = office
+    kf, travelled = keyframes
+    lc = LoopCloser(CFG)
+    for k, (i, t) in enumerate(zip(kf, travelled)):
+        lc.add_keyframe(k, points[i], t)
+    return lc
+
+
+def test_loop_closer_accepts_true_closures_on_revisit(office, keyframes, closer, caplog):
+    """Second-lap keyframes, with 0.5 m / 6 deg of drift since the first lap, close onto it."""
+    gt, _ = office
+    kf, travelled = keyframes
+    poses = drifted(gt[kf], travelled, 40.0, 55.0, [0.4, -0.3, np.deg2rad(6.0)])
+    revisits = np.flatnonzero(travelled > 56.0)[:60:6]
+    accepted = []
+    with caplog.at_level(logging.DEBUG, logger="slam2d.backend.loop_closure"):
+        for key in revisits:
+            online = poses[: key + 1]  # keyframes known when ``key`` is added
+            cands = closer.candidates(key, online)
+            assert cands, f"no candidate for keyframe {key}"
+            assert all(travelled[key] - travelled[c] >= CFG.min_travel for c in cands)
+            accepted += [lc for c in cands if (lc := closer.verify(key, c, online)) is not None]
+    assert len(accepted) >= len(revisits)
+    for lc in accepted:
+        assert isinstance(lc, LoopClosure) and lc.score >= CFG.min_score
+        guess_dxy, _ = pose_error(geometry.between(poses[lc.i], poses[lc.j]), lc.delta)
+        dxy, dth = pose_error(geometry.between(gt[kf[lc.i]], gt[kf[lc.j]]), lc.delta)
+        assert dxy < 0.05 and dth < 1.0, (lc.i, lc.j, dxy, dth)
+        assert guess_dxy > 0.2  # the matcher did correct the drifted guess
+        assert np.all(np.linalg.eigvalsh(lc.information) > 0)
+    assert closer.stats["accepted"] >= len(accepted)
+    assert any("accepted: score" in r.getMessage() for r in caplog.records)
+
+
+def test_loop_closer_rejects_a_false_candidate(office, keyframes, closer):
+    """A keyframe in meeting room T1 paired with one in room B4 that drift placed on top of it."""
+    gt, _ = office
+    kf, _ = keyframes
+    key = int(np.argmin(np.hypot(*(gt[kf, :2] - (3.0, 9.5)).T)))
+    cand = int(np.argmin(np.hypot(*(gt[kf, :2] - (17.3, 1.9)).T)))
+    shift = geometry.compose(gt[kf[key]], geometry.inverse(gt[kf[cand]]))  # moves cand onto key
+    poses = gt[kf].copy()
+    near = np.abs(np.arange(len(kf)) - cand) <= CFG.submap_keyframes
+    poses[near] = geometry.compose(shift, poses[near])
+    before = closer.stats["rejected_score"]
+    assert closer.verify(key, cand, poses) is None
+    assert closer.stats["rejected_score"] == before + 1
+
+
+def test_candidates_skip_recent_keyframes():
+    """On a circle of 12.6 m, neighbours closer than min_travel along the path are never candidates."""
+    cfg = LoopClosureConfig(search_radius=4.0, min_travel=10.0, max_candidates=3, submap_keyframes=2)
+    angle = np.arange(40) * 0.25  # keyframes 0.5 m apart on a circle of radius 2 m
+    poses = np.column_stack([2 * np.cos(angle), 2 * np.sin(angle), angle + np.pi / 2])
+    lc = LoopCloser(cfg)
+    for k in range(len(poses)):
+        lc.add_keyframe(k, np.zeros((1, 2)), 0.5 * k)
+    assert lc.candidates(15, poses[:16]) == []  # 7.5 m travelled: nothing old enough
+    cands = lc.candidates(39, poses)
+    assert 1 <= len(cands) <= cfg.max_candidates
+    assert all(0.5 * (39 - c) >= cfg.min_travel for c in cands)
+    dist = np.hypot(*(poses[cands, :2] - poses[39, :2]).T)
+    assert np.all(np.diff(dist) >= 0) and dist[0] < 0.3  # nearest first: 14 is the same place as 39
+    assert all(abs(a - b) > cfg.submap_keyframes for i, a in enumerate(cands) for b in cands[:i])
+    with pytest.raises(ValueError, match="already added"):
+        lc.add_keyframe(3, np.zeros((1, 2)), 50.0)
