@@ -80,13 +80,16 @@ class LoopClosureConfig(Section):
     """Candidate search over the optimised keyframes and scan-to-submap verification."""
 
     enabled: bool = True
+    every_n_keyframes: int = Field(5, gt=0, description="search for loops at every n-th keyframe")
     search_radius: float = Field(4.0, gt=0, description="m; candidates within this distance of the new keyframe")
     min_travel: float = Field(10.0, ge=0, description="m travelled between a candidate and the new keyframe")
     submap_keyframes: int = Field(10, ge=0, description="neighbouring keyframes on each side forming the submap")
     window_xy: float = Field(1.0, gt=0, description="m; half-width of the translational search window")
     window_theta_deg: float = Field(20.0, gt=0, description="half-width of the rotational search window")
     resolution: float = Field(0.05, gt=0, description="m; finest grid of the correlative matcher")
-    min_score: float = Field(0.55, ge=0, le=1, description="fraction of scan points on submap cells to accept")
+    min_score: float = Field(
+        0.55, ge=0, le=1, description="mean likelihood of scan points on the submap to accept (1 = all on it)"
+    )
     max_candidates: int = Field(3, gt=0, description="candidates verified per new keyframe")
 
 
@@ -97,7 +100,7 @@ class BackendConfig(Section):
     keyframe_distance: float = Field(0.2, ge=0, description="m travelled before a new keyframe")
     keyframe_angle_deg: float = Field(10.0, ge=0, description="rotation before a new keyframe")
     robust: Literal["none", "huber", "cauchy", "dcs"] = Field("cauchy", description="kernel on loop-closure factors")
-    robust_param: float = Field(1.0, gt=0, description="kernel width (whitened units)")
+    robust_param: float = Field(2.0, gt=0, description="kernel width (whitened units)")
     gnc: bool = Field(False, description="graduated non-convexity in the final batch optimisation")
     loop_closure: LoopClosureConfig = LoopClosureConfig()
 

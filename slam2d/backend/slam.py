@@ -82,7 +82,7 @@ class GraphSlamBackend:
         self._estimate = self.graph.estimate()
         if self.loops is not None:
             self.loops.add_keyframe(key, scan.points_in_base(), self._travelled)
-            if self._close_loops(key):
+            if key % self.cfg.loop_closure.every_n_keyframes == 0 and self._close_loops(key):
                 self.graph.update()
                 self._estimate = self.graph.estimate()
 
@@ -95,11 +95,11 @@ class GraphSlamBackend:
                 continue
             d2 = self.graph.loop_consistency(closure.i, closure.j, closure.delta, closure.information)
             if d2 > CHI2_3DOF_99:
-                self.stats["loops rejected by graph consistency"] += 1
+                self.stats["loop closures rejected by graph consistency"] += 1
                 log.debug("loop %d-%d rejected: Mahalanobis² %.1f", closure.i, closure.j, d2)
                 continue
             self.graph.add_loop(closure.i, closure.j, closure.delta, closure.information)
-            self.stats["loops accepted"] += 1
+            self.stats["loop closures added"] += 1
             added += 1
         return added
 
@@ -107,5 +107,5 @@ class GraphSlamBackend:
         """Counts of keyframes and loop-closure outcomes (matcher and graph checks)."""
         out = dict(self.stats)
         if self.loops is not None:
-            out.update({f"loop {k}": v for k, v in self.loops.stats.items()})
+            out.update({f"loop matcher {k}": v for k, v in self.loops.stats.items()})
         return out
