@@ -75,9 +75,12 @@ class Trajectory:
 
 @dataclass(frozen=True, eq=False)
 class LandmarkObservation:
-    """A landmark seen from the robot base: range (m), bearing (rad), 2x2 covariance."""
+    """A landmark seen from the robot base: range (m), bearing (rad, from the base x axis).
+
+    covariance: 2x2 in (bearing, range) order (rad², m²), as gtsam's BearingRange.
+    """
 
     landmark_id: int
     range: float
     bearing: float
-    covariance: np.ndarray = field(default_factory=lambda: np.diag([0.05**2, np.deg2rad(2.0) ** 2]))
+    covariance: np.ndarray = field(default_factory=lambda: np.diag([np.deg2rad(2.0) ** 2, 0.05**2]))

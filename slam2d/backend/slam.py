@@ -46,7 +46,7 @@ class GraphSlamBackend:
     def add(self, scan: Scan, result: FrontendResult) -> None:
         """Take one scan and its frontend result (``result.delta`` unused for the first)."""
         if not self._scan_keyframe:
-            self._new_keyframe(scan, np.asarray(scan.odom, float), None, None)
+            self._new_keyframe(scan, np.asarray(scan.odom, float), None, None, result.landmarks)
             return
         cov = np.linalg.inv(result.information)
         self._cov = geometry.compose_covariance(self._cov, result.delta, cov)
@@ -55,7 +55,7 @@ class GraphSlamBackend:
         if self._is_keyframe(self._delta):
             prev = self._scan_keyframe[-1]
             pose = geometry.compose(self._estimate[prev], self._delta)
-            self._new_keyframe(scan, pose, self._delta, np.linalg.inv(self._cov))
+            self._new_keyframe(scan, pose, self._delta, np.linalg.inv(self._cov), result.landmarks)
         else:
             self._scan_keyframe.append(self._scan_keyframe[-1])
             self._scan_offset.append(self._delta.copy())
@@ -72,8 +72,11 @@ class GraphSlamBackend:
             or abs(delta[2]) >= np.deg2rad(self.cfg.keyframe_angle_deg)
         )
 
-    def _new_keyframe(self, scan: Scan, pose, delta, information) -> None:
+    def _new_keyframe(self, scan: Scan, pose, delta, information, landmarks=()) -> None:
         key = self.graph.add_keyframe(pose, delta, information)
+        for obs in landmarks:  # landmarks seen from keyframes become bearing-range factors
+            self.graph.add_landmark_observation(key, obs.landmark_id, obs.bearing, obs.range, obs.covariance)
+            self.stats["landmark observations"] += 1
         self._scan_keyframe.append(key)
         self._scan_offset.append(np.zeros(3))
         self._delta, self._cov = np.zeros(3), np.zeros((3, 3))
