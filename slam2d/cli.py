@@ -88,6 +88,30 @@ def dump_config(config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT) 
 
 
 @app.command()
+def segment(
+    map_path: Path = typer.Argument(..., help="floor-plan PNG (free = white, 0.05 m/px) or a map.yaml"),
+    method: str = typer.Option("spectral", help="spectral, morphological, distance or voronoi"),
+    similarity: str = typer.Option("visibility", help="hausdorff, nearest_neighbor, feature_points or visibility"),
+    ground_truth: Optional[Path] = typer.Option(None, help="GT room image (default: <stem>_gt_segmentation.png)"),
+    root: Path = typer.Option(Path("results"), "--out", "-o", help="results folders are created under this"),
+    quiet: bool = QUIET_OPT,
+) -> None:
+    """Split a map into rooms: colour image, topological graph, metrics."""
+    from slam2d.experiment import results_folder
+    from slam2d.segmentation.run import segment_map
+
+    _setup_logging(quiet)
+    try:
+        with results_folder(root, f"segment-{map_path.stem}-{method}") as (work, published):
+            metrics = segment_map(map_path, method, similarity, work, ground_truth=ground_truth)
+    except InputError as err:
+        _fail(err)
+    summary = {k: metrics[k] for k in ("rooms", "k", "recall", "precision", "seconds") if k in metrics}
+    typer.echo(" ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in summary.items()))
+    typer.echo(f"results: {published[0]}")
+
+
+@app.command()
 def frontends() -> None:
     """List the registered frontends."""
     from slam2d.frontends import available_frontends

@@ -36,15 +36,26 @@ log = logging.getLogger("slam2d")
 
 def run_experiment(cfg: ExperimentConfig, quiet: bool = False) -> Path:
     """Run ``cfg`` end to end; return the results folder."""
-    root = Path(cfg.output.root)
+    with results_folder(cfg.output.root, cfg.name) as (work, published):
+        log.info("slam2d run '%s' -> %s", cfg.name, cfg.output.root)
+        metrics = _run_into(cfg, work, quiet)
+        log.info("done in %.1f s", metrics["runtime_s"])
+    return published[0]
+
+
+@contextmanager
+def results_folder(root: str | Path, name: str):
+    """Yield ``(work, published)``: a hidden temporary folder to fill (its log in
+    ``run.log``) and a list that receives the final path once the block succeeds.
+    On failure the temporary folder is removed, so no half-written folder remains."""
+    root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=f".{cfg.name}-", dir=root))
+    work = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=root))
+    published: list[Path] = []
     try:
         with _log_to(work / "run.log"):
-            log.info("slam2d run '%s' -> %s", cfg.name, root)
-            metrics = _run_into(cfg, work, quiet)
-            log.info("done in %.1f s", metrics["runtime_s"])
-        return _publish(work, root, cfg.name)
+            yield work, published
+        published.append(_publish(work, root, name))
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise
