@@ -111,6 +111,45 @@ def segment(
     typer.echo(f"results: {published[0]}")
 
 
+def _xy(text: str, name: str):
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"--{name}", f"expected x,y in metres, got '{text}'") from None
+    return x, y
+
+
+@app.command()
+def plan(
+    map_path: Path = typer.Argument(..., help="map.yaml, Moving AI .map, or floor-plan PNG (0.05 m/px)"),
+    start: str = typer.Option(..., help="x,y in metres"),
+    goal: str = typer.Option(..., help="x,y in metres"),
+    hierarchical: Optional[str] = typer.Option(None, help="hpa (square clusters) or rooms (needs --labels)"),
+    labels: Optional[Path] = typer.Option(None, help="room label image (labels.png of slam2d segment)"),
+    robot_radius: float = typer.Option(0.2, help="obstacle inflation, m"),
+    root: Path = typer.Option(Path("results"), "--out", "-o", help="results folders are created under this"),
+    quiet: bool = QUIET_OPT,
+) -> None:
+    """Plan a path (A* or hierarchical), smooth it, time it with toppra; write figures."""
+    from slam2d.experiment import results_folder
+    from slam2d.planning.run import plan_on_map
+
+    _setup_logging(quiet)
+    try:
+        start_xy, goal_xy = _xy(start, "start"), _xy(goal, "goal")
+        with results_folder(root, f"plan-{map_path.stem}") as (work, published):
+            metrics = plan_on_map(map_path, start_xy, goal_xy, hierarchical, work, robot_radius, labels=labels)
+    except InputError as err:
+        _fail(err)
+    if not metrics.get("found", False):
+        typer.secho(f"no path: {metrics.get('reason', 'unknown')}", fg="red", err=True)
+    keys = ("length_m", "duration_s", "nodes_expanded", "plan_ms")
+    typer.echo(" ".join(f"{k}={metrics[k]:.4g}" for k in keys if isinstance(metrics.get(k), (int, float))))
+    typer.echo(f"results: {published[0]}")
+    if not metrics.get("found", False):
+        raise typer.Exit(1)
+
+
 @app.command()
 def frontends() -> None:
     """List the registered frontends."""

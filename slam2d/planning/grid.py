@@ -1,0 +1,313 @@
+"""Planning grids: free-space masks from occupancy maps, floor plans and Moving AI maps.
+
+Convention (as :class:`~slam2d.mapping.occupancy.OccupancyGrid`): ``free[row, col]``
+with row = y index and col = x index; cell ``[0, 0]`` has its lower-left corner
+at ``origin`` (m). Occupancy maps and PNG floor plans are flipped so that rows
+go up (image row 0 is the top of the map). Moving AI maps keep their file
+order: ``row`` is the ``.scen`` y and ``col`` the ``.scen`` x, with resolution 1
+and origin (0, 0), so cell ``(y, x)`` has its centre at world ``(x + 0.5, y + 0.5)``.
+
+Loaders raise :class:`~slam2d.errors.InputError` naming the file and line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from slam2d.errors import InputError
+
+__all__ = [
+    "PlanningGrid",
+    "Scenarios",
+    "load_grid",
+    "load_map_yaml",
+    "load_floor_plan",
+    "load_movingai_map",
+    "load_scenarios",
+    "grid_from_occupancy",
+    "inflate",
+    "wall_cost",
+    "FLOOR_PLAN_FREE_MIN",
+    "MOVINGAI_PASSABLE",
+]
+
+FLOOR_PLAN_FREE_MIN = 250
+"""Grey level (0-255) from which a floor-plan pixel is free (white)."""
+
+MOVINGAI_PASSABLE = frozenset(".GS")
+"""Passable terrain of Moving AI octile maps; ``@ O T W`` are blocked."""
+
+_MOVINGAI_KNOWN = frozenset(".GS@OTW")
+
+
+@dataclass(eq=False)
+class PlanningGrid:
+    """Free-space mask ``free`` (H, W) bool, ``resolution`` m/cell, ``origin`` (x, y) m
+    of the lower-left corner of cell ``[0, 0]``; ``name`` is where it came from."""
+
+    free: np.ndarray
+    resolution: float = 1.0
+    origin: tuple[float, float] = (0.0, 0.0)
+    name: str = ""
+
+    def __post_init__(self):
+        self.free = np.ascontiguousarray(self.free, dtype=bool)
+        if self.free.ndim != 2 or min(self.free.shape) < 1:
+            raise ValueError(f"free must be a non-empty 2-D mask, got shape {self.free.shape}")
+        if not self.resolution > 0:
+            raise ValueError(f"resolution must be > 0, got {self.resolution}")
+        self.resolution = float(self.resolution)
+        self.origin = (float(self.origin[0]), float(self.origin[1]))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) in cells."""
+        return self.free.shape
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(x_min, x_max, y_min, y_max) in m (matplotlib ``extent`` with ``origin="lower"``)."""
+        h, w = self.shape
+        ox, oy = self.origin
+        return ox, ox + w * self.resolution, oy, oy + h * self.resolution
+
+    def world_to_cell(self, xy) -> np.ndarray:
+        """Integer (row, col) cells ``(..., 2)`` containing points ``xy (..., 2)`` m."""
+        xy = np.asarray(xy, dtype=np.float64)
+        col = np.floor((xy[..., 0] - self.origin[0]) / self.resolution)
+        row = np.floor((xy[..., 1] - self.origin[1]) / self.resolution)
+        return np.stack([row, col], -1).astype(np.int64)
+
+    def cell_to_world(self, cells) -> np.ndarray:
+        """Centres (x, y) m ``(..., 2)`` of (row, col) cells ``(..., 2)``."""
+        rc = np.asarray(cells, dtype=np.float64)
+        x = self.origin[0] + (rc[..., 1] + 0.5) * self.resolution
+        y = self.origin[1] + (rc[..., 0] + 0.5) * self.resolution
+        return np.stack([x, y], -1)
+
+    def in_bounds(self, cells) -> np.ndarray:
+        """Whether (row, col) cells ``(..., 2)`` lie inside the grid."""
+        rc = np.asarray(cells)
+        h, w = self.shape
+        return (rc[..., 0] >= 0) & (rc[..., 0] < h) & (rc[..., 1] >= 0) & (rc[..., 1] < w)
+
+    def is_free(self, cells) -> np.ndarray:
+        """Whether (row, col) cells ``(..., 2)`` are inside the grid and free."""
+        rc = np.asarray(cells, dtype=np.int64)
+        ok = self.in_bounds(rc)
+        out = np.zeros(ok.shape, dtype=bool)
+        out[ok] = self.free[rc[..., 0][ok], rc[..., 1][ok]]
+        return out
+
+    def clearance(self) -> np.ndarray:
+        """Distance (H, W) in m from each cell centre to the nearest blocked cell centre
+        (the area outside the grid counts as blocked); 0 on blocked cells."""
+        padded = np.pad(self.free, 1, constant_values=False)
+        return ndimage.distance_transform_edt(padded)[1:-1, 1:-1] * self.resolution
+
+    def inflated(self, radius: float) -> PlanningGrid:
+        """A copy with obstacles grown by ``radius`` m (see :func:`inflate`)."""
+        return PlanningGrid(inflate(self.free, radius / self.resolution), self.resolution, self.origin, self.name)
+
+
+def inflate(free: np.ndarray, radius_cells: float) -> np.ndarray:
+    """Free cells whose centre is farther than ``radius_cells`` from every blocked cell centre.
+
+    Uses the exact Euclidean distance transform; outside the grid counts as
+    blocked. ``radius_cells <= 0`` returns a copy of ``free``.
+    """
+    free = np.asarray(free, dtype=bool)
+    if radius_cells <= 0:
+        return free.copy()
+    dist = ndimage.distance_transform_edt(np.pad(free, 1, constant_values=False))[1:-1, 1:-1]
+    return dist > radius_cells
+
+
+def wall_cost(grid: PlanningGrid, distance: float, weight: float = 1.0) -> np.ndarray:
+    """Extra cost layer (H, W) >= 0 that rises linearly to ``weight`` towards walls.
+
+    ``weight * (1 - d / distance)`` for a cell at clearance ``d < distance`` m,
+    0 farther away. With the A* step cost ``len * (1 + (c_u + c_v) / 2)`` the
+    octile heuristic stays admissible because the layer is never negative.
+    """
+    if distance <= 0 or weight < 0:
+        raise ValueError("wall_cost needs distance > 0 and weight >= 0")
+    d = grid.clearance()
+    return (weight * np.clip(1.0 - d / distance, 0.0, None)).astype(np.float64)
+
+
+# ---------------------------------------------------------------- loaders
+
+
+def load_grid(
+    path, *, resolution: float | None = None, origin=(0.0, 0.0), free_thresh: float | None = None
+) -> PlanningGrid:
+    """Load a planning grid by file type.
+
+    ``.yaml``/``.yml``: map_server map (free = p < free_thresh, default the
+    YAML's); ``.map``: Moving AI; any image (``.png``, ``.pgm``, ...): floor
+    plan, free = grey >= 250, with ``resolution`` (default 0.05 m) and ``origin``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "map file not found")
+    suffix = path.suffix.lower()
+    if suffix in (".yaml", ".yml"):
+        return load_map_yaml(path, free_thresh=free_thresh)
+    if suffix == ".map":
+        return load_movingai_map(path)
+    return load_floor_plan(path, resolution=0.05 if resolution is None else resolution, origin=origin)
+
+
+def grid_from_occupancy(grid, free_thresh: float = 0.196, name: str = "") -> PlanningGrid:
+    """Free = occupancy probability < ``free_thresh``; unknown and occupied are blocked."""
+    return PlanningGrid(grid.free_mask(free_thresh), grid.resolution, grid.origin, name)
+
+
+def load_map_yaml(path, free_thresh: float | None = None) -> PlanningGrid:
+    """map_server YAML + image via :func:`~slam2d.mapping.export.load_map_server`.
+
+    Free = p < ``free_thresh`` (default: the YAML's ``free_thresh``); unknown
+    cells are blocked.
+    """
+    import yaml
+
+    from slam2d.mapping.export import load_map_server
+
+    path = Path(path)
+    occ = load_map_server(path)  # validates the YAML and the image
+    if free_thresh is None:
+        free_thresh = float(yaml.safe_load(path.read_text())["free_thresh"])
+    return grid_from_occupancy(occ, free_thresh, name=str(path))
+
+
+def load_floor_plan(
+    path, resolution: float = 0.05, origin=(0.0, 0.0), free_min: int = FLOOR_PLAN_FREE_MIN
+) -> PlanningGrid:
+    """Grey floor plan (free white >= ``free_min``); image row 0 is the top of the map."""
+    from PIL import Image, UnidentifiedImageError
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "floor plan not found")
+    try:
+        with Image.open(path) as im:
+            grey = np.asarray(im.convert("L"))
+    except (UnidentifiedImageError, OSError) as err:
+        raise InputError(path, f"not a readable image ({err})") from None
+    return PlanningGrid(np.flipud(grey >= free_min), resolution, origin, str(path))
+
+
+def _header_value(lines: list[str], i: int, key: str, path: Path) -> int:
+    if i >= len(lines):
+        raise InputError(f"{path}:{i + 1}", f"expected '{key} N', got end of file")
+    parts = lines[i].split()
+    if len(parts) != 2 or parts[0] != key or not parts[1].isdigit() or int(parts[1]) <= 0:
+        raise InputError(f"{path}:{i + 1}", f"expected '{key} N' with N > 0, got {lines[i]!r}")
+    return int(parts[1])
+
+
+def load_movingai_map(path) -> PlanningGrid:
+    """Moving AI ``.map``: header ``type``, ``height``, ``width``, ``map``, then the rows.
+
+    Passable terrain ``. G S``; ``@ O T W`` are blocked; anything else is an error.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "map file not found")
+    lines = path.read_text(errors="replace").splitlines()
+    if not lines or not lines[0].startswith("type"):
+        raise InputError(f"{path}:1", f"expected 'type octile', got {lines[0] if lines else ''!r}")
+    h = _header_value(lines, 1, "height", path)
+    w = _header_value(lines, 2, "width", path)
+    if len(lines) < 4 or lines[3].strip() != "map":
+        raise InputError(f"{path}:4", f"expected 'map', got {lines[3] if len(lines) > 3 else ''!r}")
+    rows = lines[4 : 4 + h]
+    if len(rows) < h:
+        raise InputError(f"{path}:{4 + len(rows) + 1}", f"expected {h} map rows, file ends after {len(rows)}")
+    for k, row in enumerate(rows):
+        if len(row) != w:
+            raise InputError(f"{path}:{k + 5}", f"expected {w} characters, got {len(row)}")
+    text = np.frombuffer("".join(rows).encode("latin-1", "replace"), dtype=np.uint8).reshape(h, w)
+    known = np.isin(text, np.frombuffer("".join(sorted(_MOVINGAI_KNOWN)).encode(), dtype=np.uint8))
+    if not known.all():
+        r, c = np.argwhere(~known)[0]
+        raise InputError(f"{path}:{r + 5}", f"unknown terrain {chr(text[r, c])!r} at column {c + 1}")
+    free = np.isin(text, np.frombuffer("".join(sorted(MOVINGAI_PASSABLE)).encode(), dtype=np.uint8))
+    return PlanningGrid(free, 1.0, (0.0, 0.0), str(path))
+
+
+@dataclass(eq=False)
+class Scenarios:
+    """Moving AI scenarios: ``bucket`` (N,), ``start``/``goal`` (N, 2) as (x, y) = (col, row),
+    ``optimal`` (N,) octile lengths (cells), map ``width``/``height`` and ``map_name``."""
+
+    bucket: np.ndarray
+    map_name: str
+    width: int
+    height: int
+    start: np.ndarray
+    goal: np.ndarray
+    optimal: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.bucket)
+
+    @property
+    def start_cells(self) -> np.ndarray:
+        """(N, 2) (row, col) start cells."""
+        return self.start[:, ::-1].copy()
+
+    @property
+    def goal_cells(self) -> np.ndarray:
+        """(N, 2) (row, col) goal cells."""
+        return self.goal[:, ::-1].copy()
+
+
+def _scen_row(line: str, where: str) -> tuple:
+    parts = line.split("\t") if "\t" in line else line.split()
+    parts = [p.strip() for p in parts]
+    if len(parts) != 9:
+        raise InputError(where, f"expected 9 fields (bucket map width height sx sy gx gy length), got {len(parts)}")
+    try:
+        ints = [int(parts[i]) for i in (0, 2, 3, 4, 5, 6, 7)]
+        length = float(parts[8])
+    except ValueError:
+        raise InputError(where, f"non-numeric field in {line.strip()!r}") from None
+    b, w, h, sx, sy, gx, gy = ints
+    if w <= 0 or h <= 0 or not (0 <= sx < w and 0 <= gx < w and 0 <= sy < h and 0 <= gy < h):
+        raise InputError(where, f"start ({sx}, {sy}) or goal ({gx}, {gy}) outside the {w}x{h} map")
+    if not np.isfinite(length) or length < 0:
+        raise InputError(where, f"optimal length must be finite and >= 0, got {parts[8]}")
+    return b, parts[1], w, h, sx, sy, gx, gy, length
+
+
+def load_scenarios(path) -> Scenarios:
+    """Moving AI ``.scen`` (``version 1``, then one scenario a line). One map per file."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "scenario file not found")
+    lines = path.read_text(errors="replace").splitlines()
+    if not lines or not lines[0].strip().startswith("version"):
+        raise InputError(f"{path}:1", f"expected 'version 1', got {lines[0] if lines else ''!r}")
+    rows = [(_scen_row(ln, f"{path}:{i + 1}"), i + 1) for i, ln in enumerate(lines) if i > 0 and ln.strip()]
+    if not rows:
+        raise InputError(path, "no scenarios")
+    first, _ = rows[0]
+    for row, lineno in rows:
+        if (row[1], row[2], row[3]) != (first[1], first[2], first[3]):
+            raise InputError(f"{path}:{lineno}", f"map {row[1]} {row[2]}x{row[3]} differs from the first line's")
+    a = np.array([r[0][4:8] for r in rows], dtype=np.int64)
+    return Scenarios(
+        bucket=np.array([r[0][0] for r in rows], dtype=np.int64),
+        map_name=first[1],
+        width=first[2],
+        height=first[3],
+        start=a[:, 0:2].copy(),
+        goal=a[:, 2:4].copy(),
+        optimal=np.array([r[0][8] for r in rows], dtype=np.float64),
+    )
