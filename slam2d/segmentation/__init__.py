@@ -1,1 +1,41 @@
-"""slam2d.segmentation."""
+"""Room segmentation of grid maps.
+
+- :mod:`~slam2d.segmentation.observations`: (pose, scan) observations, real or
+  ray-cast from a lattice of viewpoints on the free space;
+- :mod:`~slam2d.segmentation.similarity`: Hausdorff, nearest-neighbour,
+  feature-point and virtual-visibility similarity of observations;
+- :mod:`~slam2d.segmentation.spectral`: spectral clustering with a
+  silhouette-chosen k, and labels for every free cell (``segment_spectral``);
+- :mod:`~slam2d.segmentation.evaluate`: per-room recall / precision against
+  ground-truth room images (Bormann et al., ICRA 2016).
+
+Submodules import lazily, so ``import slam2d.segmentation`` stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_EXPORTS = {
+    "load_floor_plan": "evaluate",
+    "load_ground_truth": "evaluate",
+    "score": "evaluate",
+    "Observations": "observations",
+    "observations_from_scans": "observations",
+    "virtual_observations": "observations",
+    "SIMILARITIES": "similarity",
+    "similarity_matrix": "similarity",
+    "SpectralConfig": "spectral",
+    "SegmentationResult": "spectral",
+    "segment_spectral": "spectral",
+    "spectral_clusters": "spectral",
+    "label_free_cells": "spectral",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,223 @@
+"""Segment one map into rooms and write the results folder (``slam2d segment``).
+
+:func:`segment_map` reads a floor-plan image (free = gray >= 250, 0.05 m/px
+unless ``resolution`` is given; row 0 is the top) or a map_server map
+(``map.yaml``: free = occupancy probability < ``free_thresh``), runs a method
+(``spectral`` with a similarity measure, or a baseline of
+:mod:`slam2d.segmentation.baselines`), builds the topological map and writes
+
+- ``labels.png``: 16-bit grayscale, one value per room (0 = not a room), in the
+  map image's orientation (row 0 the top), so it overlays the map;
+- ``rooms.png``: the rooms in colour (neighbours differ) with the region graph:
+  nodes at room centres, edges through their portals; axes in metres;
+- ``rooms_graph.json``: :func:`slam2d.mapping.topological.save_graph`;
+- ``metrics.json``: method, rooms, seconds (and k, silhouette for spectral),
+  plus recall / precision (%) against the ground truth when one is given or
+  found beside the map as ``<stem>_gt_segmentation.png`` (for
+  ``<stem>_furnitures.png`` the unfurnished stem's).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from slam2d.errors import InputError
+
+__all__ = [
+    "segment_map", "METHODS", "find_ground_truth", "load_map", "save_labels_png", "save_rooms_png", "room_colours",
+]
+
+METHODS = ("spectral", "morphological", "distance", "voronoi")
+"""Method names :func:`segment_map` accepts."""
+
+_SIMILARITY_ALIASES = {"nearest_neighbor": "nearest_neighbour", "knn": "nearest_neighbour"}
+
+FURNISHED_SUFFIX = "_furnitures"
+GT_SUFFIX = "_gt_segmentation.png"
+
+
+def load_map(map_path, resolution: float | None = None) -> dict:
+    """Free space of a floor-plan image or a map_server YAML.
+
+    Returns ``dict(free (H, W) bool, resolution m, origin (x, y) m, row0_top)``;
+    ``row0_top`` is False for YAML maps, whose grid rows run up in y (as
+    :class:`slam2d.mapping.occupancy.OccupancyGrid`).
+    """
+    path = Path(map_path)
+    if not path.is_file():
+        raise InputError(path, "map file not found")
+    if path.suffix.lower() in (".yaml", ".yml"):
+        import yaml
+
+        from slam2d.mapping.export import load_map_server
+
+        grid = load_map_server(path)
+        free_thresh = float(yaml.safe_load(path.read_text())["free_thresh"])
+        return dict(free=grid.free_mask(free_thresh), resolution=grid.resolution, origin=grid.origin, row0_top=False)
+    from slam2d.segmentation.evaluate import load_floor_plan
+
+    free, res = load_floor_plan(path)
+    if resolution is not None:
+        if not resolution > 0:
+            raise InputError("resolution", f"must be > 0 m/px, got {resolution}")
+        res = float(resolution)
+    return dict(free=free, resolution=float(res), origin=(0.0, 0.0), row0_top=True)
+
+
+def find_ground_truth(map_path) -> Path | None:
+    """``<stem>_gt_segmentation.png`` beside the map (the unfurnished stem's for ``*_furnitures``), or None."""
+    path = Path(map_path)
+    stem = path.stem
+    if stem.endswith(FURNISHED_SUFFIX):
+        stem = stem[: -len(FURNISHED_SUFFIX)]
+    gt = path.with_name(stem + GT_SUFFIX)
+    return gt if gt.is_file() else None
+
+
+def _run_method(free, resolution, method, similarity, params) -> dict:
+    """Labels (H, W) int32 and run facts (seconds; k and silhouette for spectral)."""
+    if method == "spectral":
+        from slam2d.segmentation.similarity import SIMILARITIES
+        from slam2d.segmentation.spectral import segment_spectral
+
+        similarity = _SIMILARITY_ALIASES.get(similarity, similarity)
+        if similarity not in SIMILARITIES:
+            raise InputError("similarity", f"unknown measure {similarity!r}; choose from {sorted(SIMILARITIES)}")
+        res = segment_spectral(free, resolution, similarity=similarity, **params)
+        return dict(labels=np.asarray(res.labels, np.int32), seconds=float(res.seconds), k=int(res.k),
+                    silhouette=float(res.silhouette), similarity=similarity)  # fmt: skip
+    from slam2d.segmentation.baselines import BASELINES
+
+    if method not in BASELINES:
+        raise InputError("method", f"unknown method {method!r}; choose from {list(METHODS)}")
+    t0 = time.perf_counter()
+    try:
+        labels = BASELINES[method](free, resolution, **params)
+    except TypeError as exc:  # an unknown keyword
+        raise InputError("params", f"{method}: {exc}") from None
+    return dict(labels=labels, seconds=time.perf_counter() - t0)
+
+
+def segment_map(map_path, method="spectral", similarity="visibility", out_dir=None, *, ground_truth=None,
+                resolution=None, **params) -> dict:
+    """Segment the map at ``map_path`` into rooms and write the results into ``out_dir``.
+
+    method: one of :data:`METHODS`; similarity: the spectral measure (ignored by
+    the baselines); out_dir: results folder (default ``results/segment-<stem>-<method>-<time>``);
+    ground_truth: GT image (default: found beside the map, see :func:`find_ground_truth`);
+    resolution: m/px for an image map (default 0.05); params: the method's parameters.
+    Returns the metrics written to ``metrics.json`` (plus ``out_dir``).
+    """
+    from slam2d.mapping.topological import region_graph, save_graph
+
+    map_path = Path(map_path)
+    if method not in METHODS:
+        raise InputError("method", f"unknown method {method!r}; choose from {list(METHODS)}")
+    m = load_map(map_path, resolution)
+    run = _run_method(m["free"], m["resolution"], method, similarity, params)
+    labels = run.pop("labels")
+    graph = region_graph(labels, m["resolution"], m["origin"], row0_top=m["row0_top"])
+    out = Path(out_dir) if out_dir is not None else _default_out_dir(map_path, method)
+    out.mkdir(parents=True, exist_ok=True)
+    image_labels = labels if m["row0_top"] else np.flipud(labels)
+    save_labels_png(image_labels, out / "labels.png")
+    save_graph(graph, out / "rooms_graph.json")
+    save_rooms_png(labels, m["free"], graph, m["resolution"], m["origin"], m["row0_top"], out / "rooms.png",
+                   title=f"{map_path.stem}: {method}" + (f" ({run['similarity']})" if "similarity" in run else ""))
+    metrics = dict(map=str(map_path), method=method, **run, rooms=graph.number_of_nodes(),
+                   portals=graph.number_of_edges(), params=_jsonable(params))  # fmt: skip
+    metrics.update(_score(image_labels, ground_truth, map_path))
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    return dict(metrics, out_dir=str(out))
+
+
+def _score(image_labels, ground_truth, map_path) -> dict:
+    """Recall, precision, rooms found / in GT against the given or found GT image; {} without one."""
+    gt_path = Path(ground_truth) if ground_truth is not None else find_ground_truth(map_path)
+    if gt_path is None:
+        return {}
+    from slam2d.segmentation.evaluate import load_ground_truth, score
+
+    gt = load_ground_truth(gt_path)
+    if gt.shape != image_labels.shape:
+        raise InputError(gt_path, f"ground truth is {gt.shape[1]}x{gt.shape[0]} px, the map "
+                                  f"{image_labels.shape[1]}x{image_labels.shape[0]}")  # fmt: skip
+    return dict(score(image_labels, gt), ground_truth=str(gt_path))
+
+
+def _default_out_dir(map_path: Path, method: str) -> Path:
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    out = Path("results") / f"segment-{map_path.stem}-{method}-{stamp}"
+    n = 1
+    while out.exists():
+        out, n = out.with_name(f"segment-{map_path.stem}-{method}-{stamp}-{n}"), n + 1
+    return out
+
+
+def _jsonable(params: dict) -> dict:
+    """Parameters with anything JSON cannot hold given as its repr."""
+    out = {}
+    for k, v in params.items():
+        try:
+            json.dumps(v)
+            out[k] = v
+        except TypeError:
+            out[k] = repr(v)
+    return out
+
+
+def save_labels_png(labels, path) -> Path:
+    """Write labels (H, W) (0..65535) as a 16-bit grayscale PNG; read back with PIL + ``np.asarray``."""
+    from PIL import Image
+
+    labels = np.asarray(labels)
+    if labels.size and (labels.min() < 0 or labels.max() > 65535):
+        raise InputError(path, f"labels must lie in 0..65535 for a 16-bit PNG, got {labels.min()}..{labels.max()}")
+    Image.fromarray(labels.astype(np.uint16)).save(path)
+    return Path(path)
+
+
+def room_colours(labels, graph) -> np.ndarray:
+    """RGB (H, W, 3) float: rooms coloured so that neighbours in ``graph`` differ,
+    obstacles dark grey, unlabelled cells white."""
+    import networkx as nx
+    from matplotlib import colormaps
+
+    palette = np.asarray(colormaps["tab20"].colors)[[0, 2, 4, 6, 8, 10, 12, 16, 18, 1, 3, 5, 7, 9, 11, 13, 17, 19]]
+    colour = nx.greedy_color(graph, strategy="largest_first")
+    lut = np.ones((int(labels.max()) + 1, 3))
+    for n, c in colour.items():
+        lut[n] = palette[c % len(palette)]
+    return lut[labels]
+
+
+def save_rooms_png(labels, free, graph, resolution, origin, row0_top, path, title=None) -> Path:
+    """Figure of the rooms (see :func:`room_colours`) with the region graph drawn over them."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from slam2d.mapping.topological import draw_graph
+
+    rgb = room_colours(labels, graph)
+    rgb[~np.asarray(free, bool) & (labels == 0)] = 0.25
+    h, w = labels.shape
+    extent = (origin[0], origin[0] + w * resolution, origin[1], origin[1] + h * resolution)
+    aspect = h / max(w, 1)
+    fig = Figure(figsize=(9.0, float(np.clip(9.0 * aspect, 3.0, 16.0))), dpi=150)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    ax.imshow(rgb, origin="upper" if row0_top else "lower", extent=extent, interpolation="nearest")
+    draw_graph(ax, graph, node_size=18.0, linewidth=0.8, labels=graph.number_of_nodes() <= 80)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_aspect("equal")
+    ax.set_xlim(extent[0], extent[1])
+    ax.set_ylim(extent[2], extent[3])
+    if title:
+        ax.set_title(f"{title}: {graph.number_of_nodes()} rooms")
+    fig.savefig(path, bbox_inches="tight")
+    return Path(path)
