@@ -70,7 +70,7 @@ class DatasetConfig(Section):
 
 
 class FrontendConfig(Section):
-    name: str = Field("odometry", description="registered frontend name (slam2d frontends lists them)")
+    name: str = Field("icp", description="registered frontend name (slam2d frontends lists them)")
     options: dict[str, Any] = Field(
         default_factory=dict, description="the frontend's own parameters, checked against its Config model"
     )
@@ -95,7 +95,7 @@ class LoopClosureConfig(Section):
 
 class BackendConfig(Section):
     name: Literal["none", "pose_graph"] = Field(
-        "none", description="'none' chains the frontend's deltas; 'pose_graph' optimises with GTSAM"
+        "pose_graph", description="'pose_graph' optimises with GTSAM; 'none' chains the frontend's deltas"
     )
     keyframe_distance: float = Field(0.2, ge=0, description="m travelled before a new keyframe")
     keyframe_angle_deg: float = Field(10.0, ge=0, description="rotation before a new keyframe")

@@ -9,7 +9,7 @@ from slam2d.errors import InputError
 def test_defaults_are_the_simulator():
     cfg = config.load()
     assert cfg.dataset.kind == "simulator"
-    assert cfg.frontend.name == "odometry"
+    assert (cfg.frontend.name, cfg.backend.name) == ("icp", "pose_graph")
 
 
 def test_override_parses_yaml_values():

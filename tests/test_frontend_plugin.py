@@ -32,7 +32,7 @@ class ScaledOdometry:
 
 
 def run(options):
-    cfg = config.load(None, ["dataset.max_scans=50", "frontend.name=scaled_odometry"])
+    cfg = config.load(None, ["dataset.max_scans=50", "frontend.name=scaled_odometry", "backend.name=none"])
     cfg.frontend.options = options
     pipeline = SlamPipeline(cfg)
     return pipeline, pipeline.run(open_dataset(cfg.dataset, seed=cfg.seed))

@@ -57,3 +57,21 @@ def test_landmark_observations_become_factors_and_correct_drift():
     ids, points = result.graph.landmarks()
     # the map frame starts at the first odometry pose, which equals the true start
     assert np.allclose(points[np.argsort(ids)], PILLARS, atol=0.1)
+
+
+def test_icp_pose_graph_beats_odometry_on_the_start_of_intel(data_file):
+    """End to end on real data: the first 3000 scans of intel.bag (with loops), scored by the relations inside them."""
+    from slam2d.evaluation.relations import read_relations, relations_metric
+
+    bag, rel = data_file("radish/intel.bag"), data_file("radish/intel.relations")
+    cfg = config.load(None, ["dataset.kind=rosbag", f"dataset.path={bag}", "dataset.max_scans=3000"])
+    result = SlamPipeline(cfg).run(open_dataset(cfg.dataset))
+    relations = read_relations(rel)
+    inside = (relations.t1 <= result.stamps[-1]) & (relations.t2 <= result.stamps[-1])
+    relations = type(relations)(relations.t1[inside], relations.t2[inside], relations.delta[inside])
+    est = relations_metric(result.stamps, result.poses, relations)
+    odo = relations_metric(result.stamps, result.odometry, relations)
+    assert est["matched"] > 500 and est["unmatched"] == 0
+    assert odo["trans_abs_mean"] > 1.0  # odometry alone fails the bound by far
+    assert est["trans_abs_mean"] < 0.03, est
+    assert est["rot_abs_mean"] < 0.5, est

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from importlib import import_module
 from importlib.metadata import entry_points
+from importlib.util import find_spec
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -45,6 +47,15 @@ class Frontend(Protocol):
 
 _REGISTRY: dict[str, Callable[..., Frontend]] = {}
 
+# Built-in frontends, imported on first use so that importing slam2d stays light.
+_BUILTIN = {
+    "icp": "slam2d.frontends.icp",
+    "lines": "slam2d.frontends.lines",
+    "corners": "slam2d.frontends.corners",
+    "fuzzy_vertex": "slam2d.frontends.fuzzy_vertex",
+    "fused": "slam2d.frontends.fused",
+}
+
 
 def register_frontend(name: str):
     """Class decorator: make a frontend available under ``name`` in configs."""
@@ -57,13 +68,15 @@ def register_frontend(name: str):
 
 
 def available_frontends() -> list[str]:
-    """Names of all registered frontends, entry points included."""
+    """Names of all registered frontends, built-ins and entry points included."""
     _load_entry_points()
-    return sorted(_REGISTRY)
+    return sorted(set(_REGISTRY) | {n for n, m in _BUILTIN.items() if find_spec(m) is not None})
 
 
 def frontend_class(name: str):
     """The class registered as ``name`` (entry points included)."""
+    if name not in _REGISTRY and name in _BUILTIN and find_spec(_BUILTIN[name]) is not None:
+        import_module(_BUILTIN[name])
     if name not in _REGISTRY:
         _load_entry_points()
     if name not in _REGISTRY:
