@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 from slam2d import config
 from slam2d.cli import app
 from slam2d.errors import InputError
-from slam2d.experiment import load_sweep, run_experiment, run_sweep
+from slam2d.experiment import load_sweep, resolved, run_experiment, run_sweep
 
 SMALL = ["dataset.max_scans=40", "mapping.resolution=0.1"]
 
@@ -27,7 +27,7 @@ def test_run_writes_complete_results_folder(tmp_path):
     assert metrics["scans"] == 40
     assert metrics["ate"]["rmse"] >= 0 and "odometry_ate" in metrics
     # the resolved config reproduces the run's config
-    assert config.load(folder / "config.yaml") == small_cfg(tmp_path)
+    assert config.load(folder / "config.yaml") == resolved(small_cfg(tmp_path))
     assert len([l for l in (folder / "trajectory.tum").read_text().splitlines() if not l.startswith("#")]) == 40
 
 
