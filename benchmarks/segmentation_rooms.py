@@ -145,6 +145,16 @@ def main() -> None:
     ap.add_argument("--setting", choices=["both", "plain", "furnished"], default="both")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (1 or 2)")
     ap.add_argument("--csv", type=Path, default=Path("results") / "segmentation_rooms.csv")
+    ap.add_argument("--config", type=Path, help="YAML with any of these options (e.g. experiments/ablation_segmentation.yaml)")
+    pre, _ = ap.parse_known_args()
+    if pre.config:
+        import yaml
+
+        options = yaml.safe_load(pre.config.read_text()) or {}
+        unknown = set(options) - {a.dest for a in ap._actions}
+        if unknown:
+            ap.error(f"{pre.config}: unknown key '{sorted(unknown)[0]}'")
+        ap.set_defaults(**options)
     args = ap.parse_args()
     if not 1 <= args.jobs <= 2:
         ap.error("--jobs must be 1 or 2 (the machine is shared)")
