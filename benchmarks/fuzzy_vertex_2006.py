@@ -6,7 +6,7 @@ steps, a compass for the heading, 10 trials; mean localisation error over the
 first n steps and time per step. The paper does not give its room layout (only
 a figure) nor its step count, so this script uses a polygonal room of its
 scale (an L-shaped hall with a box pillar, a triangular and a pentagonal
-obstacle) and a route of 1 m steps from (5, 5) twice round them (148 steps).
+obstacle) and a route of 1 m steps from (5, 5) twice round them (149 steps).
 
 Motion error: ``sample_odometry`` with alpha3 = alpha2 = 0.01 (std 10 % of a
 step along and across the motion, so +-20 % is the 2-sigma band). With the
