@@ -1,26 +1,36 @@
 """Scan-to-local-map ICP on kiss-icp's C++ building blocks, planar points (z = 0).
 
 The frontend keeps the robot base pose in its own odometry-like local frame
-and a kiss-icp ``VoxelHashMap`` of recent scan points in that frame. Each scan
-is registered to the map starting from the wheel-odometry prediction (not a
-constant-velocity model); the returned delta is the base motion from the
-previous scan to this one.
+and a kiss-icp ``VoxelHashMap`` of the last ``map_window`` scans in that frame
+(points in the base frame, so the laser mounting pose is already applied).
+Each scan is registered to the map starting from the wheel-odometry
+prediction, not kiss-icp's constant-velocity model; the returned delta is the
+base motion from the previous scan to this one. kiss-icp's
+``AdaptiveThreshold`` (fed with the deviation of the result from odometry)
+sets the correspondence distance and the robust kernel.
 
-Two solvers share the map, the adaptive threshold and the checks:
+Two solvers share the map, the threshold and the checks:
 
-- ``point_to_line`` (default): 2D Gauss-Newton over (x, y, theta) in numpy.
-  Correspondences are the ``neighbours`` nearest map points (scipy cKDTree);
-  their 2x2 scatter gives a local line, and the residual is weighted mostly
-  across it (plus a small along-line term), with a Geman-McClure kernel.
+- ``point_to_line`` (default): 2D Gauss-Newton over (x, y, theta). Each scan
+  point is matched to its ``neighbours`` nearest map points (a hashed grid
+  searched in numba); where they form a line the residual is the distance
+  across it, where they do not but the scan's own neighbouring beams do, the
+  residual is across the scan's line, else it is point-to-point (isolated
+  points are dropped). Geman-McClure weights with the adaptive scale, then a
+  refinement with the fixed ``refine_kernel``; a weak prior on the odometry
+  delta keeps directions the scan cannot see (corridors) at odometry.
 - ``point_to_point``: kiss-icp's own 6-DoF ``Registration`` on (x, y, 0)
-  points, projected back to SE(2). With every point at z = 0 the z rows of the
-  problem pin z, roll and pitch to 0, so the result stays planar to ~1e-12.
+  points, projected to SE(2). With every point at z = 0 the z rows of the
+  problem pin z, roll and pitch: the result is planar exactly (checked, and a
+  non-planar result falls back to odometry).
 
 The information matrix is J^T W J / sigma^2 of the final residuals in
-(x, y, theta), sigma^2 estimated from those residuals, then bounded in both
-directions so it stays positive definite in degenerate scenes and is never
-overconfident. Failures fall back to odometry with confidence 0 (counted in
-``self.fallbacks``).
+(x, y, theta), sigma^2 estimated from them, plus the odometry prior, expressed
+in the frame of the delta and bounded so every direction's std lies in
+[min_sigma, max_sigma]. The confidence is the fraction of points whose
+residual is within ``inlier_distance``. Too few points, a non-finite or
+non-planar result, a correction beyond the divergence bound or too few
+matches fall back to odometry with confidence 0, counted in ``fallbacks``.
 """
 
 from __future__ import annotations
@@ -95,6 +105,7 @@ class _Grid(NamedTuple):
         return cls(points, keys[order], order, cell)
 
 
+@register_frontend("icp")
 class IcpFrontend:
     """Scan-to-local-map ICP with the odometry delta as the initial guess.
 
@@ -125,21 +136,26 @@ class IcpFrontend:
         kernel_factor: float = Field(1.0, gt=0, description="Geman-McClure scale / threshold")
         refine_kernel: float = Field(0.05, ge=0, description="m; Geman-McClure scale of a final refinement (0: none)")
         neighbours: int = Field(5, ge=2, description="map points per correspondence (point_to_line)")
+        information_neighbours: int = Field(
+            15, ge=2, description="map points per line fit for the information and confidence (steadier normals)"
+        )
         along_weight: float = Field(0.0, ge=0, le=1, description="weight of the along-line residual (point_to_line)")
         line_ratio: float = Field(0.2, gt=0, le=1, description="max eigenvalue ratio of a line neighbourhood")
         scan_line_gap: float = Field(1.0, gt=0, description="m; max gap between beams fitted to one scan line")
         min_cluster: int = Field(3, ge=1, description="map points near a point on no line for a point-to-point match")
         max_iterations: int = Field(20, gt=0, description="correspondence searches per scan")
         inner_iterations: int = Field(3, gt=0, description="Gauss-Newton steps per correspondence search")
-        convergence: float = Field(1e-5, gt=0, description="stop when the update is below this (m and rad)")
+        convergence: float = Field(1e-4, gt=0, description="stop when the update is below this (m and rad)")
         odom_prior: bool = Field(True, description="regularise the match with the odometry delta (point_to_line)")
-        point_sigma: float = Field(0.03, gt=0, description="m; std of one point residual, scales the prior")
+        point_sigma: float = Field(0.03, gt=0, description="m; std of one point residual: prior weight vs points")
         inlier_distance: float = Field(0.1, gt=0, description="m; residual of a point counted as matched")
         retry_below: float = Field(0.6, ge=0, le=1, description="matched fraction below which other guesses are tried")
         min_points: int = Field(20, ge=3, description="fewer valid points than this -> odometry fallback")
         min_inlier_fraction: float = Field(0.2, ge=0, le=1, description="fewer matched points -> fallback")
         max_correction_xy: float = Field(0.5, gt=0, description="m; ICP farther than this from odometry diverged")
-        max_correction_theta_deg: float = Field(30.0, gt=0, description="ICP rotated more than this from odometry diverged")
+        max_correction_theta_deg: float = Field(
+            30.0, gt=0, description="ICP rotated more than this from odometry diverged"
+        )
         max_planarity_error: float = Field(1e-3, gt=0, description="point_to_point: tolerated z (m) / tilt (rad)")
         odom_sigma_xy: float = Field(0.05, gt=0, description="m; std of the odometry delta (prior, fallback)")
         odom_sigma_theta_deg: float = Field(2.0, gt=0, description="std of the odometry delta (prior, fallback)")
@@ -177,6 +193,9 @@ class IcpFrontend:
         """Register ``scan`` to the local map; ``odom_delta`` (3,) is the base motion since the last scan."""
         cfg = self.config
         odom_delta = geometry.as_pose(odom_delta)
+        if not np.all(np.isfinite(odom_delta)):
+            log.debug("non-finite odometry delta %s; assuming no motion", odom_delta)
+            odom_delta = np.zeros(3)
         guess = geometry.compose(self.pose, odom_delta)
         points = self._valid_points(scan)
         if not self._started:
@@ -190,7 +209,8 @@ class IcpFrontend:
         grid = self._map_grid(threshold)
         found = self._best_match(source, guess, threshold, grid)
         if found is None:
-            return self._fallback("non-planar or non-finite registration", guess, odom_delta, points)
+            return self._fallback("registration failed (non-finite, non-planar or < 3 matches)", guess, odom_delta,
+                                  points)
         pose, corr, matched = found
         reason = self._diverged(pose, guess)
         if reason:
@@ -297,10 +317,10 @@ class IcpFrontend:
         return pose
 
     def _correspondences(self, grid: _Grid, source, pose, threshold) -> _Correspondences:
-        """Map neighbourhoods (line fits) of ``source`` (M, 2) moved to ``pose``."""
+        """Map neighbourhoods (line fits over ``information_neighbours`` points) of ``source`` at ``pose``."""
         cfg = self.config
         return _Correspondences(*_correspond(
-            grid.points, grid.keys, grid.order, grid.cell, source, pose, cfg.neighbours,
+            grid.points, grid.keys, grid.order, grid.cell, source, pose, cfg.information_neighbours,
             cfg.correspondence_factor * threshold, cfg.along_weight, cfg.line_ratio, cfg.min_cluster,
         ))
 
@@ -317,8 +337,9 @@ class IcpFrontend:
         previous base frame (the frame of the delta).
         """
         cfg = self.config
-        h, _, sq, wsum = _normal_equations(source, pose, corr.valid, corr.target, corr.omega,
-                                           cfg.kernel_factor * threshold)
+        refined = cfg.method == "point_to_line" and cfg.refine_kernel > 0
+        kernel = cfg.refine_kernel if refined else cfg.kernel_factor * threshold
+        h, _, sq, wsum = _normal_equations(source, pose, corr.valid, corr.target, corr.omega, kernel)
         sigma2 = max(sq / max(wsum - 3, 1.0), cfg.min_sigma_xy**2)
         info = h / sigma2 + (self._odom_information if cfg.odom_prior and cfg.method == "point_to_line" else 0.0)
         a = np.eye(3)
@@ -383,35 +404,45 @@ class IcpFrontend:
 
 
 # ---------------------------------------------------------------------- maths
+# numba kernels: each loops over the 100-400 points of one scan, several times
+# per scan; numpy's per-call overhead on arrays this small would dominate.
 
 
-def _scan_normals(points: np.ndarray, line_ratio: float, max_gap: float, half_window: int = 2) -> np.ndarray:
+@njit(cache=True, nogil=True)
+def _scan_normals(points, line_ratio, max_gap, half_window=2):
     """Unit normals (M, 2) of the scan's local lines; zeros where the beams around a point are no line.
 
     ``points`` (M, 2) are in beam order. Each point's window is the
-    ``2 * half_window + 1`` beams around it; it is a line when its scatter's
-    eigenvalue ratio is <= ``line_ratio`` and no two consecutive beams in it
-    are more than ``max_gap`` m apart (a depth jump).
+    ``2 * half_window + 1`` beams around it (clipped at the ends); it is a line
+    when its scatter's eigenvalue ratio is <= ``line_ratio`` and no two
+    consecutive beams in it are more than ``max_gap`` m apart (a depth jump).
     """
     m = len(points)
-    if m < 3:
-        return np.zeros((m, 2))
-    idx = np.clip(np.arange(m)[:, None] + np.arange(-half_window, half_window + 1), 0, m - 1)
-    win = points[idx]
-    d = win - win.mean(1, keepdims=True)
-    cxx, cyy, cxy = (d[..., 0] ** 2).mean(1), (d[..., 1] ** 2).mean(1), (d[..., 0] * d[..., 1]).mean(1)
-    half = 0.5 * (cxx + cyy)
-    disc = np.sqrt(np.maximum(half**2 - (cxx * cyy - cxy**2), 0.0))
-    hi, lo = half + disc, half - disc
-    gap = np.linalg.norm(np.diff(win, axis=1), axis=-1).max(1)
-    line = (hi > 0) & (lo <= line_ratio * hi) & (gap <= max_gap)
-    a, b = np.column_stack([hi - cyy, cxy]), np.column_stack([cxy, hi - cxx])
-    t = np.where((np.sum(a * a, 1) >= np.sum(b * b, 1))[:, None], a, b)
-    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)
-    return np.column_stack([-t[:, 1], t[:, 0]]) * line[:, None]
+    out = np.zeros((m, 2))
+    for i in range(m):
+        lo, hi = max(0, i - half_window), min(m, i + half_window + 1)
+        if hi - lo < 3:
+            continue
+        mx, my, gap = 0.0, 0.0, 0.0
+        for j in range(lo, hi):
+            mx += points[j, 0]
+            my += points[j, 1]
+            if j > lo:
+                gap = max(gap, np.hypot(points[j, 0] - points[j - 1, 0], points[j, 1] - points[j - 1, 1]))
+        if gap > max_gap:
+            continue
+        mx, my = mx / (hi - lo), my / (hi - lo)
+        cxx, cyy, cxy = 0.0, 0.0, 0.0
+        for j in range(lo, hi):
+            dx, dy = points[j, 0] - mx, points[j, 1] - my
+            cxx += dx * dx
+            cyy += dy * dy
+            cxy += dx * dy
+        ok, tx, ty = _line_direction(cxx, cyy, cxy, line_ratio)
+        if ok:
+            out[i, 0], out[i, 1] = -ty, tx
+    return out
 
-# numba kernels: each loops over the ~100-400 points of one scan, where numpy's
-# per-call overhead (~7 searches per scan, 13k scans) would dominate.
 
 _KEY_OFFSET = 1 << 20  # cell indices are shifted by this to make keys non-negative
 
@@ -479,6 +510,23 @@ def _knn(map_xy, keys, order, cell, x, y, radius, idx, d2):
 
 
 @njit(cache=True, nogil=True)
+def _line_direction(cxx, cyy, cxy, line_ratio):
+    """(is a line, tx, ty): unit direction of the largest eigenvector of [[cxx, cxy], [cxy, cyy]].
+
+    A line when the smaller eigenvalue is at most ``line_ratio`` times the larger.
+    """
+    half = 0.5 * (cxx + cyy)
+    disc = np.sqrt(max(half * half - (cxx * cyy - cxy * cxy), 0.0))
+    hi, lo = half + disc, half - disc
+    if not (hi > 0 and lo <= line_ratio * hi):
+        return False, 1.0, 0.0
+    ax, ay, bx, by = hi - cyy, cxy, cxy, hi - cxx
+    tx, ty = (ax, ay) if ax * ax + ay * ay >= bx * bx + by * by else (bx, by)
+    norm = np.sqrt(tx * tx + ty * ty)
+    return True, tx / norm, ty / norm
+
+
+@njit(cache=True, nogil=True)
 def _line_fit(map_xy, idx, n, along, line_ratio, out_target, out_omega):
     """Target and weight of one correspondence from its ``n`` nearest map points ``idx``.
 
@@ -498,14 +546,8 @@ def _line_fit(map_xy, idx, n, along, line_ratio, out_target, out_omega):
         cxx += dx * dx
         cyy += dy * dy
         cxy += dx * dy
-    half, det = 0.5 * (cxx + cyy), cxx * cyy - cxy * cxy
-    disc = np.sqrt(max(half * half - det, 0.0))
-    if n >= 3 and half + disc > 0 and half - disc <= line_ratio * (half + disc):
-        hi = half + disc  # line direction t: eigenvector of the largest eigenvalue
-        ax, ay, bx, by = hi - cyy, cxy, cxy, hi - cxx
-        tx, ty = (ax, ay) if ax * ax + ay * ay >= bx * bx + by * by else (bx, by)
-        norm = np.sqrt(tx * tx + ty * ty)
-        tx, ty = tx / norm, ty / norm
+    ok, tx, ty = _line_direction(cxx, cyy, cxy, line_ratio)
+    if n >= 3 and ok:
         out_omega[0, 0] = ty * ty + along * tx * tx
         out_omega[1, 1] = tx * tx + along * ty * ty
         out_omega[0, 1] = out_omega[1, 0] = (along - 1.0) * tx * ty
@@ -673,5 +715,3 @@ def _clip_eigen(info: np.ndarray, scale: np.ndarray, floor: bool) -> np.ndarray:
     out = (vecs * vals) @ vecs.T / scale[:, None] / scale[None, :]
     return 0.5 * (out + out.T)
 
-
-register_frontend("icp")(IcpFrontend)
