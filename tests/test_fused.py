@@ -138,3 +138,18 @@ def test_fused_frontend_beats_odometry_on_the_simulator():
     assert est < 0.5 * odo, (est, odo)
     assert set(pipeline.frontend.sources) == {"lines", "corners", "icp"}
     assert pipeline.frontend.accepted["lines"] > 150
+
+
+def test_fused_weights_scale_each_source_information():
+    cfg = FusedFrontend.Config(sources=["lines", "corners"], weights={"lines": 3.0, "corners": 1.0})
+    fe = FusedFrontend(cfg)
+    a = FrontendResult(delta=np.array([0.12, 0.0, 0.0]), information=np.diag([100.0, 100.0, 100.0]), confidence=0.9)
+    b = FrontendResult(delta=np.array([0.10, 0.02, 0.0]), information=np.diag([300.0, 100.0, 100.0]), confidence=1.0)
+    fe.sources = {"lines": Fixed(a), "corners": Fixed(b)}
+    odom = np.array([0.1, 0.0, 0.0])
+    points = wall_points()
+    fe.process(scan_of(points, 0), np.zeros(3))
+    out = fe.process(scan_of(geometry.transform_points(geometry.inverse(odom), points), 1), odom)
+    # by hand: x = 0.1 + (300 * 0.02 + 300 * 0) / 600, y = (300 * 0 + 100 * 0.02) / 400
+    assert np.allclose(out.delta, [0.11, 0.005, 0.0])
+    assert np.allclose(out.information, np.diag([300.0, 200.0, 200.0]))

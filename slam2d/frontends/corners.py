@@ -471,7 +471,7 @@ class CornerFrontend:
         max_count: int = Field(50, gt=0, description="sightings weighting a corner's running mean at most")
         max_angle_deg: float = Field(30.0, gt=0, description="bisectors of one corner differ by less than this")
         use_direction: bool = Field(False, description="the corners' bisectors also constrain the heading")
-        sigma_corner: float = Field(0.03, gt=0, description="m; std of an observed corner against its listed one")
+        sigma_corner: float = Field(0.05, gt=0, description="m; std of an observed corner against its listed one")
         sigma_direction_deg: float = Field(1.0, gt=0, description="std added to a bisector's own (arm fit) std")
         max_correction_xy: float = Field(0.5, gt=0, description="m; corrections beyond this are divergence")
         max_correction_theta_deg: float = Field(15.0, gt=0, description="corrections beyond this are divergence")
@@ -483,7 +483,7 @@ class CornerFrontend:
         max_sigma_xy: float = Field(1.0, gt=0, description="m; largest std of a direction")
         max_sigma_theta_deg: float = Field(20.0, gt=0, description="largest std of a direction")
         landmarks: bool = Field(True, description="return matched corners as landmark observations")
-        landmark_sigma: float = Field(0.05, gt=0, description="m; std of a landmark observation (range, and across)")
+        landmark_sigma: float = Field(0.2, gt=0, description="m; std of a landmark observation (range, and across)")
         gate: SimilarityGate.Config = SimilarityGate.Config(min_confidence=0.66)
 
     def __init__(self, config: Config | None = None):
