@@ -81,11 +81,11 @@ class LoopClosureConfig(Section):
 
     enabled: bool = True
     every_n_keyframes: int = Field(5, gt=0, description="search for loops at every n-th keyframe")
-    search_radius: float = Field(4.0, gt=0, description="m; candidates within this distance of the new keyframe")
+    search_radius: float = Field(8.0, gt=0, description="m; candidates within this distance of the new keyframe")
     min_travel: float = Field(10.0, ge=0, description="m travelled between a candidate and the new keyframe")
     submap_keyframes: int = Field(10, ge=0, description="neighbouring keyframes on each side forming the submap")
-    window_xy: float = Field(1.0, gt=0, description="m; half-width of the translational search window")
-    window_theta_deg: float = Field(20.0, gt=0, description="half-width of the rotational search window")
+    window_xy: float = Field(3.0, gt=0, description="m; half-width of the translational search window")
+    window_theta_deg: float = Field(30.0, gt=0, description="half-width of the rotational search window")
     resolution: float = Field(0.05, gt=0, description="m; finest grid of the correlative matcher")
     min_score: float = Field(
         0.55, ge=0, le=1, description="mean likelihood of scan points on the submap to accept (1 = all on it)"

@@ -6,7 +6,7 @@ on a regular grid, plus max-pooled levels for branch and bound. :func:`match`
 sweeps every rotation of the angular window (step ``resolution / range``,
 Olson 2009, "Real-time correlative scan matching") and searches translations
 by branch and bound over the pooled levels (Hess et al. 2016, "Real-time loop
-closure in 2D LIDAR SLAM"), one vectorised gather per level. The best cell
+closure in 2D LIDAR SLAM"), one compiled gather per level. The best cell
 is then refined by point-to-line Gauss-Newton against the submap points,
 whose Hessian gives the covariance.
 
@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy.ndimage import distance_transform_edt
 from scipy.spatial import cKDTree
 
@@ -31,7 +32,6 @@ SIGMA_CELLS = 1.0  # std of the likelihood field, in cells
 MAX_DEPTH = 4  # pooled levels of branch and bound; top cells are 2^depth cells wide
 RANGE_PERCENTILE = 95.0  # the scan's "max range" for the angular step ignores rare far points
 MIN_RANGE = 1.0  # m; floor of that range, so close-up scans do not get huge angular steps
-GATHER_BATCH = 2_000_000  # grid values gathered per numpy batch
 NORMAL_NEIGHBOURS = 8  # submap points per normal estimate
 NORMAL_RADIUS_CELLS = 3.0  # neighbourhood radius of a normal estimate, in cells
 REFINE_ITERATIONS = 20
@@ -213,12 +213,20 @@ def _discretise(pyr: _Pyramid, points: np.ndarray, start: np.ndarray, thetas: np
 
 def _scores(level: np.ndarray, flat: np.ndarray, cands: np.ndarray, width: int) -> np.ndarray:
     """Mean of ``level`` over the points of each candidate (C, 3) = (angle index, dx, dy) cells."""
-    out = np.empty(len(cands), dtype=np.float64)
-    batch = max(1, GATHER_BATCH // max(flat.shape[1], 1))
-    for i in range(0, len(cands), batch):
-        c = cands[i : i + batch]
-        idx = flat[c[:, 0]] + (c[:, 2] * width + c[:, 1])[:, None]
-        out[i : i + batch] = level.take(idx).mean(axis=1, dtype=np.float64)
+    return _scores_kernel(level, flat, np.ascontiguousarray(cands), width)
+
+
+@njit(cache=True, nogil=True)
+def _scores_kernel(level, flat, cands, width):  # pragma: no cover - compiled
+    n_pts = flat.shape[1]
+    out = np.empty(cands.shape[0], dtype=np.float64)
+    for c in range(cands.shape[0]):
+        row = flat[cands[c, 0]]
+        shift = cands[c, 2] * width + cands[c, 1]
+        total = 0.0
+        for i in range(n_pts):
+            total += level[row[i] + shift]
+        out[c] = total / max(n_pts, 1)
     return out
 
 

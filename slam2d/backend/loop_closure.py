@@ -129,40 +129,51 @@ class LoopCloser:
     def verify(self, key: int, cand: int, poses) -> LoopClosure | None:
         """Match keyframe ``key``'s scan against the submap around ``cand``; a LoopClosure if the score passes.
 
-        The submap holds keyframes ``cand - n .. cand + n`` (n = ``submap_keyframes``,
-        in insertion order, leaving out any within ``min_travel`` of ``key``) in
-        ``cand``'s frame; the initial guess is ``between(poses[cand], poses[key])``.
+        Submaps are fixed windows of keyframes so neighbouring candidates share
+        one: the window centred on the anchor nearest ``cand`` among every
+        ``submap_keyframes``-th keyframe, reaching ``submap_keyframes`` to each
+        side (in insertion order, leaving out any within ``min_travel`` of
+        ``key``), in the anchor's frame. The closure links the anchor and
+        ``key``; the initial guess is ``between(poses[anchor], poses[key])``.
         """
         cfg = self.cfg
         poses = geometry.as_pose(poses).reshape(-1, 3)
         self.stats["verified"] += 1
         self._position(key)  # a clear KeyError for a keyframe never added
         points = self._points[int(key)]
-        submap = self._submap(key, cand, poses) if len(points) >= MIN_POINTS else None
+        anchor = self._anchor(cand)
+        submap = self._submap(key, anchor, poses) if len(points) >= MIN_POINTS else None
         if submap is None:
             self.stats["rejected_points"] += 1
-            log.debug("loop %d -> %d rejected: too few points", cand, key)
+            log.debug("loop %d -> %d rejected: too few points", anchor, key)
             return None
-        guess = geometry.between(poses[cand], poses[key])
+        guess = geometry.between(poses[anchor], poses[key])
         window_theta = np.deg2rad(cfg.window_theta_deg)
         prune = max(0.0, cfg.min_score - SEARCH_MARGIN)
         result = match(submap.grid, points, guess, cfg.window_xy, window_theta, min_score=prune)
         if result.score < cfg.min_score:
             self.stats["rejected_score"] += 1
-            log.debug("loop %d -> %d rejected: score %.3f < %.3f", cand, key, result.score, cfg.min_score)
+            log.debug("loop %d -> %d rejected: score %.3f < %.3f", anchor, key, result.score, cfg.min_score)
             return None
         self.stats["accepted"] += 1
         moved = geometry.between(guess, result.pose)
         log.debug(
             "loop %d -> %d accepted: score %.3f, correction %.3f m %.2f deg",
-            cand, key, result.score, np.hypot(moved[0], moved[1]), np.rad2deg(moved[2]),
+            anchor, key, result.score, np.hypot(moved[0], moved[1]), np.rad2deg(moved[2]),
         )  # fmt: skip
         info = np.linalg.inv(result.covariance)
-        return LoopClosure(int(cand), int(key), result.pose, 0.5 * (info + info.T), result.score)
+        return LoopClosure(int(anchor), int(key), result.pose, 0.5 * (info + info.T), result.score)
 
-    def _submap(self, key: int, cand: int, poses: np.ndarray) -> _Submap | None:
-        """The grid of keyframes around ``cand`` in its frame (cached while their poses hold), or None if empty."""
+    def _anchor(self, cand: int) -> int:
+        """The submap anchor for ``cand``: the nearest keyframe whose position is a multiple of ``submap_keyframes``."""
         n, pos = self.cfg.submap_keyframes, self._position(cand)
+        if n == 0:
+            return int(cand)
+        return self._keys[min(int(round(pos / n)) * n, len(self._keys) - 1)]
+
+    def _submap(self, key: int, anchor: int, poses: np.ndarray) -> _Submap | None:
+        """The grid of keyframes around ``anchor`` in its frame (cached while their poses hold), or None if empty."""
+        n, pos = self.cfg.submap_keyframes, self._position(anchor)
         here = self.travelled(key)
         span = slice(max(0, pos - n), pos + n + 1)
         members = tuple(
@@ -172,16 +183,16 @@ class LoopCloser:
         )
         if not members:
             return None
-        relative = geometry.between(poses[cand], poses[list(members)])
-        cached = self._submaps.get(cand)
+        relative = geometry.between(poses[anchor], poses[list(members)])
+        cached = self._submaps.get(anchor)
         if cached is not None and cached.members == members and self._unmoved(cached.relative, relative):
-            self._submaps.move_to_end(cand)
+            self._submaps.move_to_end(anchor)
             return cached
         pts = np.vstack([geometry.transform_points(p, self._points[k]) for k, p in zip(members, relative)])
         if len(pts) < MIN_POINTS:
             return None
         submap = _Submap(members, relative, ProbabilityGrid(pts, self.cfg.resolution))
-        self._submaps[cand] = submap
+        self._submaps[anchor] = submap
         if len(self._submaps) > SUBMAP_CACHE:
             self._submaps.popitem(last=False)
         return submap

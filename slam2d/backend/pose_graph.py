@@ -36,7 +36,7 @@ ISAM2_FACTORIZATION = "CHOLESKY"  # faster; an ill-conditioned update falls back
 PRIOR_SIGMAS = np.array([1e-6, 1e-6, 1e-6])  # m, m, rad: anchors the first keyframe / vertex
 DEFAULT_ODOMETRY_SIGMAS = np.array([0.05, 0.05, np.deg2rad(2.0)])  # m, m, rad, when no information is given
 GNC_OUTLIER_WEIGHT = 0.5  # a loop whose final GNC weight is below this is rejected
-CHI2_3DOF_99 = 11.344866730144373  # chi-square 99% quantile, 3 degrees of freedom: a loop_consistency gate
+CHI2_3DOF_99 = 11.344866730144373  # chi-square 99% quantile, 3 degrees of freedom: loop residual / consistency gate
 
 
 def pose_key(k: int) -> int:
@@ -99,6 +99,7 @@ class PoseGraph:
         self._active: list[bool] = []
         self._initial: list[np.ndarray] = []  # poses given to add_keyframe
         self._landmarks: set[int] = set()
+        self.rejected_inconsistent = 0  # loops removed after the batch optimisation
         self.factorization = ISAM2_FACTORIZATION
         self._reset_isam()
 
@@ -203,6 +204,11 @@ class PoseGraph:
         tail = np.array(self._initial[self._n_in_isam :]).reshape(-1, 3)
         return np.vstack([self._isam_poses, tail])
 
+    def pose(self, key: int) -> np.ndarray:
+        """Current pose (3,) of keyframe ``key`` alone (cheaper than the whole estimate)."""
+        p = self._pose_value(self._check_key(key))
+        return np.array([p.x(), p.y(), p.theta()])
+
     def landmarks(self) -> tuple[np.ndarray, np.ndarray]:
         """Landmark ids (L,) and their current positions (L, 2), m."""
         ids = np.array(sorted(self._landmarks), dtype=int)
@@ -235,9 +241,11 @@ class PoseGraph:
         return float(err @ np.linalg.solve(rel_cov + meas_cov, err))
 
     def optimize_batch(self) -> np.ndarray:
-        """Levenberg-Marquardt over all factors from the current estimate (GNC when
-        ``cfg.gnc``, rejecting loops it weighs as outliers); the result replaces the
-        estimate and restarts iSAM2 from it. Returns the poses (K, 3)."""
+        """Levenberg-Marquardt over all factors from the current estimate; loops whose
+        residual then fails the chi-square test (``CHI2_3DOF_99``) are removed and LM
+        runs once more. With ``cfg.gnc``, GNC instead, rejecting loops it weighs as
+        outliers. The result replaces the estimate and restarts iSAM2 from it.
+        Returns the poses (K, 3)."""
         import gtsam
 
         graph, index = self._batch_graph()
@@ -253,6 +261,9 @@ class PoseGraph:
             opt = gtsam.LevenbergMarquardtOptimizer(graph, initial, _lm_params())
             result = opt.optimize()
             log.info("batch LM: %d iterations", opt.iterations())
+            if self._reject_inconsistent(result):
+                graph, index = self._batch_graph()
+                result = gtsam.LevenbergMarquardtOptimizer(graph, result, _lm_params()).optimize()
         log.info(
             "batch %s: error %.6g -> %.6g in %.3f s",
             "GNC" if self.cfg.gnc else "LM",
@@ -340,6 +351,25 @@ class PoseGraph:
                 graph.add(f.factor)
                 index.append(n)
         return graph, index
+
+    def _reject_inconsistent(self, values) -> int:
+        """Deactivate loops whose squared Mahalanobis residual at ``values`` exceeds
+        ``CHI2_3DOF_99`` (the graph could not accommodate them); how many."""
+        import gtsam
+
+        rejected = 0
+        for n, (f, a) in enumerate(zip(self._factors, self._active)):
+            if not a or f.kind != "loop":
+                continue
+            rel = values.atPose2(pose_key(f.i)).between(values.atPose2(pose_key(f.j)))
+            err = gtsam.Pose2.Logmap(_gtsam_pose(f.measurement).between(rel))
+            if float(err @ f.information @ err) > CHI2_3DOF_99:
+                self._active[n] = False
+                rejected += 1
+        if rejected:
+            log.info("%d loop closures inconsistent with the optimised graph removed", rejected)
+        self.rejected_inconsistent += rejected
+        return rejected
 
     def _reject_outliers(self, index, weights) -> None:
         for g, n in enumerate(index):

@@ -4,7 +4,9 @@ Every scan arrives with its FrontendResult. Scans become keyframes after the
 configured travel or rotation; between keyframes the frontend's deltas are
 composed (with their covariances) into one between factor. Each new keyframe
 is checked for loop closures against the current estimate; a closure needs the
-matcher's score and a chi-square test against the graph. Poses for every scan
+matcher's score, enters the graph under the robust kernel, and is removed
+after the batch optimisation if the optimised graph cannot accommodate it
+(chi-square test on its residual, see ``PoseGraph.optimize_batch``). Poses for every scan
 are keyframe poses composed with the scan's offset from its keyframe.
 """
 
@@ -22,9 +24,6 @@ from slam2d.types import Scan
 
 log = logging.getLogger(__name__)
 
-CHI2_3DOF_99 = 11.345  # 99% quantile of chi-square with 3 degrees of freedom
-
-
 class GraphSlamBackend:
     """Builds and optimises the pose graph; returns a pose for every scan."""
 
@@ -41,7 +40,6 @@ class GraphSlamBackend:
         self._delta = np.zeros(3)  # motion since the last keyframe
         self._cov = np.zeros((3, 3))
         self._travelled = 0.0
-        self._estimate = np.zeros((0, 3))
 
     def add(self, scan: Scan, result: FrontendResult) -> None:
         """Take one scan and its frontend result (``result.delta`` unused for the first)."""
@@ -54,7 +52,7 @@ class GraphSlamBackend:
         self._travelled += float(np.hypot(*result.delta[:2]))
         if self._is_keyframe(self._delta):
             prev = self._scan_keyframe[-1]
-            pose = geometry.compose(self._estimate[prev], self._delta)
+            pose = geometry.compose(self.graph.pose(prev), self._delta)
             self._new_keyframe(scan, pose, self._delta, np.linalg.inv(self._cov), result.landmarks)
         else:
             self._scan_keyframe.append(self._scan_keyframe[-1])
@@ -62,8 +60,7 @@ class GraphSlamBackend:
 
     def finish(self) -> np.ndarray:
         """Final batch optimisation; poses (N, 3) for every scan added."""
-        kf = self.graph.optimize_batch() if len(self._estimate) > 1 else self._estimate
-        self._estimate = kf
+        kf = self.graph.optimize_batch() if self.graph.num_keyframes > 1 else self.graph.estimate()
         return geometry.compose(kf[np.array(self._scan_keyframe)], np.array(self._scan_offset))
 
     def _is_keyframe(self, delta: np.ndarray) -> bool:
@@ -82,33 +79,26 @@ class GraphSlamBackend:
         self._delta, self._cov = np.zeros(3), np.zeros((3, 3))
         self.stats["keyframes"] += 1
         self.graph.update()
-        self._estimate = self.graph.estimate()
         if self.loops is not None:
             self.loops.add_keyframe(key, scan.points_in_base(), self._travelled)
             if key % self.cfg.loop_closure.every_n_keyframes == 0 and self._close_loops(key):
                 self.graph.update()
-                self._estimate = self.graph.estimate()
 
     def _close_loops(self, key: int) -> int:
         """Verify loop candidates for ``key``; add the accepted ones. Returns how many."""
-        added = 0
-        for cand in self.loops.candidates(key, self._estimate):
-            closure = self.loops.verify(key, cand, self._estimate)
-            if closure is None:
-                continue
-            d2 = self.graph.loop_consistency(closure.i, closure.j, closure.delta, closure.information)
-            if d2 > CHI2_3DOF_99:
-                self.stats["loop closures rejected by graph consistency"] += 1
-                log.debug("loop %d-%d rejected: Mahalanobis² %.1f", closure.i, closure.j, d2)
-                continue
-            self.graph.add_loop(closure.i, closure.j, closure.delta, closure.information)
-            self.stats["loop closures added"] += 1
-            added += 1
+        added, estimate = 0, self.graph.estimate()
+        for cand in self.loops.candidates(key, estimate):
+            closure = self.loops.verify(key, cand, estimate)
+            if closure is not None:
+                self.graph.add_loop(closure.i, closure.j, closure.delta, closure.information)
+                self.stats["loop closures added"] += 1
+                added += 1
         return added
 
     def summary(self) -> dict[str, int]:
         """Counts of keyframes and loop-closure outcomes (matcher and graph checks)."""
         out = dict(self.stats)
+        out["loop closures removed as inconsistent"] = self.graph.rejected_inconsistent
         if self.loops is not None:
             out.update({f"loop matcher {k}": v for k, v in self.loops.stats.items()})
         return out
