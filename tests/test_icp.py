@@ -107,6 +107,24 @@ def test_chained_deltas_follow_the_path(room):
     assert_close_pose(pose, geometry.between(path[0], path[-1]))
 
 
+def test_motion_filter_skips_scans_until_odometry_moves(room):
+    """Odometry reports 4 mm per scan (truth 6 mm). The second scan is registered (the filter
+    needs a registration that agreed with odometry), the next two ride on odometry, the fifth
+    (12 mm of odometry since) is registered and brings the chained pose back to the truth."""
+    fe = create_frontend("icp", {})
+    path = [np.array([1.5, 1.2, 0.0]) + [0.006 * k, 0.0, 0.0] for k in range(5)]
+    pose = np.zeros(3)
+    for k, p in enumerate(path):
+        res = fe.process(scan_at(room, p, seed=k), np.array([0.004, 0.0, 0.0]) if k else np.zeros(3))
+        pose = geometry.compose(pose, res.delta)
+    assert fe.still == 2
+    assert_close_pose(pose, geometry.between(path[0], path[-1]), xy=0.003, theta_deg=0.1)
+    never = create_frontend("icp", {"still_distance": 0.0, "still_angle_deg": 0.0})
+    for k, p in enumerate(path):
+        never.process(scan_at(room, p, seed=k), np.array([0.004, 0.0, 0.0]) if k else np.zeros(3))
+    assert never.still == 0
+
+
 # --- information -------------------------------------------------------------------------------
 
 

@@ -17,7 +17,8 @@ in [0, 1]). A scan is "not continuous" when its similarity is below
 
 The module also holds the small odometry helpers the feature frontends share:
 an odometry information matrix, a motion-dependent odometry noise, a test for
-one-scan odometry outliers, and eigenvalue bounds on an information.
+one-scan odometry outliers, eigenvalue bounds on an information, and an online
+calibration of the odometry heading (a drift rate and a turn scale).
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ __all__ = [
     "nn_similarity",
     "odometry_information",
     "bound_information",
+    "HeadingCalibration",
 ]
 
 
@@ -79,6 +81,66 @@ def odometry_spike(previous, current, min_turn_deg: float = 5.0, ratio: float = 
         return False
     a, b = float(geometry.as_pose(previous)[2]), float(geometry.as_pose(current)[2])
     return abs(a) > np.deg2rad(min_turn_deg) and abs(a + b) < ratio * abs(a)
+
+
+class HeadingCalibration:
+    """Online estimate of the odometry heading error: a drift rate (rad/s) and a turn-scale error.
+
+    Wheel odometry often turns at a biased rate (the Intel log's drifts by about
+    half a degree per second against its scan matches) or under-reports turns.
+    Between two accepted matches the heading error of the corrected odometry is
+    ``rate_error * time + scale_error * odometry_turn``; each accepted match
+    measures it (its heading minus the predicted one) and recursive least
+    squares with forgetting refines both parameters. :meth:`correct` then turns
+    every odometry delta by ``rate * dt + scale * dtheta``, so the heading
+    drifts far less while no match is found.
+    """
+
+    class Config(Section):
+        """Calibration of the odometry heading from the matches' heading corrections."""
+
+        enabled: bool = Field(True, description="False: odometry deltas are used as they are")
+        forgetting: float = Field(0.995, gt=0, le=1, description="RLS forgetting factor per accepted match")
+        sigma_rate_deg_s: float = Field(1.0, gt=0, description="prior std of the drift rate")
+        sigma_scale: float = Field(0.05, ge=0, description="prior std of the turn-scale error (0: rate only)")
+        noise_deg: float = Field(0.5, gt=0, description="std of one match's heading correction")
+        max_rate_deg_s: float = Field(2.0, gt=0, description="the drift rate estimate stays within +- this")
+        max_scale: float = Field(0.1, ge=0, description="the turn-scale estimate stays within +- this")
+        max_gap_s: float = Field(5.0, gt=0, description="corrections after a longer span without a match are unused")
+        min_updates: int = Field(20, ge=0, description="accepted matches before odometry is corrected")
+
+    def __init__(self, config: Config | None = None):
+        self.config = cfg = config or self.Config()
+        self.params = np.zeros(2)  # rate (rad/s), scale error
+        var_scale = cfg.sigma_scale**2 if cfg.sigma_scale > 0 else 0.0
+        self.cov = np.diag([np.deg2rad(cfg.sigma_rate_deg_s) ** 2, var_scale])
+        self.updates = 0
+        self._since = np.zeros(2)  # (seconds, odometry turn) since the last accepted match
+
+    def correct(self, delta, dt: float) -> np.ndarray:
+        """The odometry ``delta`` (3,) over ``dt`` s with its heading corrected; the span is remembered."""
+        delta = geometry.as_pose(delta).copy()
+        self._since += [max(float(dt), 0.0), float(delta[2])]
+        if self.config.enabled and self.updates >= self.config.min_updates:
+            delta[2] += self.params[0] * max(float(dt), 0.0) + self.params[1] * delta[2]
+        return delta
+
+    def observe(self, heading_error: float) -> None:
+        """An accepted match moved the predicted heading by ``heading_error`` (rad): refine, restart the span."""
+        cfg = self.config
+        phi, self._since = self._since, np.zeros(2)
+        if not cfg.enabled or phi[0] <= 0 or phi[0] > cfg.max_gap_s:
+            return
+        if self.updates < cfg.min_updates:  # the corrections are not applied yet: the error is the raw one
+            heading_error -= float(phi @ self.params)
+        noise = np.deg2rad(cfg.noise_deg) ** 2
+        p_phi = self.cov @ phi
+        gain = p_phi / (cfg.forgetting * noise + phi @ p_phi)
+        self.params = self.params + gain * float(heading_error)
+        self.cov = (self.cov - np.outer(gain, p_phi)) / cfg.forgetting
+        limit = np.array([np.deg2rad(cfg.max_rate_deg_s), cfg.max_scale])
+        self.params = np.clip(self.params, -limit, limit)
+        self.updates += 1
 
 
 def bound_information(info: np.ndarray, min_sigma: np.ndarray, max_sigma: np.ndarray) -> np.ndarray:

@@ -31,6 +31,14 @@ in the frame of the delta and bounded so every direction's std lies in
 residual is within ``inlier_distance``. Too few points, a non-finite or
 non-planar result, a correction beyond the divergence bound or too few
 matches fall back to odometry with confidence 0, counted in ``fallbacks``.
+
+Motion filter: while odometry says the robot moved less than ``still_distance``
+and ``still_angle_deg`` since the last registered scan, a scan is not
+registered (nor added to the map); its delta is the odometry one with the
+tightest information, counted in ``still``. A third of ACES is such scans.
+The filter applies only after a registration that agreed with odometry
+(within ``STILL_TRUST_XY`` and ``STILL_TRUST_THETA``): after a large correction
+the next scan is registered whatever odometry says.
 """
 
 from __future__ import annotations
@@ -49,6 +57,9 @@ from slam2d.frontends.base import FrontendResult, register_frontend
 from slam2d.types import Scan
 
 log = logging.getLogger(__name__)
+
+STILL_TRUST_XY = 0.02  # m; a registration corrected by less than this (and ...
+STILL_TRUST_THETA = np.deg2rad(1.0)  # ... this) lets the motion filter skip the next still scans
 
 __all__ = ["IcpFrontend"]
 
@@ -164,6 +175,10 @@ class IcpFrontend:
         max_sigma_xy: float = Field(1.0, gt=0, description="m; degenerate directions get at most this std")
         max_sigma_theta_deg: float = Field(20.0, gt=0, description="degenerate directions get at most this std")
         threads: int = Field(1, ge=0, description="kiss-icp registration threads (0: all cores)")
+        still_distance: float = Field(
+            0.01, ge=0, description="m; odometry motion since the last registered scan below which a scan is skipped"
+        )
+        still_angle_deg: float = Field(0.5, ge=0, description="... and rotation below which (0 and 0: never skip)")
 
     def __init__(self, config: Config | None = None):
         from kiss_icp.mapping import VoxelHashMap
@@ -178,10 +193,15 @@ class IcpFrontend:
         self._registration = Registration(cfg.max_iterations, cfg.convergence, cfg.threads)
         sigmas = np.array([cfg.odom_sigma_xy, cfg.odom_sigma_xy, np.deg2rad(cfg.odom_sigma_theta_deg)])
         self._odom_information = np.diag(1.0 / sigmas**2)
+        tightest = np.array([cfg.min_sigma_xy, cfg.min_sigma_xy, np.deg2rad(cfg.min_sigma_theta_deg)])
+        self._still_information = np.diag(1.0 / tightest**2)
         # the odometry prior in the units of the unweighted point residuals (m^2)
         self._prior = cfg.point_sigma**2 * self._odom_information if cfg.odom_prior else np.zeros((3, 3))
         self.pose = np.zeros(3)
         self.fallbacks: Counter[str] = Counter()
+        self.still = 0  # scans not registered because odometry saw no motion
+        self._unregistered = np.zeros(3)  # odometry since the last registered scan
+        self._trust_still = False  # the last registration agreed with odometry (see STILL_TRUST_*)
         self._last_delta = np.zeros(3)
         self._started = False
         self._recent: deque[np.ndarray] = deque(maxlen=cfg.map_window or None)
@@ -193,13 +213,20 @@ class IcpFrontend:
         """Register ``scan`` to the local map; ``odom_delta`` (3,) is the base motion since the last scan."""
         cfg = self.config
         odom_delta = geometry.as_pose(odom_delta)
-        if not np.all(np.isfinite(odom_delta)):
-            log.debug("non-finite odometry delta %s; assuming no motion", odom_delta)
+        known = bool(np.all(np.isfinite(odom_delta)))
+        if not known:
+            log.debug("non-finite odometry delta %s; registering from no motion", odom_delta)
             odom_delta = np.zeros(3)
         guess = geometry.compose(self.pose, odom_delta)
         points = self._valid_points(scan)
         if not self._started:
             return self._first(points, guess, odom_delta)
+        self._unregistered = geometry.compose(self._unregistered, odom_delta)
+        if known and self._trust_still and self._is_still(self._unregistered):
+            self.still += 1
+            self.pose = guess
+            return FrontendResult(delta=odom_delta.copy(), information=self._still_information.copy(), confidence=1.0)
+        self._unregistered = np.zeros(3)
         if len(points) < cfg.min_points:
             return self._fallback(f"fewer than {cfg.min_points} valid points", guess, odom_delta, points)
         if self.map.empty():
@@ -218,8 +245,19 @@ class IcpFrontend:
         if matched < cfg.min_inlier_fraction:
             return self._fallback(f"matched fraction below {cfg.min_inlier_fraction}", guess, odom_delta, points)
         information = self._information(source, pose, corr, threshold)
-        self._threshold._update_model_deviation(_pose_to_matrix(geometry.between(guess, pose)))
+        correction = geometry.between(guess, pose)
+        self._threshold._update_model_deviation(_pose_to_matrix(correction))
+        self._trust_still = bool(
+            np.hypot(correction[0], correction[1]) < STILL_TRUST_XY and abs(correction[2]) < STILL_TRUST_THETA
+        )
         return self._accept(pose, points, information, matched)
+
+    def _is_still(self, motion: np.ndarray) -> bool:
+        cfg = self.config
+        return bool(
+            np.hypot(motion[0], motion[1]) < cfg.still_distance
+            and abs(motion[2]) < np.deg2rad(cfg.still_angle_deg)
+        )
 
     @property
     def threshold(self) -> float:
@@ -398,6 +436,7 @@ class IcpFrontend:
     def _fallback(self, reason: str, guess, odom_delta, points) -> FrontendResult:
         """Odometry delta, odometry information, confidence 0; counted by reason."""
         self.fallbacks[reason] += 1
+        self._trust_still = False
         log.debug("icp fallback to odometry: %s", reason)
         self._step(guess, points)
         return FrontendResult(delta=odom_delta.copy(), information=self._odom_information.copy(), confidence=0.0)
