@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import queue
-import threading
 from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -53,44 +51,6 @@ class ChainBackend:
         return {}
 
 
-class _BackendThread:
-    """Feeds a back end from a worker thread, in order, so that the frontend and
-    the back end (loop closing) overlap on two cores; the compiled kernels, the
-    k-d trees and the bag decompression release the GIL. Leaving the ``with``
-    block waits for the queue to drain and re-raises the worker's error."""
-
-    QUEUE = 256  # scans buffered ahead of the back end
-
-    def __init__(self, backend) -> None:
-        self.backend = backend
-        self._queue: queue.Queue = queue.Queue(maxsize=self.QUEUE)
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._work, name="slam2d-backend", daemon=True)
-
-    def __enter__(self) -> _BackendThread:
-        self._thread.start()
-        return self
-
-    def add(self, scan: Scan, result: FrontendResult) -> None:
-        if self._error is not None:
-            raise self._error
-        self._queue.put((scan, result))
-
-    def _work(self) -> None:
-        while (item := self._queue.get()) is not None:
-            if self._error is None:
-                try:
-                    self.backend.add(*item)
-                except BaseException as err:  # re-raised in the caller's thread
-                    self._error = err
-
-    def __exit__(self, *exc) -> None:
-        self._queue.put(None)
-        self._thread.join()
-        if self._error is not None and exc[0] is None:
-            raise self._error
-
-
 class SlamPipeline:
     """Runs the configured frontend and back end over a scan stream."""
 
@@ -108,15 +68,14 @@ class SlamPipeline:
         """Process every scan; ``on_scan`` is called after each one (progress)."""
         kept: list[Scan] = []
         confidences = []
-        with _BackendThread(self.backend) as backend:
-            for scan in scans:
-                odom_delta = np.zeros(3) if not kept else geometry.between(kept[-1].odom, scan.odom)
-                result = self.frontend.process(scan, odom_delta)
-                backend.add(scan, result)
-                confidences.append(result.confidence)
-                kept.append(scan)
-                if on_scan:
-                    on_scan()
+        for scan in scans:
+            odom_delta = np.zeros(3) if not kept else geometry.between(kept[-1].odom, scan.odom)
+            result = self.frontend.process(scan, odom_delta)
+            self.backend.add(scan, result)
+            confidences.append(result.confidence)
+            kept.append(scan)
+            if on_scan:
+                on_scan()
         if not kept:
             skipped = dict(getattr(scans, "skipped", {}))
             raise InputError(getattr(scans, "name", "dataset"), f"no usable scan (skipped: {skipped})")
