@@ -20,7 +20,8 @@ translation by n-weighted least squares on the matched lines' normal offsets,
 then unit fusion, as in Gasos & Rosetti's scheme the paper compares against);
 vertex localisation (eqs. 6-12, the paper's translation-only offset, no
 odometry prior); and the frontend's defaults for real logs (SE(2) fit, wall
-directions, odometry prior, rigidity check and gate); and, where present, slam2d's
+directions, odometry prior, rigidity check and gate; without the compass also
+the online odometry-heading calibration); and, where present, slam2d's
 ``lines`` frontend with options loosened for 18 beams.
 
     .venv/bin/python benchmarks/fuzzy_vertex_2006.py [--trials 10] [--no-compass]
@@ -116,6 +117,7 @@ def vertex_paper(compass: bool) -> fv.FuzzyVertexFrontend:
     opts = dict(SPARSE, heading="translation", arm_heading=False, wall_heading=False, odometry_prior=False)
     opts.update(rigid_check=False)
     opts.update(max_arm_error_deg=None, max_mahalanobis=None, heading_lever=not compass)
+    opts.update(calibration={"enabled": False})
     return fv.FuzzyVertexFrontend(fv.FuzzyVertexFrontend.Config(**opts))
 
 
@@ -125,6 +127,7 @@ def vertex_full(compass: bool) -> fv.FuzzyVertexFrontend:
     walls = not compass  # with a compass the heading is known
     opts = dict(SPARSE, heading=heading, arm_heading=walls, wall_heading=walls, heading_lever=walls)
     opts.update(heading_error_deg=0.01 if compass else 2.0, heading_rel=0.0 if compass else 0.1)
+    opts.update(calibration={"enabled": not compass})  # a compass heading needs no calibration
     return fv.FuzzyVertexFrontend(fv.FuzzyVertexFrontend.Config(**opts))
 
 

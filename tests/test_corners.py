@@ -149,3 +149,25 @@ def test_corners_frontend_beats_odometry_on_the_simulator():
     est = ate(result.poses, result.ground_truth)["rmse"]
     odo = ate(result.odometry, result.ground_truth)["rmse"]
     assert est < odo, (est, odo)
+
+
+def test_corner_matches_calibrate_a_bending_odometry():
+    # a room with four corners; the odometry bends by 3 degrees per metre of a straight run
+    world = polyline((0, 0), (8, 0), (8, 4), (0, 4), (0, 0))
+    bend = np.deg2rad(3.0)
+    poses = np.column_stack([np.linspace(2.0, 6.0, 81), np.full(81, 2.0), np.zeros(81)])
+    runs = {}
+    for enabled in (True, False):
+        fe = CornerFrontend(CornerFrontend.Config(calibration={"enabled": enabled, "min_updates": 10}))
+        est = np.zeros(3)
+        for k, pose in enumerate(poses):
+            scan = Scan(stamp=0.2 * k, ranges=ranges_of(world, pose, noise=0.005, seed=k), angles=BEAMS,
+                        range_min=0.05, range_max=12.0, index=k)
+            odom = np.zeros(3) if k == 0 else geometry.between(poses[k - 1], pose) - [0.0, 0.0, bend * 0.05]
+            est = geometry.compose(est, fe.process(scan, odom).delta)
+        runs[enabled] = (fe, geometry.between(geometry.between(poses[0], poses[-1]), est))
+    fe, err = runs[True]
+    assert fe.calibration.updates > 20
+    assert fe.calibration.params[0] == pytest.approx(bend, rel=0.3)
+    assert runs[False][0].calibration.updates == 0
+    assert abs(err[2]) < np.deg2rad(0.5) and np.hypot(*err[:2]) < 0.05

@@ -8,7 +8,7 @@ from slam2d.datasets.registry import open_dataset
 from slam2d.evaluation.trajectory import ate
 from slam2d.frontends.base import FrontendResult
 from slam2d.frontends.fused import FusedFrontend, fuse_deltas, se2_exp, se2_log
-from slam2d.frontends.gate import SimilarityGate, bound_information, nn_similarity
+from slam2d.frontends.gate import HeadingCalibration, SimilarityGate, bound_information, nn_similarity
 from slam2d.pipeline import SlamPipeline
 from slam2d.types import Scan
 
@@ -55,6 +55,46 @@ def test_gate_catches_a_dip_relative_to_the_usual_similarity():
     for s in [0.95, 0.96, 0.94, 0.95]:
         assert gate.continuity(s) is None
     assert gate.continuity(0.6) == "similarity dip"  # above min_similarity but far below the usual
+
+
+def calibration_run(curvature, scale, steps=400, noise_deg=0.3, seed=0, **cfg):
+    """Feed a HeadingCalibration odometry deltas bent by ``curvature`` (rad/m) and ``scale``; a match
+    every 3rd scan measures the heading error of the corrected prediction (with noise). Returns the
+    calibration and the heading error (rad) left in the corrected deltas over the last 100 steps."""
+    rng = np.random.default_rng(seed)
+    cal = HeadingCalibration(HeadingCalibration.Config(**cfg))
+    span, left = 0.0, []
+    for k in range(steps):
+        true = np.array([0.1, 0.0, np.deg2rad(5.0) * np.sin(k / 7.0)])
+        odom = true.copy()
+        odom[2] = true[2] - curvature * true[0] - scale * true[2]  # the odometry bends and mis-scales turns
+        corrected = cal.correct(odom)
+        span += corrected[2] - true[2]
+        if k >= steps - 100:
+            left.append(corrected[2] - true[2])
+        if k % 3 == 2:
+            cal.observe(-span + np.deg2rad(noise_deg) * rng.standard_normal())  # match heading - predicted
+            span = 0.0
+    return cal, np.sum(left)
+
+
+def test_heading_calibration_learns_curvature_and_turn_scale():
+    curvature, scale = np.deg2rad(2.0), 0.04
+    cal, left = calibration_run(curvature, scale)
+    assert cal.params[0] == pytest.approx(curvature, rel=0.15)
+    assert cal.params[1] == pytest.approx(scale, abs=0.01)
+    assert np.all(cal.applied != 0)
+    _, raw = calibration_run(curvature, scale, enabled=False)
+    assert abs(left) < 0.2 * abs(raw)  # the corrected odometry drifts far less
+
+
+def test_heading_calibration_leaves_unbiased_odometry_alone():
+    cal, left = calibration_run(0.0, 0.0)
+    assert np.all(cal.applied == 0)  # nothing significant: odometry is used as it is
+    delta = np.array([0.1, 0.02, 0.03])
+    np.testing.assert_array_equal(cal.correct(delta), delta)
+    off, _ = calibration_run(np.deg2rad(2.0), 0.0, enabled=False)
+    assert np.all(off.params == 0) and off.updates == 0
 
 
 def test_bounded_information_keeps_the_std_within_limits():

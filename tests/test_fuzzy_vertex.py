@@ -251,6 +251,9 @@ def test_frontend_corrects_odometry_and_emits_stable_landmarks():
         seen = {obs.landmark_id for obs in result.landmarks}
         ids = seen if ids is None else ids
         assert seen & ids  # the same corners keep their ids
+        for obs in result.landmarks:  # (bearing, range) order, as gtsam's BearingRange; isotropic in the plane
+            bearing_var, range_var = np.diag(obs.covariance)
+            assert bearing_var * obs.range**2 == pytest.approx(range_var, rel=1e-9)
         assert np.linalg.eigvalsh(result.information).min() > 0
     assert not front.fallbacks
 

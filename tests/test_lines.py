@@ -20,6 +20,7 @@ from slam2d.frontends.lines import (
     match_lines,
 )
 from slam2d.pipeline import SlamPipeline
+from slam2d.types import Scan
 
 BEAMS = np.linspace(-np.pi, np.pi, 360, endpoint=False)
 
@@ -167,3 +168,29 @@ def test_lines_frontend_beats_odometry_on_the_simulator():
     odo = ate(result.odometry, result.ground_truth)["rmse"]
     assert est < 0.5 * odo, (est, odo)
     assert np.mean(result.confidences > 0.5) > 0.8
+
+
+def test_standing_still_among_a_few_short_segments_stays_put():
+    # three short wall pieces 3-4 m away, 180 one-degree beams, 1.5 cm range noise, the robot not moving
+    pieces = np.array([[[3.0, -0.3], [3.0, 0.4]], [[-0.2, 3.5], [0.5, 3.5]], [[-3.2, -0.8], [-3.2, -0.1]]])
+    world = World(pieces)
+    beams = np.deg2rad(np.arange(-90.0, 270.0, 1.0))
+    pose = np.array([0.1, 0.2, 0.3])
+
+    def drift(options):
+        fe = LineFrontend(LineFrontend.Config(**options))
+        est = np.zeros(3)
+        worst = np.zeros(3)
+        for k in range(40):
+            r = world.raycast(pose[:2], beams + pose[2], 12.0)
+            r = r + 0.015 * np.random.default_rng(k).standard_normal(len(r))
+            r = np.where(r < 11.9, r, np.nan)
+            scan = Scan(stamp=0.2 * k, ranges=r, angles=beams, range_min=0.05, range_max=12.0, index=k)
+            est = geometry.compose(est, fe.process(scan, np.zeros(3)).delta)
+            worst = np.maximum(worst, np.abs(est))
+        return worst
+
+    still = drift({})
+    assert np.hypot(still[0], still[1]) < 0.025 and still[2] < np.deg2rad(0.5), still
+    loose = drift({"odom_sigma_xy": 0.05, "odom_sigma_theta_deg": 2.0})  # the earlier, loose odometry prior
+    assert loose[2] > 2.0 * still[2], (loose, still)  # the heading wandered with the segments' noise

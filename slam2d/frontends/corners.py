@@ -29,9 +29,9 @@ After the patrol-robot thesis (Tian 2016, sections 2.3.2, 2.3.3 and 4.2.1):
   odometry noise (``motion``) since the last match: corners are sparse and a
   few centimetres noisy, so they correct a drifted pose strongly and a fresh
   one little. A one-scan odometry outlier (a turn undone by the next delta)
-  is bridged, and the odometry heading is calibrated online (a drift rate
-  and a turn scale, from the accepted matches' heading corrections), so it
-  drifts less between matches.
+  is bridged, and the odometry heading is calibrated online (a curvature
+  bias and a turn scale, from the accepted matches' heading corrections), so
+  it drifts less between matches.
 - Confidence: 1 matched corner 0.33, 2 corners 0.66, 3 or more 1.0 (thesis).
   Matched corners are also returned as landmark observations (range, bearing
   from the base) with the list's stable ids.
@@ -512,7 +512,6 @@ class CornerFrontend:
         self._previous: np.ndarray | None = None
         self._index = 0
         self.calibration = HeadingCalibration(cfg.calibration)
-        self._stamp: float | None = None
 
     def process(self, scan: Scan, odom_delta) -> FrontendResult:
         """Match the scan's corners to the corner list, starting from the odometry guess.
@@ -521,9 +520,7 @@ class CornerFrontend:
         it (``motion``), a match shrinks it; the predicted covariance is the
         prior of the match, so noisy corners move a well-known pose little.
         """
-        dt = 0.0 if self._stamp is None else float(scan.stamp) - self._stamp
-        self._stamp = float(scan.stamp)
-        odom_delta = self.calibration.correct(odom_delta, dt)
+        odom_delta = self.calibration.correct(odom_delta)
         base, base_cov, motion = self.pose, self.cov, odom_delta
         if odometry_spike(self._last_delta, odom_delta):  # bridge the outlier odometry of the last scan
             self.fallbacks["odometry spike bridged"] += 1

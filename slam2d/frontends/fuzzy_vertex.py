@@ -38,9 +38,11 @@ each unit added to ``delta_a`` (``heading_lever``); a floor and a cap on
 ``R`` (eq. 11 only shrinks it); a rigidity check on the matched set; the
 odometry prediction fused with the vertex fit by information
 (``odometry_prior``), with fits too far from it rejected (``max_mahalanobis``);
-and the pruning of vertices seen only once. With ``heading="translation"``,
-``arm_heading``, ``wall_heading``, ``odometry_prior``, ``rigid_check`` and the
-gates off, the frontend is the paper's method as printed.
+the pruning of vertices seen only once; and an online calibration of the
+odometry heading (curvature bias and turn scale) from the accepted fits
+(``calibration``, see ``gate.HeadingCalibration``). With ``heading="translation"``,
+``arm_heading``, ``wall_heading``, ``odometry_prior``, ``rigid_check``,
+``calibration`` and the gates off, the frontend is the paper's method as printed.
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ from pydantic import Field
 from slam2d import geometry
 from slam2d.config import Section
 from slam2d.frontends.base import FrontendResult, register_frontend
+from slam2d.frontends.gate import HeadingCalibration
 from slam2d.types import LandmarkObservation, Scan
 
 __all__ = [
@@ -769,9 +772,11 @@ class FuzzyVertexFrontend:
         unit_map: bool = Field(True, description="keep the fused global unit map (eqs. 13-21)")
         min_sigma_xy: float = Field(0.005, gt=0, description="m; the information never claims a smaller std")
         min_sigma_theta_deg: float = Field(0.1, gt=0, description="the information never claims a smaller std")
+        calibration: HeadingCalibration.Config = HeadingCalibration.Config()
 
     def __init__(self, config: Config | None = None):
         self.config = cfg = config or self.Config()
+        self.calibration = HeadingCalibration(cfg.calibration)
         self.pose = np.zeros(3)
         self.vertices = VertexMap()
         self.units = UnitMap(cfg.min_radius)
@@ -785,7 +790,7 @@ class FuzzyVertexFrontend:
         """Localise ``scan`` on the vertex map; ``odom_delta`` (3,) is the base motion since the last scan."""
         cfg = self.config
         self._step += 1
-        odom_delta = geometry.as_pose(odom_delta)
+        odom_delta = self.calibration.correct(odom_delta)
         pred = geometry.compose(self.pose, odom_delta)
         delta_a = cfg.dead_reckoning_error + cfg.dead_reckoning_rel * float(np.hypot(*odom_delta[:2]))
         sigma_theta = np.deg2rad(cfg.heading_error_deg) + cfg.heading_rel * abs(float(odom_delta[2]))
@@ -806,6 +811,7 @@ class FuzzyVertexFrontend:
         if reason:
             self.fallbacks[reason] += 1
             return self._accept(pred, odom_delta, units, local, None, prior)
+        self.calibration.observe(float(geometry.wrap_angle(pose[2] - pred[2])))
         return self._accept(pose, odom_delta, units, local, pairs, info)
 
     def extract(self, scan: Scan, delta_a: float = 0.0, heading_error: float = 0.0) -> tuple[Units, Vertices]:
@@ -1007,13 +1013,14 @@ def _mahalanobis2(fit, pred, fit_info, prior) -> float:
 
 
 def _observations(local: Vertices, ids) -> tuple[LandmarkObservation, ...]:
-    """Range-bearing observations (base frame) of matched vertices, covariance from R."""
+    """Range-bearing observations (base frame) of matched vertices; covariance from R, isotropic
+    in the plane, in (bearing, range) order (rad^2, m^2)."""
     o = local.o
     rng = np.linalg.norm(o, axis=1)
     bearing = np.arctan2(o[:, 1], o[:, 0])
     sd = local.R / FUZZY_SCALE
     return tuple(
-        LandmarkObservation(int(i), float(r), float(b), np.diag([s**2, (s / max(r, 1e-3)) ** 2]))
+        LandmarkObservation(int(i), float(r), float(b), np.diag([(s / max(r, 1e-3)) ** 2, s**2]))
         for i, r, b, s in zip(ids, rng, bearing, sd)
         if r > 1e-3
     )

@@ -18,7 +18,7 @@ in [0, 1]). A scan is "not continuous" when its similarity is below
 The module also holds the small odometry helpers the feature frontends share:
 an odometry information matrix, a motion-dependent odometry noise, a test for
 one-scan odometry outliers, eigenvalue bounds on an information, and an online
-calibration of the odometry heading (a drift rate and a turn scale).
+calibration of the odometry heading (a curvature bias and a turn scale).
 """
 
 from __future__ import annotations
@@ -84,16 +84,19 @@ def odometry_spike(previous, current, min_turn_deg: float = 5.0, ratio: float = 
 
 
 class HeadingCalibration:
-    """Online estimate of the odometry heading error: a drift rate (rad/s) and a turn-scale error.
+    """Online calibration of the odometry heading: a curvature bias (rad/m) and a turn-scale error.
 
-    Wheel odometry often turns at a biased rate (the Intel log's drifts by about
-    half a degree per second against its scan matches) or under-reports turns.
-    Between two accepted matches the heading error of the corrected odometry is
-    ``rate_error * time + scale_error * odometry_turn``; each accepted match
-    measures it (its heading minus the predicted one) and recursive least
-    squares with forgetting refines both parameters. :meth:`correct` then turns
-    every odometry delta by ``rate * dt + scale * dtheta``, so the heading
-    drifts far less while no match is found.
+    The two systematic heading errors of a differential drive (Borenstein and
+    Feng's UMBmark) are unequal wheel radii, which bend straight runs by a
+    fixed angle per metre, and a wrong wheelbase, which scales every turn (the
+    Intel log's odometry bends by about 2 degrees per metre against its scan
+    matches). Between two accepted matches the heading error of the corrected
+    odometry is ``curvature_error * forward_distance + scale_error * turn``;
+    each accepted match measures it (its heading minus the predicted one) and
+    recursive least squares with forgetting refines both parameters.
+    :meth:`correct` turns every odometry delta by ``curvature * dx + scale *
+    dtheta``, once a parameter is significant, so the heading drifts less
+    while no match is found.
     """
 
     class Config(Section):
@@ -101,44 +104,58 @@ class HeadingCalibration:
 
         enabled: bool = Field(True, description="False: odometry deltas are used as they are")
         forgetting: float = Field(0.995, gt=0, le=1, description="RLS forgetting factor per accepted match")
-        sigma_rate_deg_s: float = Field(1.0, gt=0, description="prior std of the drift rate")
-        sigma_scale: float = Field(0.05, ge=0, description="prior std of the turn-scale error (0: rate only)")
+        sigma_curvature_deg_m: float = Field(3.0, ge=0, description="prior std of the curvature bias (0: none)")
+        sigma_scale: float = Field(0.05, ge=0, description="prior std of the turn-scale error (0: none)")
         noise_deg: float = Field(0.5, gt=0, description="std of one match's heading correction")
-        max_rate_deg_s: float = Field(2.0, gt=0, description="the drift rate estimate stays within +- this")
+        max_curvature_deg_m: float = Field(5.0, ge=0, description="the curvature estimate stays within +- this")
         max_scale: float = Field(0.1, ge=0, description="the turn-scale estimate stays within +- this")
-        max_gap_s: float = Field(5.0, gt=0, description="corrections after a longer span without a match are unused")
+        max_span: float = Field(2.0, gt=0, description="m; corrections after a longer run without a match are unused")
         min_updates: int = Field(20, ge=0, description="accepted matches before odometry is corrected")
+        significance: float = Field(4.0, ge=0, description="a parameter corrects odometry only beyond this many "
+                                    "of its standard errors")
 
     def __init__(self, config: Config | None = None):
         self.config = cfg = config or self.Config()
-        self.params = np.zeros(2)  # rate (rad/s), scale error
-        var_scale = cfg.sigma_scale**2 if cfg.sigma_scale > 0 else 0.0
-        self.cov = np.diag([np.deg2rad(cfg.sigma_rate_deg_s) ** 2, var_scale])
+        self.params = np.zeros(2)  # curvature (rad/m), turn-scale error
+        self.cov = np.diag([np.deg2rad(cfg.sigma_curvature_deg_m) ** 2, cfg.sigma_scale**2])
         self.updates = 0
-        self._since = np.zeros(2)  # (seconds, odometry turn) since the last accepted match
+        self._since = np.zeros(2)  # (forward distance m, odometry turn rad) since the last accepted match
+        self._travel = 0.0  # path length since the last accepted match, m
 
-    def correct(self, delta, dt: float) -> np.ndarray:
-        """The odometry ``delta`` (3,) over ``dt`` s with its heading corrected; the span is remembered."""
+    @property
+    def applied(self) -> np.ndarray:
+        """The parameters (curvature rad/m, scale) that correct odometry now: each estimate beyond
+        ``significance`` standard errors (after ``min_updates`` matches), else 0."""
+        if not self.config.enabled or self.updates < self.config.min_updates:
+            return np.zeros(2)
+        sd = np.sqrt(np.maximum(np.diag(self.cov), 0.0))
+        return np.where(np.abs(self.params) > self.config.significance * sd, self.params, 0.0)
+
+    def correct(self, delta) -> np.ndarray:
+        """The odometry ``delta`` (3,) with its heading corrected; its motion is added to the current span."""
         delta = geometry.as_pose(delta).copy()
-        self._since += [max(float(dt), 0.0), float(delta[2])]
-        if self.config.enabled and self.updates >= self.config.min_updates:
-            delta[2] += self.params[0] * max(float(dt), 0.0) + self.params[1] * delta[2]
+        phi = np.array([delta[0], delta[2]])
+        self._since += phi
+        self._travel += float(np.hypot(delta[0], delta[1]))
+        delta[2] += float(self.applied @ phi)
         return delta
 
     def observe(self, heading_error: float) -> None:
         """An accepted match moved the predicted heading by ``heading_error`` (rad): refine, restart the span."""
         cfg = self.config
-        phi, self._since = self._since, np.zeros(2)
-        if not cfg.enabled or phi[0] <= 0 or phi[0] > cfg.max_gap_s:
+        phi, travel = self._since, self._travel
+        applied = self.applied
+        self._since, self._travel = np.zeros(2), 0.0
+        if not cfg.enabled or travel > cfg.max_span or not phi.any():
             return
-        if self.updates < cfg.min_updates:  # the corrections are not applied yet: the error is the raw one
-            heading_error -= float(phi @ self.params)
+        # raw odometry error = measured error of the corrected prediction + the correction applied
+        innovation = float(heading_error) + float(phi @ applied) - float(phi @ self.params)
         noise = np.deg2rad(cfg.noise_deg) ** 2
         p_phi = self.cov @ phi
         gain = p_phi / (cfg.forgetting * noise + phi @ p_phi)
-        self.params = self.params + gain * float(heading_error)
+        self.params = self.params + gain * innovation
         self.cov = (self.cov - np.outer(gain, p_phi)) / cfg.forgetting
-        limit = np.array([np.deg2rad(cfg.max_rate_deg_s), cfg.max_scale])
+        limit = np.array([np.deg2rad(cfg.max_curvature_deg_m), cfg.max_scale])
         self.params = np.clip(self.params, -limit, limit)
         self.updates += 1
 
