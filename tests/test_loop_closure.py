@@ -83,7 +83,7 @@ def test_match_rejects_a_different_room(office):
 
     (Rooms B1-B4 share their shape and door position and differ only in
     furniture; between them the score reaches 0.5-0.65, so that aliasing is
-    left to the pose graph's consistency gate.)
+    left to the robust kernel and the pose graph's residual check after the batch.)
     """
     gt, points = office
     b4 = nearest_scan(gt, (17.3, 1.9))

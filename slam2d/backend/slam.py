@@ -6,13 +6,12 @@ composed (with their covariances) into one between factor. Each new keyframe
 is checked for loop closures against the current estimate; a closure needs the
 matcher's score, enters the graph under the robust kernel, and is removed
 after the batch optimisation if the optimised graph cannot accommodate it
-(chi-square test on its residual, see ``PoseGraph.optimize_batch``). Poses for every scan
-are keyframe poses composed with the scan's offset from its keyframe.
+(chi-square test on its residual, see ``PoseGraph.optimize_batch``). Poses
+for every scan are keyframe poses composed with the scan's offset from its keyframe.
 """
 
 from __future__ import annotations
 
-import logging
 from collections import Counter
 
 import numpy as np
@@ -22,7 +21,6 @@ from slam2d.config import BackendConfig
 from slam2d.frontends.base import FrontendResult
 from slam2d.types import Scan
 
-log = logging.getLogger(__name__)
 
 class GraphSlamBackend:
     """Builds and optimises the pose graph; returns a pose for every scan."""
