@@ -84,3 +84,33 @@ class LandmarkObservation:
     range: float
     bearing: float
     covariance: np.ndarray = field(default_factory=lambda: np.diag([np.deg2rad(2.0) ** 2, 0.05**2]))
+
+
+class GridFrame:
+    """World <-> cell conversions of a 2D grid with ``origin`` (x, y) m of cell (0, 0)'s
+    corner, ``resolution`` m per cell and ``shape`` (rows, cols); rows run along y."""
+
+    origin: tuple[float, float]
+    resolution: float
+    shape: tuple[int, int]
+
+    def world_to_cell(self, xy) -> np.ndarray:
+        """Integer (row, col) cells ``(..., 2)`` containing points ``xy (..., 2)`` m
+        (outside the grid for points outside it; see :meth:`in_bounds`)."""
+        xy = np.asarray(xy, dtype=np.float64)
+        col = np.floor((xy[..., 0] - self.origin[0]) / self.resolution)
+        row = np.floor((xy[..., 1] - self.origin[1]) / self.resolution)
+        return np.stack([row, col], -1).astype(np.int64)
+
+    def cell_to_world(self, cells) -> np.ndarray:
+        """Centres (x, y) m ``(..., 2)`` of (row, col) cells ``(..., 2)``."""
+        rc = np.asarray(cells, dtype=np.float64)
+        x = self.origin[0] + (rc[..., 1] + 0.5) * self.resolution
+        y = self.origin[1] + (rc[..., 0] + 0.5) * self.resolution
+        return np.stack([x, y], -1)
+
+    def in_bounds(self, cells) -> np.ndarray:
+        """Whether (row, col) cells ``(..., 2)`` lie inside the grid."""
+        rc = np.asarray(cells)
+        h, w = self.shape
+        return (rc[..., 0] >= 0) & (rc[..., 0] < h) & (rc[..., 1] >= 0) & (rc[..., 1] < w)

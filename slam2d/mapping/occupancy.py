@@ -30,7 +30,7 @@ from numba import njit
 
 from slam2d import geometry
 from slam2d.config import MappingConfig
-from slam2d.types import Scan
+from slam2d.types import GridFrame, Scan
 
 __all__ = ["OccupancyGrid", "build_grid", "NO_RETURN_CLEAR_M", "MARGIN_M", "MAX_CELLS"]
 
@@ -50,7 +50,7 @@ MAX_CELLS = 100_000_000
 
 
 @dataclass(eq=False)
-class OccupancyGrid:
+class OccupancyGrid(GridFrame):
     """Log-odds grid: ``log_odds`` (H, W) float32, ``resolution`` m/cell,
     ``origin`` (x, y) m of the lower-left corner of cell ``[0, 0]``."""
 
@@ -80,29 +80,6 @@ class OccupancyGrid:
     def probability(self) -> np.ndarray:
         """Occupancy probability (H, W) in [0, 1]."""
         return 1.0 / (1.0 + np.exp(-self.log_odds.astype(np.float64)))
-
-    def world_to_cell(self, xy) -> np.ndarray:
-        """Cells ``(..., 2)`` as integer (row, col) containing points ``xy (..., 2)`` m.
-
-        Points outside the grid give indices outside it; see :meth:`in_bounds`.
-        """
-        xy = np.asarray(xy, dtype=np.float64)
-        col = np.floor((xy[..., 0] - self.origin[0]) / self.resolution)
-        row = np.floor((xy[..., 1] - self.origin[1]) / self.resolution)
-        return np.stack([row, col], -1).astype(np.int64)
-
-    def cell_to_world(self, cells) -> np.ndarray:
-        """Centres ``(..., 2)`` as (x, y) m of cells given as (row, col) ``(..., 2)``."""
-        rc = np.asarray(cells, dtype=np.float64)
-        x = self.origin[0] + (rc[..., 1] + 0.5) * self.resolution
-        y = self.origin[1] + (rc[..., 0] + 0.5) * self.resolution
-        return np.stack([x, y], -1)
-
-    def in_bounds(self, cells) -> np.ndarray:
-        """Whether (row, col) cells ``(..., 2)`` lie inside the grid."""
-        rc = np.asarray(cells)
-        h, w = self.shape
-        return (rc[..., 0] >= 0) & (rc[..., 0] < h) & (rc[..., 1] >= 0) & (rc[..., 1] < w)
 
     def occupied_mask(self, thresh: float = 0.65) -> np.ndarray:
         """Cells with occupancy probability > ``thresh`` (as map_server reads a map)."""

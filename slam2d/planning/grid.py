@@ -19,6 +19,7 @@ import numpy as np
 from scipy import ndimage
 
 from slam2d.errors import InputError
+from slam2d.types import GridFrame
 
 __all__ = [
     "PlanningGrid",
@@ -45,7 +46,7 @@ _MOVINGAI_KNOWN = frozenset(".GS@OTW")
 
 
 @dataclass(eq=False)
-class PlanningGrid:
+class PlanningGrid(GridFrame):
     """Free-space mask ``free`` (H, W) bool, ``resolution`` m/cell, ``origin`` (x, y) m
     of the lower-left corner of cell ``[0, 0]``; ``name`` is where it came from."""
 
@@ -74,26 +75,6 @@ class PlanningGrid:
         h, w = self.shape
         ox, oy = self.origin
         return ox, ox + w * self.resolution, oy, oy + h * self.resolution
-
-    def world_to_cell(self, xy) -> np.ndarray:
-        """Integer (row, col) cells ``(..., 2)`` containing points ``xy (..., 2)`` m."""
-        xy = np.asarray(xy, dtype=np.float64)
-        col = np.floor((xy[..., 0] - self.origin[0]) / self.resolution)
-        row = np.floor((xy[..., 1] - self.origin[1]) / self.resolution)
-        return np.stack([row, col], -1).astype(np.int64)
-
-    def cell_to_world(self, cells) -> np.ndarray:
-        """Centres (x, y) m ``(..., 2)`` of (row, col) cells ``(..., 2)``."""
-        rc = np.asarray(cells, dtype=np.float64)
-        x = self.origin[0] + (rc[..., 1] + 0.5) * self.resolution
-        y = self.origin[1] + (rc[..., 0] + 0.5) * self.resolution
-        return np.stack([x, y], -1)
-
-    def in_bounds(self, cells) -> np.ndarray:
-        """Whether (row, col) cells ``(..., 2)`` lie inside the grid."""
-        rc = np.asarray(cells)
-        h, w = self.shape
-        return (rc[..., 0] >= 0) & (rc[..., 0] < h) & (rc[..., 1] >= 0) & (rc[..., 1] < w)
 
     def is_free(self, cells) -> np.ndarray:
         """Whether (row, col) cells ``(..., 2)`` are inside the grid and free."""
