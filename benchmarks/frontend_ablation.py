@@ -3,18 +3,19 @@
 Reads the variants of a sweep file (default ``experiments/ablation_frontends.yaml``),
 runs them one after another in this process with ``slam2d.experiment.run_experiment``
 (one heavy job at a time: the whole Intel log needs up to 1 GB) and builds the
-table from each run's ``metrics.json`` plus what the run itself measured:
+table from each run's ``metrics.json``:
 
 - relations metric (absolute translational error, m, and rotational error, deg,
   mean ± std) where a relations file is given, and the odometry's beside it;
 - ATE RMSE (m) against ground truth where there is one (the simulator);
-- CPU ms per scan: process CPU time of ``SlamPipeline.run`` (frontend,
-  back end and bag decoding) divided by the scans; the wall-clock
-  figure of ``metrics.json`` (``timings_s.slam``) goes to the CSV;
-- loop closures accepted (added and kept after the final optimisation) and
-  rejected (by the matcher's score or points, or removed as inconsistent);
-- odometry fallbacks: scans after the first whose frontend result has
-  confidence 0 (the frontend returned odometry), and their share of the scans.
+- CPU ms per scan (``cpu_ms_per_scan``: process CPU time of the run's
+  reading, frontend and back end over the scans); the wall-clock figure
+  (``timings_s.slam``) goes to the CSV;
+- loop closures accepted (``slam.loop closures kept``: added and kept after
+  the final optimisation) and rejected (``slam.loop closures rejected``: by the
+  matcher's score or points, or removed as inconsistent);
+- odometry fallbacks (``frontend_fallbacks``: scans after the first answered
+  with confidence 0), and their share of the scans.
 
 Writes ``table.md``, ``table.csv`` and ``rows.json`` under ``--out`` and prints the
 Markdown table. ``--only REGEX`` runs the matching variants; ``--resume`` keeps
@@ -30,47 +31,14 @@ import csv
 import json
 import re
 import sys
-import time
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from slam2d.experiment import load_sweep, run_experiment, variant_config
 
 DATASETS = {"simulator": "simulator default", "intel.bag": "intel.bag", "aces.bag": "aces.bag"}
 
-
-class _Timed:
-    """Wraps ``SlamPipeline.run``: process CPU time and the confidences of the last run."""
-
-    def __init__(self) -> None:
-        from slam2d import pipeline
-
-        self.cpu_s = 0.0
-        self.confidences = np.zeros(0)
-        original = pipeline.SlamPipeline.run
-
-        def run(pipe, *args, **kwargs):
-            t0 = time.process_time()
-            result = original(pipe, *args, **kwargs)
-            self.cpu_s = time.process_time() - t0
-            self.confidences = np.asarray(result.confidences, float)
-            return result
-
-        pipeline.SlamPipeline.run = run
-
-
-def _loops(slam: dict[str, Any]) -> tuple[int | None, int | None]:
-    """(accepted, rejected) loop closures from the run's ``slam`` stats; None without loop closing."""
-    if not any(k.startswith("loop ") for k in slam):
-        return None, None
-    removed = sum(v for k, v in slam.items() if k.startswith("loop closures") and ("removed" in k or "rejected" in k))
-    matcher = sum(v for k, v in slam.items() if k.startswith("loop matcher rejected"))
-    return slam.get("loop closures added", 0) - removed, matcher + removed
-
-
-def _row(name: str, cfg, folder: Path, bench: dict[str, Any]) -> dict[str, Any]:
+def _row(name: str, cfg, folder: Path) -> dict[str, Any]:
     m = json.loads((folder / "metrics.json").read_text())
     dataset = "simulator" if cfg.dataset.kind == "simulator" else Path(cfg.dataset.path).name
     row: dict[str, Any] = {
@@ -87,20 +55,19 @@ def _row(name: str, cfg, folder: Path, bench: dict[str, Any]) -> dict[str, Any]:
                         f"{label}rot_deg": r["rot_abs_mean"], f"{label}rot_std_deg": r["rot_abs_std"]})
     if "ate" in m:
         row["ate_m"], row["odometry_ate_m"] = m["ate"]["rmse"], m["odometry_ate"]["rmse"]
-    row["cpu_ms_per_scan"] = 1000.0 * bench["cpu_s"] / m["scans"]
+    row["cpu_ms_per_scan"] = m["cpu_ms_per_scan"]
     row["wall_ms_per_scan"] = 1000.0 * m["timings_s"]["slam"] / m["scans"]
-    row["loops_accepted"], row["loops_rejected"] = _loops(m["slam"])
-    row["fallbacks"] = bench["fallbacks"]
-    row["fallback_share"] = bench["fallbacks"] / max(m["scans"] - 1, 1)
+    row["loops_accepted"] = m["slam"].get("loop closures kept")
+    row["loops_rejected"] = m["slam"].get("loop closures rejected")
+    row["fallbacks"] = m["frontend_fallbacks"]
+    row["fallback_share"] = m["frontend_fallbacks"] / max(m["scans"] - 1, 1)
     row["frontend_stats"] = {k[len("frontend "):]: v for k, v in m["slam"].items() if k.startswith("frontend ")}
     row["folder"] = str(folder)
     return row
 
-
 def _fmt(row: dict[str, Any], key: str, digits: int) -> str:
     value = row.get(key)
     return "" if value is None else f"{value:.{digits}f}"
-
 
 def markdown(rows: list[dict[str, Any]]) -> str:
     head = ("| dataset | frontend | backend | relations trans. (m) | relations rot. (deg) | ATE RMSE (m) "
@@ -117,12 +84,10 @@ def markdown(rows: list[dict[str, Any]]) -> str:
                    f"| {ate} | {r['cpu_ms_per_scan']:.2f} | {loops} | {fallbacks} |")
     return "\n".join(out) + "\n"
 
-
 def _finished(runs: Path, name: str) -> Path | None:
-    done = sorted(p.parent for p in runs.glob(f"{name}-*/bench.json") if re.fullmatch(rf"{re.escape(name)}-[\d-]+",
+    done = sorted(p.parent for p in runs.glob(f"{name}-*/metrics.json") if re.fullmatch(rf"{re.escape(name)}-[\d-]+",
                                                                                           p.parent.name))
     return done[-1] if done else None
-
 
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -137,7 +102,6 @@ def main(argv: list[str]) -> int:
         variants = [v for v in variants if re.search(args.only, v.name)]
     out = Path(args.out)
     runs = out / "runs"
-    timed = _Timed()
     rows = []
     for v in variants:
         cfg = variant_config(base, v, runs)
@@ -146,12 +110,8 @@ def main(argv: list[str]) -> int:
         if folder is None:
             print(f"{v.name} ...", file=sys.stderr, flush=True)
             folder = run_experiment(cfg, quiet=True)
-            fallbacks = int(np.count_nonzero(timed.confidences[1:] <= 0.0))
-            bench = {"cpu_s": timed.cpu_s, "fallbacks": fallbacks}
-            (folder / "bench.json").write_text(json.dumps(bench))
-        bench = json.loads((folder / "bench.json").read_text())
-        rows.append(_row(v.name, cfg, folder, bench))
-        print(f"{v.name}: {bench['cpu_s']:.1f} s CPU", file=sys.stderr, flush=True)
+        rows.append(_row(v.name, cfg, folder))
+        print(f"{v.name}: {rows[-1]['cpu_ms_per_scan']:.2f} ms CPU per scan", file=sys.stderr, flush=True)
 
     out.mkdir(parents=True, exist_ok=True)
     table = markdown(rows)
@@ -164,7 +124,6 @@ def main(argv: list[str]) -> int:
         writer.writerows(rows)
     print(table)
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))

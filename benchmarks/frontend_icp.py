@@ -24,7 +24,7 @@ from slam2d import geometry
 from slam2d.datasets.rosbag import RosbagSource
 from slam2d.evaluation.relations import Relations, read_relations, relations_metric
 from slam2d.frontends import create_frontend
-from slam2d.frontends import icp  # noqa: F401  (registers "icp")
+from slam2d.frontends.icp import STILL_EVENT
 
 SHORT = 10.0  # s; relations shorter than this measure local accuracy
 DEFAULT_DATA = Path(os.environ.get("SLAM2D_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets"))
@@ -106,10 +106,10 @@ def main() -> None:
         print(row(name, "odometry", score(stamps, odom, rel), None, len(scans), "-"))
         for method in args.methods:
             deltas, seconds, fe = run_frontend(scans, {"method": method, **overrides})
-            fb = sum(fe.fallbacks.values())
+            fb = sum(v for k, v in fe.events.items() if k != STILL_EVENT)
             print(row(name, f"icp {method}", score(stamps, chain(deltas), rel), seconds, len(scans), fb), flush=True)
-            for reason, count in fe.fallbacks.items():
-                print(f"    fallback: {reason}: {count}")
+            for reason, count in fe.events.items():
+                print(f"    {reason}: {count}")
 
 
 if __name__ == "__main__":

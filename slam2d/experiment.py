@@ -82,6 +82,8 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
         "skipped": dict(result.skipped),
         "invalid_beams": getattr(source, "invalid_beams", 0),
         "slam": result.stats,
+        "frontend_fallbacks": result.fallbacks,
+        "cpu_ms_per_scan": 1000.0 * result.cpu_s / len(result.scans),
     }
     metrics.update(_evaluate(cfg, result, relations))
     t_eval = time.perf_counter()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -27,9 +28,15 @@ class SlamResult:
     odometry: np.ndarray
     ground_truth: np.ndarray | None
     confidences: np.ndarray
+    cpu_s: float  # process CPU time of the run (reading, frontend, back end)
     skipped: Counter = field(default_factory=Counter)
     stats: dict[str, Any] = field(default_factory=dict)
     graph: Any = None  # the PoseGraph when the back end is 'pose_graph'
+
+    @property
+    def fallbacks(self) -> int:
+        """Scans after the first answered with confidence 0 (the frontend returned odometry)."""
+        return int(np.count_nonzero(self.confidences[1:] <= 0.0))
 
 
 class ChainBackend:
@@ -66,6 +73,7 @@ class SlamPipeline:
 
     def run(self, scans: Iterable[Scan], on_scan: Callable[[], None] | None = None) -> SlamResult:
         """Process every scan; ``on_scan`` is called after each one (progress)."""
+        t0 = time.process_time()
         kept: list[Scan] = []
         confidences = []
         for scan in scans:
@@ -82,9 +90,7 @@ class SlamPipeline:
         poses = self.backend.finish()
         gts = [s.ground_truth for s in kept]
         stats = dict(self.backend.summary())
-        stats.update({f"frontend {k}": v for k, v in getattr(self.frontend, "fallbacks", {}).items()})
-        if getattr(self.frontend, "still", 0):
-            stats["frontend scans not registered (no motion)"] = self.frontend.still
+        stats.update({f"frontend {k}": v for k, v in getattr(self.frontend, "events", {}).items()})
         return SlamResult(
             scans=kept,
             stamps=np.array([s.stamp for s in kept]),
@@ -92,6 +98,7 @@ class SlamPipeline:
             odometry=np.array([s.odom for s in kept]),
             ground_truth=None if any(g is None for g in gts) else np.array(gts),
             confidences=np.array(confidences),
+            cpu_s=time.process_time() - t0,
             skipped=Counter(getattr(scans, "skipped", {})),
             stats=stats,
             graph=self.backend.graph,

@@ -26,6 +26,7 @@ def test_run_writes_complete_results_folder(tmp_path):
     metrics = json.loads((folder / "metrics.json").read_text())
     assert metrics["scans"] == 40
     assert metrics["ate"]["rmse"] >= 0 and "odometry_ate" in metrics
+    assert metrics["cpu_ms_per_scan"] > 0 and 0 <= metrics["frontend_fallbacks"] < 40
     # the resolved config reproduces the run's config
     assert config.load(folder / "config.yaml") == resolved(small_cfg(tmp_path))
     assert len([l for l in (folder / "trajectory.tum").read_text().splitlines() if not l.startswith("#")]) == 40
@@ -62,7 +63,8 @@ def test_ablate_two_variants_table(tmp_path):
     with (folder / "table.csv").open() as fh:
         table = list(csv.DictReader(fh))
     assert len(table) == 2
-    assert {"variant", "dataset.simulator.odometry.alpha3", "odometry_ate.rmse"} <= set(table[0])
+    assert {"variant", "dataset.simulator.odometry.alpha3", "odometry_ate.rmse", "cpu_ms_per_scan",
+            "frontend_fallbacks"} <= set(table[0])
     # more odometry noise, larger odometry error: the table carries real numbers per variant
     assert float(table[1]["odometry_ate.rmse"]) > float(table[0]["odometry_ate.rmse"])
     assert "| variant |" in (folder / "table.md").read_text()

@@ -56,3 +56,28 @@ def test_unknown_frontend_name_lists_available():
     cfg = config.load(None, ["frontend.name=nope"])
     with pytest.raises(InputError, match="unknown frontend 'nope'.*odometry"):
         SlamPipeline(cfg)
+
+
+@register_frontend("every_third_fails")
+class EveryThirdFails:
+    """Odometry, but every third scan is answered with confidence 0 and counted as an event."""
+
+    def __init__(self, config=None):
+        from collections import Counter
+
+        self.events, self.calls = Counter(), 0
+
+    def process(self, scan, odom_delta):
+        self.calls += 1
+        failed = self.calls % 3 == 0
+        if failed:
+            self.events["stub failure"] += 1
+        return FrontendResult(delta=np.asarray(odom_delta, float), information=np.eye(3), confidence=0.0 if failed else 1.0)
+
+
+def test_frontend_events_and_fallbacks_reported():
+    cfg = config.load(None, ["dataset.max_scans=30", "frontend.name=every_third_fails", "backend.name=none"])
+    result = SlamPipeline(cfg).run(open_dataset(cfg.dataset, seed=cfg.seed))
+    assert result.stats["frontend stub failure"] == 10
+    assert result.fallbacks == 10  # scans 3, 6, ..., 30
+    assert result.cpu_s > 0

@@ -43,11 +43,11 @@ def test_gate_falls_back_when_similarity_drops():
     out = gate.check(moved, other, good, odom)
     assert out is not good and out.confidence == 0.0
     assert np.array_equal(out.delta, odom) and np.array_equal(out.information, gate.odometry_information)
-    assert gate.fallbacks == {"gate: similarity below min_similarity": 1}
+    assert gate.events == {"gate: similarity below min_similarity": 1}
     weak = FrontendResult(delta=good.delta, information=good.information, confidence=0.1)
     again = geometry.transform_points(geometry.inverse(odom), other)
     assert gate.check(other, again, weak, odom).confidence == 0.0
-    assert gate.fallbacks["gate: confidence below min_confidence"] == 1
+    assert gate.events["gate: confidence below min_confidence"] == 1
 
 
 def test_gate_catches_a_dip_relative_to_the_usual_similarity():
@@ -133,7 +133,7 @@ class Fixed:
     """A stand-in source returning a fixed result."""
 
     def __init__(self, result):
-        self.result, self.fallbacks = result, {"stub reason": 2}
+        self.result, self.events = result, {"stub reason": 2}
 
     def process(self, scan, odom_delta):
         return self.result
@@ -161,12 +161,12 @@ def test_fused_frontend_gates_each_source_and_combines_the_rest():
     fe.sources["corners"] = Fixed(FrontendResult(delta=b.delta, information=b.information, confidence=0.33))
     out = fe.process(scan_of(geometry.transform_points(geometry.inverse(odom), points), 2), odom)
     assert np.allclose(out.delta, a.delta) and np.allclose(out.information, a.information)
-    assert fe.fallbacks["gate corners: confidence below min_confidence"] == 1
-    assert fe.fallbacks["lines: stub reason"] == 2
+    assert fe.events["gate corners: confidence below min_confidence"] == 1
+    assert fe.events["lines: stub reason"] == 2
     # a scan unlike the previous one: odometry
     out = fe.process(scan_of(wall_points(200, -6.0), 3), odom)
     assert np.array_equal(out.delta, odom) and out.confidence == 0.0
-    assert fe.fallbacks["no source accepted"] == 1
+    assert fe.events["no source accepted"] == 1
 
 
 def test_fused_frontend_beats_odometry_on_the_simulator():

@@ -255,7 +255,7 @@ def test_frontend_corrects_odometry_and_emits_stable_landmarks():
             bearing_var, range_var = np.diag(obs.covariance)
             assert bearing_var * obs.range**2 == pytest.approx(range_var, rel=1e-9)
         assert np.linalg.eigvalsh(result.information).min() > 0
-    assert not front.fallbacks
+    assert not front.events
 
 
 def test_translation_mode_keeps_the_odometry_heading():
@@ -276,7 +276,7 @@ def test_fallback_to_odometry_is_counted():
     result = front.process(empty, odom)
     np.testing.assert_allclose(result.delta, odom)
     assert result.confidence == 0.0 and result.landmarks == ()
-    assert front.fallbacks["too few vertices matched"] == 1
+    assert front.events["too few vertices matched"] == 1
 
 
 def test_pipeline_by_name_beats_odometry_on_the_simulator():

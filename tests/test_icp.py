@@ -1,4 +1,4 @@
-"""The ICP frontend: registration, recovery from wrong odometry, information, fallbacks, Intel."""
+"""The ICP frontend: registration, recovery from wrong odometry, information, events, Intel."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from slam2d import geometry
 from slam2d.datasets.simulator import World
 from slam2d.errors import InputError
 from slam2d.frontends import available_frontends, create_frontend
-from slam2d.frontends.icp import IcpFrontend
+from slam2d.frontends.icp import STILL_EVENT, IcpFrontend
 from slam2d.types import Scan
 
 BEAMS = np.linspace(-np.pi, np.pi, 360, endpoint=False)
@@ -83,7 +83,7 @@ def test_recovers_true_delta_from_wrong_odometry(room, method):
     fe, res = register(room, P0, geometry.compose(P0, TRUE), WRONG, {"method": method})
     assert_close_pose(res.delta, TRUE)
     assert res.confidence > 0.9
-    assert not fe.fallbacks
+    assert not fe.events
 
 
 def test_sensor_mounting_pose_is_handled(room):
@@ -117,12 +117,12 @@ def test_motion_filter_skips_scans_until_odometry_moves(room):
     for k, p in enumerate(path):
         res = fe.process(scan_at(room, p, seed=k), np.array([0.004, 0.0, 0.0]) if k else np.zeros(3))
         pose = geometry.compose(pose, res.delta)
-    assert fe.still == 2
+    assert fe.events[STILL_EVENT] == 2
     assert_close_pose(pose, geometry.between(path[0], path[-1]), xy=0.003, theta_deg=0.1)
     never = create_frontend("icp", {"still_distance": 0.0, "still_angle_deg": 0.0})
     for k, p in enumerate(path):
         never.process(scan_at(room, p, seed=k), np.array([0.004, 0.0, 0.0]) if k else np.zeros(3))
-    assert never.still == 0
+    assert not never.events[STILL_EVENT]
 
 
 # --- information -------------------------------------------------------------------------------
@@ -166,7 +166,7 @@ def test_information_is_capped():
     assert np.sqrt(cov[2, 2]) >= np.deg2rad(cfg.min_sigma_theta_deg) * (1 - 1e-6)
 
 
-# --- fallbacks ---------------------------------------------------------------------------------
+# --- events ---------------------------------------------------------------------------------
 
 
 def _is_odometry_fallback(res, odom):
@@ -184,13 +184,13 @@ def test_too_few_points_falls_back_to_odometry(room):
     assert _is_odometry_fallback(res, odom)
     empty = fe.process(Scan(2.0, np.full(360, np.nan), BEAMS.copy(), 0.05, RANGE_MAX), odom)
     assert _is_odometry_fallback(empty, odom)
-    assert sum(fe.fallbacks.values()) == 2 and "fewer than 20 valid points" in fe.fallbacks
+    assert sum(fe.events.values()) == 2 and "fewer than 20 valid points" in fe.events
 
 
 def test_correction_beyond_bound_falls_back(room):
     fe, res = register(room, P0, geometry.compose(P0, TRUE), WRONG, {"max_correction_xy": 0.05})
     assert _is_odometry_fallback(res, WRONG)
-    assert fe.fallbacks["correction beyond max_correction_xy"] == 1
+    assert fe.events["correction beyond max_correction_xy"] == 1
 
 
 def test_unrelated_scene_falls_back(room):
@@ -202,7 +202,7 @@ def test_unrelated_scene_falls_back(room):
     odom = np.array([0.1, 0.0, 0.0])
     res = fe.process(scan_at(hall, np.zeros(3), seed=4), odom)
     assert _is_odometry_fallback(res, odom)
-    assert sum(fe.fallbacks.values()) == 1
+    assert sum(fe.events.values()) == 1
 
 
 def test_the_run_continues_after_a_fallback(room):
@@ -236,7 +236,7 @@ def test_intel_short_relations_beat_odometry(data_file):
     assert m_icp["matched"] >= 30
     assert m_icp["trans_abs_mean"] < 0.7 * m_odom["trans_abs_mean"]
     assert m_icp["rot_abs_mean"] < 0.5 * m_odom["rot_abs_mean"]
-    assert sum(fe.fallbacks.values()) <= 5
+    assert sum(v for k, v in fe.events.items() if k != STILL_EVENT) <= 5  # fallbacks
 
 
 def test_non_finite_odometry_is_taken_as_no_motion(room):

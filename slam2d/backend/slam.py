@@ -94,9 +94,17 @@ class GraphSlamBackend:
         return added
 
     def summary(self) -> dict[str, int]:
-        """Counts of keyframes and loop-closure outcomes (matcher and graph checks)."""
+        """Counts of keyframes and loop-closure outcomes (matcher and graph checks).
+
+        ``loop closures kept``: added and not removed by the final check;
+        ``loop closures rejected``: by the matcher (score, points) or removed.
+        """
         out = dict(self.stats)
-        out["loop closures removed as inconsistent"] = self.graph.rejected_inconsistent
+        removed = self.graph.rejected_inconsistent
+        out["loop closures removed as inconsistent"] = removed
         if self.loops is not None:
             out.update({f"loop matcher {k}": v for k, v in self.loops.stats.items()})
+            matcher = sum(v for k, v in self.loops.stats.items() if k.startswith("rejected"))
+            out["loop closures kept"] = self.stats["loop closures added"] - removed
+            out["loop closures rejected"] = matcher + removed
         return out

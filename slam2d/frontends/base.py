@@ -40,6 +40,8 @@ class FrontendResult:
 
 @runtime_checkable
 class Frontend(Protocol):
+    """Optionally also an ``events`` Counter (reason -> count: fallbacks, skipped scans), reported by the run."""
+
     def process(self, scan: Scan, odom_delta: np.ndarray) -> FrontendResult:
         """Estimate the motion since the previous scan (``odom_delta`` for the first: zeros)."""
         ...

@@ -499,9 +499,9 @@ class CornerFrontend:
         self.config = cfg = config or self.Config()
         self.map = CornerMap(cfg.merge_radius, cfg.rebuild_every, cfg.max_count, cfg.max_angle_deg)
         self.pose = np.zeros(3)
-        self.fallbacks: Counter[str] = Counter()
+        self.events: Counter[str] = Counter()
         self.gate = SimilarityGate(cfg.gate)
-        self.gate.fallbacks = self.fallbacks
+        self.gate.events = self.events
         self.cov = np.zeros((3, 3))  # uncertainty of self.pose against the corner list, local frame
         self._before = (self.pose, self.cov)  # pose and covariance before the last scan
         self._last_delta: np.ndarray | None = None
@@ -523,7 +523,7 @@ class CornerFrontend:
         odom_delta = self.calibration.correct(odom_delta)
         base, base_cov, motion = self.pose, self.cov, odom_delta
         if odometry_spike(self._last_delta, odom_delta):  # bridge the outlier odometry of the last scan
-            self.fallbacks["odometry spike bridged"] += 1
+            self.events["odometry spike bridged"] += 1
             base, base_cov = self._before
             motion = geometry.compose(self._last_delta, odom_delta)
         self._before, self._last_delta = (self.pose, self.cov), odom_delta
@@ -610,7 +610,7 @@ class CornerFrontend:
         return FrontendResult(delta=odom_delta.copy(), information=np.linalg.inv(step_cov), confidence=0.0)
 
     def _fallback(self, reason: str):
-        self.fallbacks[reason] += 1
+        self.events[reason] += 1
         log.debug("corners fallback to odometry: %s", reason)
         return None, None, None
 

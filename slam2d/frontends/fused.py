@@ -116,7 +116,7 @@ class FusedFrontend:
         self.sources = {name: create_frontend(name, self._options(name)) for name in dict.fromkeys(cfg.sources)}
         self.gate = SimilarityGate(cfg.gate)
         self._own: Counter[str] = Counter()
-        self.gate.fallbacks = self._own
+        self.gate.events = self._own
         self.accepted: Counter[str] = Counter()  # scans on which each source was fused
         self._previous: np.ndarray | None = None
 
@@ -128,11 +128,11 @@ class FusedFrontend:
         return options
 
     @property
-    def fallbacks(self) -> Counter:
-        """This frontend's fallbacks and gate rejections, and each source's own, prefixed by its name."""
+    def events(self) -> Counter:
+        """This frontend's events and gate rejections, and each source's own, prefixed by its name."""
         out = Counter(self._own)
         for name, fe in self.sources.items():
-            out.update({f"{name}: {k}": v for k, v in getattr(fe, "fallbacks", {}).items()})
+            out.update({f"{name}: {k}": v for k, v in getattr(fe, "events", {}).items()})
         return out
 
     def process(self, scan: Scan, odom_delta) -> FrontendResult:

@@ -729,7 +729,7 @@ class FuzzyVertexFrontend:
     to the map from the odometry prediction, the pose is fitted, and the maps
     are updated at the fitted pose. The returned delta is the fitted motion
     since the previous scan; with no vertex matched it is the odometry delta
-    (counted in ``fallbacks``).
+    (counted in ``events``).
     """
 
     class Config(Section):
@@ -780,7 +780,7 @@ class FuzzyVertexFrontend:
         self.pose = np.zeros(3)
         self.vertices = VertexMap()
         self.units = UnitMap(cfg.min_radius)
-        self.fallbacks: Counter[str] = Counter()
+        self.events: Counter[str] = Counter()
         self.matched_counts: list[int] = []
         self._step = -1
 
@@ -801,7 +801,7 @@ class FuzzyVertexFrontend:
         walls = self._wall_heading(units, pred) if cfg.wall_heading else None
         pose, info, pairs, gate = self._localise(pred, local, prior, walls)
         if pairs is None:
-            self.fallbacks["too few vertices matched"] += 1
+            self.events["too few vertices matched"] += 1
             if walls is not None:  # odometry translation, heading from the matched walls
                 pose, info = _combine(pred, [walls, (pred, prior)])
                 if self._diverged(pose, pred, _mahalanobis2(walls[0], pred, walls[1], prior)) is None:
@@ -809,7 +809,7 @@ class FuzzyVertexFrontend:
             return self._accept(pred, odom_delta, units, local, None, prior)
         reason = self._diverged(pose, pred, gate)
         if reason:
-            self.fallbacks[reason] += 1
+            self.events[reason] += 1
             return self._accept(pred, odom_delta, units, local, None, prior)
         self.calibration.observe(float(geometry.wrap_angle(pose[2] - pred[2])))
         return self._accept(pose, odom_delta, units, local, pairs, info)

@@ -210,7 +210,7 @@ class SimilarityGate:
 
     ``check(previous, current, result, odom_delta)`` returns ``result`` or an
     odometry fallback (odometry delta and information, confidence 0). Each
-    fallback is counted in ``fallbacks`` under ``gate: <reason>``.
+    fallback is counted in ``events`` under ``gate: <reason>``.
 
     The two scans are aligned by the match's own delta (``align = "match"``:
     a doorway, new ground or a wrong match all lower the overlap) or by the
@@ -236,7 +236,7 @@ class SimilarityGate:
 
     def __init__(self, config: Config | None = None):
         self.config = config or self.Config()
-        self.fallbacks: Counter[str] = Counter()
+        self.events: Counter[str] = Counter()
         self.odometry_information = odometry_information(self.config.odom_sigma_xy, self.config.odom_sigma_theta_deg)
         self.typical: dict[str, float] = {}  # per source: EMA of recent similarities
         self.last_similarity: float | None = None
@@ -314,7 +314,7 @@ class SimilarityGate:
     def fallback(self, reason: str, odom_delta, source: str = "") -> FrontendResult:
         """Odometry delta with the odometry information and confidence 0, counted under ``reason``."""
         key = f"gate{' ' + source if source else ''}: {reason}"
-        self.fallbacks[key] += 1
+        self.events[key] += 1
         log.debug("%s", key)
         return FrontendResult(
             delta=geometry.as_pose(odom_delta).copy(), information=self.odometry_information.copy(), confidence=0.0

@@ -30,12 +30,12 @@ in the frame of the delta and bounded so every direction's std lies in
 [min_sigma, max_sigma]. The confidence is the fraction of points whose
 residual is within ``inlier_distance``. Too few points, a non-finite or
 non-planar result, a correction beyond the divergence bound or too few
-matches fall back to odometry with confidence 0, counted in ``fallbacks``.
+matches fall back to odometry with confidence 0, counted in ``events``.
 
 Motion filter: while odometry says the robot moved less than ``still_distance``
 and ``still_angle_deg`` since the last registered scan, a scan is not
 registered (nor added to the map); its delta is the odometry one with the
-tightest information, counted in ``still``. A third of ACES is such scans.
+tightest information, counted in ``events`` as STILL_EVENT. A third of ACES is such scans.
 The filter applies only after a registration that agreed with odometry
 (within ``STILL_TRUST_XY`` and ``STILL_TRUST_THETA``): after a large correction
 the next scan is registered whatever odometry says.
@@ -58,6 +58,7 @@ from slam2d.types import Scan
 
 log = logging.getLogger(__name__)
 
+STILL_EVENT = "scans not registered (no motion)"  # key in ``events``
 STILL_TRUST_XY = 0.02  # m; a registration corrected by less than this (and ...
 STILL_TRUST_THETA = np.deg2rad(1.0)  # ... this) lets the motion filter skip the next still scans
 
@@ -121,7 +122,7 @@ class IcpFrontend:
     """Scan-to-local-map ICP with the odometry delta as the initial guess.
 
     ``pose`` is the base pose (3,) of the last scan in the frontend's local
-    frame, ``map`` the kiss-icp voxel map in that frame, ``fallbacks`` counts
+    frame, ``map`` the kiss-icp voxel map in that frame, ``events`` counts
     the scans answered with odometry, by reason.
     """
 
@@ -198,8 +199,7 @@ class IcpFrontend:
         # the odometry prior in the units of the unweighted point residuals (m^2)
         self._prior = cfg.point_sigma**2 * self._odom_information if cfg.odom_prior else np.zeros((3, 3))
         self.pose = np.zeros(3)
-        self.fallbacks: Counter[str] = Counter()
-        self.still = 0  # scans not registered because odometry saw no motion
+        self.events: Counter[str] = Counter()
         self._unregistered = np.zeros(3)  # odometry since the last registered scan
         self._trust_still = False  # the last registration agreed with odometry (see STILL_TRUST_*)
         self._last_delta = np.zeros(3)
@@ -223,7 +223,7 @@ class IcpFrontend:
             return self._first(points, guess, odom_delta)
         self._unregistered = geometry.compose(self._unregistered, odom_delta)
         if known and self._trust_still and self._is_still(self._unregistered):
-            self.still += 1
+            self.events[STILL_EVENT] += 1
             self.pose = guess
             return FrontendResult(delta=odom_delta.copy(), information=self._still_information.copy(), confidence=1.0)
         self._unregistered = np.zeros(3)
@@ -435,7 +435,7 @@ class IcpFrontend:
 
     def _fallback(self, reason: str, guess, odom_delta, points) -> FrontendResult:
         """Odometry delta, odometry information, confidence 0; counted by reason."""
-        self.fallbacks[reason] += 1
+        self.events[reason] += 1
         self._trust_still = False
         log.debug("icp fallback to odometry: %s", reason)
         self._step(guess, points)

@@ -752,9 +752,9 @@ class LineFrontend:
         self.calibration = HeadingCalibration(cfg.calibration)
         self.map = LineMap(cfg.map_max_count)
         self.pose = np.zeros(3)
-        self.fallbacks: Counter[str] = Counter()
+        self.events: Counter[str] = Counter()
         self.gate = SimilarityGate(cfg.gate)
-        self.gate.fallbacks = self.fallbacks
+        self.gate.events = self.events
         self.odometry_information = odometry_information(cfg.odom_sigma_xy, cfg.odom_sigma_theta_deg)
         self._min_sigma = np.array([cfg.min_sigma_xy, cfg.min_sigma_xy, np.deg2rad(cfg.min_sigma_theta_deg)])
         self._max_sigma = np.array([cfg.max_sigma_xy, cfg.max_sigma_xy, np.deg2rad(cfg.max_sigma_theta_deg)])
@@ -851,7 +851,7 @@ class LineFrontend:
         return FrontendResult(delta=odom_delta.copy(), information=self.odometry_information.copy(), confidence=0.0)
 
     def _fallback(self, reason: str, odom_delta) -> FrontendResult:
-        self.fallbacks[reason] += 1
+        self.events[reason] += 1
         log.debug("lines fallback to odometry: %s", reason)
         return self._odometry(odom_delta)
 
