@@ -84,13 +84,19 @@ class LoopClosureConfig(Section):
     search_radius: float = Field(8.0, gt=0, description="m; candidates within this distance of the new keyframe")
     min_travel: float = Field(10.0, ge=0, description="m travelled between a candidate and the new keyframe")
     submap_keyframes: int = Field(10, ge=0, description="neighbouring keyframes on each side forming the submap")
-    window_xy: float = Field(3.0, gt=0, description="m; half-width of the translational search window")
+    window_xy: float = Field(
+        2.0, gt=0, description="m; half-width of the translational search window (the drift it can undo)"
+    )
     window_theta_deg: float = Field(30.0, gt=0, description="half-width of the rotational search window")
     resolution: float = Field(0.05, gt=0, description="m; finest grid of the correlative matcher")
     min_score: float = Field(
         0.55, ge=0, le=1, description="mean likelihood of scan points on the submap to accept (1 = all on it)"
     )
     max_candidates: int = Field(3, gt=0, description="candidates verified per new keyframe")
+    ambiguity_distance: float = Field(
+        0.5, ge=0, description="m; reject a match with a rival this far from it or farther (0: no check) ..."
+    )
+    ambiguity_ratio: float = Field(0.9, gt=0, le=1, description="... scoring at least this fraction of its score")
 
 
 class BackendConfig(Section):

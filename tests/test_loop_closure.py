@@ -195,3 +195,23 @@ def test_candidates_skip_recent_keyframes():
     assert all(abs(a - b) > cfg.submap_keyframes for i, a in enumerate(cands) for b in cands[:i])
     with pytest.raises(ValueError, match="already added"):
         lc.add_keyframe(3, np.zeros((1, 2)), 50.0)
+
+
+def _box(x0: float) -> np.ndarray:
+    """Outline (points every 2 cm) of a 2 m x 1.5 m box open to the left, its corner at (x0, 0)."""
+    t = np.arange(0.0, 1.0, 0.01)
+    return np.vstack([np.column_stack([x0 + 2.0 * t, 0 * t]), np.column_stack([x0 + 2.0 + 0 * t, 1.5 * t]),
+                      np.column_stack([x0 + 2.0 * t, 1.5 + 0 * t])])
+
+
+def test_match_reports_a_rival_in_a_periodic_place():
+    """Two identical boxes 3 m apart: a scan of one, guessed halfway, matches both equally."""
+    scan = _box(0.0) - [1.0, 0.75]  # the box seen from its centre
+    guess = np.array([2.5, 0.75, 0.0])  # halfway between the boxes' centres (1, 0.75) and (4, 0.75)
+    twins = ProbabilityGrid(np.vstack([_box(0.0), _box(3.0)]), 0.05)
+    result = match(twins, scan, guess, 2.0, WINDOW_THETA, ambiguity_xy=0.5, ambiguity_ratio=0.9)
+    assert result.score > 0.9 and result.runner_up > 0.9 * result.search_score
+    single = ProbabilityGrid(_box(3.0), 0.05)
+    result = match(single, scan, guess, 2.0, WINDOW_THETA, ambiguity_xy=0.5, ambiguity_ratio=0.9)
+    assert result.score > 0.9 and result.runner_up == 0.0
+    assert pose_error(result.pose, [4.0, 0.75, 0.0])[0] < 0.03

@@ -52,6 +52,9 @@ class MatchResult:
     covariance: (3, 3) of ``pose``.
     search_score: best grid score of branch and bound, before refinement.
     evaluated: number of (rotation, translation) candidates scored.
+    runner_up: best grid score more than ``ambiguity_xy`` from the search's
+      best translation, when at least ``ambiguity_ratio`` times its score
+      (an alternative match: a periodic or featureless place); else 0.
     """
 
     pose: np.ndarray
@@ -59,6 +62,7 @@ class MatchResult:
     covariance: np.ndarray
     search_score: float
     evaluated: int
+    runner_up: float = 0.0
 
 
 def voxel_filter(points, cell: float) -> np.ndarray:
@@ -230,19 +234,36 @@ def _scores_kernel(level, flat, cands, width):  # pragma: no cover - compiled
     return out
 
 
-def _children(cands: np.ndarray, level: int, window: int) -> np.ndarray:
-    """The four sub-blocks at ``level - 1`` of candidates (C, 3) at ``level``, inside the window."""
+def _children(cands: np.ndarray, level: int, window: int, exclude=None) -> np.ndarray:
+    """The four sub-blocks at ``level - 1`` of candidates (C, 3) at ``level``, inside the window
+    and not wholly inside the ``exclude`` square (see :func:`_outside`)."""
     h = 2 ** (level - 1)
     steps = np.array([[0, 0, 0], [0, h, 0], [0, 0, h], [0, h, h]], dtype=np.int64)
     kids = (cands[:, None, :] + steps[None]).reshape(-1, 3)
-    return kids[(kids[:, 1] <= window) & (kids[:, 2] <= window)]
+    kids = kids[(kids[:, 1] <= window) & (kids[:, 2] <= window)]
+    return kids[_outside(kids, h, exclude)]
 
 
-def _greedy(pyr: _Pyramid, flat: np.ndarray, cand: np.ndarray, level: int) -> tuple[np.ndarray, float, int]:
+def _outside(cands: np.ndarray, size: int, exclude) -> np.ndarray:
+    """Mask of blocks (C, 3) of ``size`` cells not wholly inside ``exclude`` = (dx, dy, r) cells,
+    the square of half-width r around (dx, dy); all True when ``exclude`` is None."""
+    if exclude is None:
+        return np.ones(len(cands), dtype=bool)
+    bx, by, r = exclude
+    inside = (
+        (cands[:, 1] >= bx - r) & (cands[:, 1] + size - 1 <= bx + r)
+        & (cands[:, 2] >= by - r) & (cands[:, 2] + size - 1 <= by + r)
+    )  # fmt: skip
+    return ~inside
+
+
+def _greedy(pyr: _Pyramid, flat: np.ndarray, cand: np.ndarray, level: int, exclude=None):
     """Descend from ``cand`` at ``level`` to level 0 through the best child: (candidate, score, evaluated)."""
     width, evaluated, score = pyr.shape[1], 0, 0.0
     for k in range(level, 0, -1):
-        kids = _children(cand[None], k, pyr.window)
+        kids = _children(cand[None], k, pyr.window, exclude)
+        if len(kids) == 0:
+            return cand, -np.inf, evaluated
         s = _scores(pyr.levels[k - 1], flat, kids, width)
         evaluated += len(kids)
         cand, score = kids[np.argmax(s)], float(s.max())
@@ -252,29 +273,32 @@ def _greedy(pyr: _Pyramid, flat: np.ndarray, cand: np.ndarray, level: int) -> tu
     return cand, score, evaluated
 
 
-def _branch_and_bound(pyr: _Pyramid, flat: np.ndarray, min_score: float) -> tuple[np.ndarray, float, int]:
+def _branch_and_bound(pyr: _Pyramid, flat: np.ndarray, min_score: float, exclude=None):
     """Best (angle index, dx, dy) over all angles and the translational window, its score, evaluations.
 
     Level-synchronous branch and bound: every level's surviving blocks are
     scored in one gather; a block survives while its pooled upper bound beats
     the best exact score so far (found by greedy descents) and ``min_score``.
+    ``exclude`` = (dx, dy, r) cells leaves out the translations within r of
+    (dx, dy) (the runner-up search). The score is -inf when nothing is left.
     """
     w, depth, width = pyr.window, pyr.depth, pyr.shape[1]
     offs = np.arange(-w, w + 1, 2**depth, dtype=np.int64)
     a, dx, dy = np.meshgrid(np.arange(len(flat), dtype=np.int64), offs, offs, indexing="ij")
     cands = np.column_stack([a.ravel(), dx.ravel(), dy.ravel()])
+    cands = cands[_outside(cands, 2**depth, exclude)]
     bound = _scores(pyr.levels[depth], flat, cands, width)
     evaluated = len(cands)
     best, best_score = None, -np.inf
     for k in range(depth, 0, -1):
         if len(cands) == 0:
             break
-        c, s, n = _greedy(pyr, flat, cands[np.argmax(bound)], k)
+        c, s, n = _greedy(pyr, flat, cands[np.argmax(bound)], k, exclude)
         evaluated += n
         if s > best_score:
             best, best_score = c, s
         keep = bound > max(best_score, min_score)
-        cands = _children(cands[keep], k, w)
+        cands = _children(cands[keep], k, w, exclude)
         bound = _scores(pyr.levels[k - 1], flat, cands, width)
         evaluated += len(cands)
     if len(cands) and (best is None or bound.max() > best_score):
@@ -352,6 +376,8 @@ def match(
     *,
     min_score: float = 0.0,
     depth: int | None = None,
+    ambiguity_xy: float = 0.0,
+    ambiguity_ratio: float = 0.9,
 ) -> MatchResult:
     """Match scan points (N, 2) in the scan's base frame against ``grid``.
 
@@ -360,20 +386,25 @@ def match(
     min_score: prune blocks whose bound is below it (a faster search when the
     caller rejects lower scores anyway; the result may then be a greedy one
     below ``min_score``). depth: pooled levels (default: enough for the window,
-    at most ``MAX_DEPTH``).
+    at most ``MAX_DEPTH``). ambiguity_xy: m; when > 0, also search for the
+    runner-up outside this distance of the best (see ``MatchResult.runner_up``).
     """
     initial = geometry.as_pose(initial).reshape(3)
     pts = voxel_filter(points, grid.resolution)
     if len(pts) == 0:
         raise ValueError("match needs at least one finite scan point")
-    found, step, search_score, evaluated = _search(grid, pts, initial, window_xy, window_theta, min_score, depth)
+    ambiguity = (ambiguity_xy, ambiguity_ratio)
+    found, step, search_score, evaluated, runner_up = _search(
+        grid, pts, initial, window_xy, window_theta, min_score, depth, ambiguity
+    )
     pose, score = _polish(grid, pts, found, step)
     cov = _covariance(grid, pts, pose, np.array([window_xy, window_xy, window_theta]))
-    return MatchResult(pose, score, cov, search_score, evaluated)
+    return MatchResult(pose, score, cov, search_score, evaluated, runner_up)
 
 
-def _search(grid, pts, initial, window_xy, window_theta, min_score, depth) -> tuple[np.ndarray, float, float, int]:
-    """Branch and bound around ``initial``: (best pose (3,), angular step (rad), its grid score, evaluations)."""
+def _search(grid, pts, initial, window_xy, window_theta, min_score, depth, ambiguity):
+    """Branch and bound around ``initial``: best pose (3,), angular step (rad), its grid score,
+    evaluations, and the runner-up score (``ambiguity`` = (distance m, ratio), see ``match``)."""
     res = grid.resolution
     window = int(np.ceil(window_xy / res - 1e-9))
     if depth is None:
@@ -385,7 +416,14 @@ def _search(grid, pts, initial, window_xy, window_theta, min_score, depth) -> tu
     flat = _discretise(pyr, pts, initial[:2], thetas)
     best, score, evaluated = _branch_and_bound(pyr, flat, min_score)
     pose = np.array([*(initial[:2] + res * best[1:]), geometry.wrap_angle(thetas[best[0]])])
-    return pose, step, score, evaluated
+    runner_up, (distance, ratio) = 0.0, ambiguity
+    if distance > 0:
+        floor = ratio * score
+        exclude = (int(best[1]), int(best[2]), int(np.ceil(distance / res - 1e-9)))
+        _, second, n = _branch_and_bound(pyr, flat, floor, exclude)
+        evaluated += n
+        runner_up = second if second >= floor else 0.0
+    return pose, step, score, evaluated, runner_up
 
 
 def _polish(grid: ProbabilityGrid, pts: np.ndarray, found: np.ndarray, step: float) -> tuple[np.ndarray, float]:

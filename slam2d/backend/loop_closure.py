@@ -3,7 +3,9 @@
 :class:`LoopCloser` keeps every keyframe's points (decimated) and travelled
 distance. :meth:`LoopCloser.candidates` finds earlier keyframes near a new
 one; :meth:`LoopCloser.verify` matches the new keyframe's scan against the
-submap around a candidate with the correlative matcher and accepts on score.
+submap around a candidate with the correlative matcher and accepts on score
+when no rival match elsewhere in the window scores nearly as well (a
+periodic or featureless place aliases: the rival may be the true one).
 Consistency with the graph (a Mahalanobis gate) is the pose graph's job.
 
 Keys index the ``poses`` arrays: ``poses[k]`` is the pose of keyframe ``k``.
@@ -60,7 +62,7 @@ class LoopCloser:
     """Candidate search and verification for loop closures.
 
     ``stats`` counts candidates proposed, pairs verified, accepted, and
-    rejections by reason (``rejected_score``, ``rejected_points``).
+    rejections by reason (``rejected_score``, ``rejected_points``, ``rejected_ambiguous``).
     """
 
     def __init__(self, cfg: LoopClosureConfig | None = None):
@@ -150,10 +152,18 @@ class LoopCloser:
         guess = geometry.between(poses[anchor], poses[key])
         window_theta = np.deg2rad(cfg.window_theta_deg)
         prune = max(0.0, cfg.min_score - SEARCH_MARGIN)
-        result = match(submap.grid, points, guess, cfg.window_xy, window_theta, min_score=prune)
+        result = match(
+            submap.grid, points, guess, cfg.window_xy, window_theta, min_score=prune,
+            ambiguity_xy=cfg.ambiguity_distance, ambiguity_ratio=cfg.ambiguity_ratio,
+        )  # fmt: skip
         if result.score < cfg.min_score:
             self.stats["rejected_score"] += 1
             log.debug("loop %d -> %d rejected: score %.3f < %.3f", anchor, key, result.score, cfg.min_score)
+            return None
+        if result.runner_up > 0:
+            self.stats["rejected_ambiguous"] += 1
+            log.debug("loop %d -> %d rejected: rival match %.3f vs %.3f", anchor, key, result.runner_up,
+                      result.search_score)  # fmt: skip
             return None
         self.stats["accepted"] += 1
         moved = geometry.between(guess, result.pose)
