@@ -215,3 +215,21 @@ def test_match_reports_a_rival_in_a_periodic_place():
     result = match(single, scan, guess, 2.0, WINDOW_THETA, ambiguity_xy=0.5, ambiguity_ratio=0.9)
     assert result.score > 0.9 and result.runner_up == 0.0
     assert pose_error(result.pose, [4.0, 0.75, 0.0])[0] < 0.03
+
+
+def test_likelihood_field_matches_the_distance_transform():
+    """The splatted field equals exp(-d^2 / 2 sigma^2) from scipy's exact distance transform within the cutoff."""
+    from scipy.ndimage import distance_transform_edt
+
+    from slam2d.backend.correlative import FIELD_CUTOFF_SIGMAS, _likelihood_field
+
+    rng = np.random.default_rng(3)
+    cells = np.column_stack([rng.integers(0, 60, 40), rng.integers(0, 45, 40)])  # (col, row)
+    sigma = 1.5
+    field = _likelihood_field(cells, (45, 60), sigma)
+    occupied = np.zeros((45, 60), dtype=bool)
+    occupied[cells[:, 1], cells[:, 0]] = True
+    d = distance_transform_edt(~occupied)
+    near = d <= FIELD_CUTOFF_SIGMAS * sigma
+    assert np.allclose(field[near], np.exp(-0.5 * (d[near] / sigma) ** 2), atol=1e-6)
+    assert np.all(field[~near] == 0) and field.max() == 1.0

@@ -1,8 +1,8 @@
 """Correlative scan-to-submap matching that survives a poor initial guess.
 
 A submap becomes a :class:`ProbabilityGrid`: a likelihood field
-``exp(-d^2 / 2 sigma^2)`` (d: distance in metres to the nearest submap point)
-on a regular grid, plus max-pooled levels for branch and bound. :func:`match`
+``exp(-d^2 / 2 sigma^2)`` (d: distance in metres to the nearest cell holding
+a submap point, the field cut to 0 beyond 4 sigma) on a regular grid, plus max-pooled levels for branch and bound. :func:`match`
 sweeps every rotation of the angular window (step ``resolution / range``,
 Olson 2009, "Real-time correlative scan matching") and searches translations
 by branch and bound over the pooled levels (Hess et al. 2016, "Real-time loop
@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.ndimage import distance_transform_edt
 from scipy.spatial import cKDTree
 
 from slam2d import geometry
@@ -29,6 +28,7 @@ from slam2d import geometry
 __all__ = ["ProbabilityGrid", "MatchResult", "match", "voxel_filter", "angular_step"]
 
 SIGMA_CELLS = 1.0  # std of the likelihood field, in cells
+FIELD_CUTOFF_SIGMAS = 4.0  # the field is 0 beyond this many sigma from the submap (exp(-8) = 3e-4)
 MAX_DEPTH = 4  # pooled levels of branch and bound; top cells are 2^depth cells wide
 RANGE_PERCENTILE = 95.0  # the scan's "max range" for the angular step ignores rare far points
 MIN_RANGE = 1.0  # m; floor of that range, so close-up scans do not get huge angular steps
@@ -124,10 +124,7 @@ class ProbabilityGrid:
         self.origin = pts.min(axis=0) - margin
         cells = np.floor((pts - self.origin) / resolution).astype(np.int64)
         nx, ny = np.floor((pts.max(axis=0) + margin - self.origin) / resolution).astype(np.int64) + 1
-        occupied = np.zeros((ny, nx), dtype=bool)
-        occupied[cells[:, 1], cells[:, 0]] = True
-        d = distance_transform_edt(~occupied, sampling=resolution)
-        self.field = np.exp(-0.5 * (d / self.sigma) ** 2).astype(np.float32)
+        self.field = _likelihood_field(cells, (int(ny), int(nx)), self.sigma / resolution)
         self.points = pts
         self.tree = cKDTree(pts)
         self.normals, self.has_normal = _normals(self.tree, pts, NORMAL_RADIUS_CELLS * resolution)
@@ -171,6 +168,34 @@ class ProbabilityGrid:
             return 0.0
         d, _ = self.tree.query(pts, distance_upper_bound=5.0 * self.sigma)
         return float(np.mean(np.exp(-0.5 * (np.minimum(d, 1e3) / self.sigma) ** 2)))
+
+
+def _likelihood_field(cells: np.ndarray, shape: tuple[int, int], sigma_cells: float) -> np.ndarray:
+    """exp(-d^2 / 2 sigma^2) on a grid of ``shape`` (d: distance to the nearest occupied cell
+    ``cells`` (M, 2) = (col, row)), cut to 0 beyond ``FIELD_CUTOFF_SIGMAS`` sigma."""
+    r = int(np.ceil(FIELD_CUTOFF_SIGMAS * sigma_cells))
+    off = np.arange(-r, r + 1)
+    d2 = (off[:, None] ** 2 + off[None, :] ** 2) / sigma_cells**2
+    kernel = np.where(d2 <= FIELD_CUTOFF_SIGMAS**2, np.exp(-0.5 * d2), 0.0).astype(np.float32)
+    flat = np.unique(cells[:, 1] * shape[1] + cells[:, 0])
+    return _splat_max(flat // shape[1], flat % shape[1], shape[0], shape[1], kernel)
+
+
+@njit(cache=True, nogil=True)
+def _splat_max(rows, cols, ny, nx, kernel):  # pragma: no cover - compiled
+    """Grid (ny, nx) holding, per cell, the max of ``kernel`` centred on each (row, col)."""
+    field = np.zeros((ny, nx), dtype=np.float32)
+    r = kernel.shape[0] // 2
+    for p in range(len(rows)):
+        for dy in range(-r, r + 1):
+            y = rows[p] + dy
+            if y < 0 or y >= ny:
+                continue
+            for dx in range(-r, r + 1):
+                x = cols[p] + dx
+                if 0 <= x < nx and kernel[dy + r, dx + r] > field[y, x]:
+                    field[y, x] = kernel[dy + r, dx + r]
+    return field
 
 
 def _normals(tree: cKDTree, pts: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -387,7 +412,8 @@ def match(
     caller rejects lower scores anyway; the result may then be a greedy one
     below ``min_score``). depth: pooled levels (default: enough for the window,
     at most ``MAX_DEPTH``). ambiguity_xy: m; when > 0, also search for the
-    runner-up outside this distance of the best (see ``MatchResult.runner_up``).
+    runner-up outside this distance of the best (see ``MatchResult.runner_up``)
+    when the best's grid score reaches ``min_score``.
     """
     initial = geometry.as_pose(initial).reshape(3)
     pts = voxel_filter(points, grid.resolution)
@@ -417,7 +443,7 @@ def _search(grid, pts, initial, window_xy, window_theta, min_score, depth, ambig
     best, score, evaluated = _branch_and_bound(pyr, flat, min_score)
     pose = np.array([*(initial[:2] + res * best[1:]), geometry.wrap_angle(thetas[best[0]])])
     runner_up, (distance, ratio) = 0.0, ambiguity
-    if distance > 0:
+    if distance > 0 and score >= min_score:  # below min_score the caller rejects the match anyway
         floor = ratio * score
         exclude = (int(best[1]), int(best[2]), int(np.ceil(distance / res - 1e-9)))
         _, second, n = _branch_and_bound(pyr, flat, floor, exclude)
