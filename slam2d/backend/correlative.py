@@ -30,7 +30,7 @@ __all__ = ["ProbabilityGrid", "MatchResult", "match", "voxel_filter", "angular_s
 SIGMA_CELLS = 1.0  # std of the likelihood field, in cells
 FIELD_CUTOFF_SIGMAS = 4.0  # the field is 0 beyond this many sigma from the submap (exp(-8) = 3e-4)
 MAX_DEPTH = 4  # pooled levels of branch and bound; top cells are 2^depth cells wide
-RANGE_PERCENTILE = 95.0  # the scan's "max range" for the angular step ignores rare far points
+RANGE_PERCENTILE = 75.0  # range (percentile) for the angular step; farther points move a few cells per step
 MIN_RANGE = 1.0  # m; floor of that range, so close-up scans do not get huge angular steps
 NORMAL_NEIGHBOURS = 8  # submap points per normal estimate
 NORMAL_RADIUS_CELLS = 3.0  # neighbourhood radius of a normal estimate, in cells
@@ -78,7 +78,8 @@ def voxel_filter(points, cell: float) -> np.ndarray:
 
 
 def angular_step(points, resolution: float) -> float:
-    """Rotation step (rad) that moves a far scan point by about one cell of ``resolution`` m."""
+    """Rotation step (rad) that moves a point at the ``RANGE_PERCENTILE`` range by one cell of ``resolution`` m
+    (the refinement after the search recovers the finer angle)."""
     r = np.hypot(points[:, 0], points[:, 1])
     far = max(float(np.percentile(r, RANGE_PERCENTILE)), MIN_RANGE) if len(r) else MIN_RANGE
     return float(np.arccos(1.0 - resolution**2 / (2.0 * far**2)))
