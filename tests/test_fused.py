@@ -73,7 +73,8 @@ def calibration_run(curvature, scale, steps=400, noise_deg=0.3, seed=0, **cfg):
         if k >= steps - 100:
             left.append(corrected[2] - true[2])
         if k % 3 == 2:
-            cal.observe(-span + np.deg2rad(noise_deg) * rng.standard_normal())  # match heading - predicted
+            error = -span + np.deg2rad(noise_deg) * rng.standard_normal()  # match heading - predicted
+            cal.observe(np.array([0.0, 0.0, error]), np.zeros(3))
             span = 0.0
     return cal, np.sum(left)
 
@@ -145,16 +146,25 @@ def scan_of(points, k):
     return Scan(stamp=float(k), ranges=r[order], angles=a[order], range_min=0.01, range_max=30.0, index=k)
 
 
-def test_fused_frontend_gates_each_source_and_combines_the_rest():
-    cfg = FusedFrontend.Config(sources=["lines", "corners"], min_confidence={"lines": 0.3, "corners": 0.66})
+ODOM = np.array([0.1, 0.0, 0.0])  # odometry delta between the two wall scans of fuse_two_scans
+
+
+def fuse_two_scans(cfg, lines_result, corners_result):
+    """A FusedFrontend whose lines and corners sources answer with fixed results, run on a wall
+    scan and the same wall after moving ODOM; the frontend and its result for the second scan."""
     fe = FusedFrontend(cfg)
-    a = FrontendResult(delta=np.array([0.12, 0.0, 0.0]), information=np.diag([100.0, 100.0, 100.0]), confidence=0.9)
-    b = FrontendResult(delta=np.array([0.10, 0.02, 0.0]), information=np.diag([300.0, 100.0, 100.0]), confidence=0.66)
-    fe.sources = {"lines": Fixed(a), "corners": Fixed(b)}
-    odom = np.array([0.1, 0.0, 0.0])
+    fe.sources = {"lines": Fixed(lines_result), "corners": Fixed(corners_result)}
     points = wall_points()
     fe.process(scan_of(points, 0), np.zeros(3))
-    out = fe.process(scan_of(geometry.transform_points(geometry.inverse(odom), points), 1), odom)
+    return fe, fe.process(scan_of(geometry.transform_points(geometry.inverse(ODOM), points), 1), ODOM)
+
+
+def test_fused_frontend_gates_each_source_and_combines_the_rest():
+    cfg = FusedFrontend.Config(sources=["lines", "corners"], min_confidence={"lines": 0.3, "corners": 0.66})
+    a = FrontendResult(delta=np.array([0.12, 0.0, 0.0]), information=np.diag([100.0, 100.0, 100.0]), confidence=0.9)
+    b = FrontendResult(delta=np.array([0.10, 0.02, 0.0]), information=np.diag([300.0, 100.0, 100.0]), confidence=0.66)
+    fe, out = fuse_two_scans(cfg, a, b)
+    odom, points = ODOM, wall_points()
     assert np.allclose(out.delta, [0.105, 0.01, 0.0])
     assert np.allclose(out.information, np.diag([200.0, 100.0, 100.0]))
     # corners at 0.33 (one corner) is below its threshold: lines alone
@@ -182,14 +192,9 @@ def test_fused_frontend_beats_odometry_on_the_simulator():
 
 def test_fused_weights_scale_each_source_information():
     cfg = FusedFrontend.Config(sources=["lines", "corners"], weights={"lines": 3.0, "corners": 1.0})
-    fe = FusedFrontend(cfg)
     a = FrontendResult(delta=np.array([0.12, 0.0, 0.0]), information=np.diag([100.0, 100.0, 100.0]), confidence=0.9)
     b = FrontendResult(delta=np.array([0.10, 0.02, 0.0]), information=np.diag([300.0, 100.0, 100.0]), confidence=1.0)
-    fe.sources = {"lines": Fixed(a), "corners": Fixed(b)}
-    odom = np.array([0.1, 0.0, 0.0])
-    points = wall_points()
-    fe.process(scan_of(points, 0), np.zeros(3))
-    out = fe.process(scan_of(geometry.transform_points(geometry.inverse(odom), points), 1), odom)
+    _, out = fuse_two_scans(cfg, a, b)
     # by hand: x = 0.1 + (300 * 0.02 + 300 * 0) / 600, y = (300 * 0 + 100 * 0.02) / 400
     assert np.allclose(out.delta, [0.11, 0.005, 0.0])
     assert np.allclose(out.information, np.diag([300.0, 200.0, 200.0]))

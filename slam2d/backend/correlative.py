@@ -2,8 +2,8 @@
 
 A submap becomes a :class:`ProbabilityGrid`: a likelihood field
 ``exp(-d^2 / 2 sigma^2)`` (d: distance in metres to the nearest cell holding
-a submap point, the field cut to 0 beyond 4 sigma) on a regular grid, plus max-pooled levels for branch and bound. :func:`match`
-sweeps every rotation of the angular window (step ``resolution / range``,
+a submap point; 0 beyond 4 sigma) on a regular grid, plus max-pooled levels
+for branch and bound. :func:`match` sweeps every rotation of the angular window (step ``resolution / range``,
 Olson 2009, "Real-time correlative scan matching") and searches translations
 by branch and bound over the pooled levels (Hess et al. 2016, "Real-time loop
 closure in 2D LIDAR SLAM"), one compiled gather per level. The best cell
@@ -420,18 +420,17 @@ def match(
     pts = voxel_filter(points, grid.resolution)
     if len(pts) == 0:
         raise ValueError("match needs at least one finite scan point")
-    ambiguity = (ambiguity_xy, ambiguity_ratio)
     found, step, search_score, evaluated, runner_up = _search(
-        grid, pts, initial, window_xy, window_theta, min_score, depth, ambiguity
+        grid, pts, initial, window_xy, window_theta, min_score, depth, ambiguity_xy, ambiguity_ratio
     )
     pose, score = _polish(grid, pts, found, step)
     cov = _covariance(grid, pts, pose, np.array([window_xy, window_xy, window_theta]))
     return MatchResult(pose, score, cov, search_score, evaluated, runner_up)
 
 
-def _search(grid, pts, initial, window_xy, window_theta, min_score, depth, ambiguity):
+def _search(grid, pts, initial, window_xy, window_theta, min_score, depth, ambiguity_xy, ambiguity_ratio):
     """Branch and bound around ``initial``: best pose (3,), angular step (rad), its grid score,
-    evaluations, and the runner-up score (``ambiguity`` = (distance m, ratio), see ``match``)."""
+    evaluations, and the runner-up score (see ``match``)."""
     res = grid.resolution
     window = int(np.ceil(window_xy / res - 1e-9))
     if depth is None:
@@ -443,10 +442,10 @@ def _search(grid, pts, initial, window_xy, window_theta, min_score, depth, ambig
     flat = _discretise(pyr, pts, initial[:2], thetas)
     best, score, evaluated = _branch_and_bound(pyr, flat, min_score)
     pose = np.array([*(initial[:2] + res * best[1:]), geometry.wrap_angle(thetas[best[0]])])
-    runner_up, (distance, ratio) = 0.0, ambiguity
-    if distance > 0 and score >= min_score:  # below min_score the caller rejects the match anyway
-        floor = ratio * score
-        exclude = (int(best[1]), int(best[2]), int(np.ceil(distance / res - 1e-9)))
+    runner_up = 0.0
+    if ambiguity_xy > 0 and score >= min_score:  # below min_score the caller rejects the match anyway
+        floor = ambiguity_ratio * score
+        exclude = (int(best[1]), int(best[2]), int(np.ceil(ambiguity_xy / res - 1e-9)))
         _, second, n = _branch_and_bound(pyr, flat, floor, exclude)
         evaluated += n
         runner_up = second if second >= floor else 0.0

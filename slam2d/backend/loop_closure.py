@@ -6,7 +6,8 @@ one; :meth:`LoopCloser.verify` matches the new keyframe's scan against the
 submap around a candidate with the correlative matcher and accepts on score
 when no rival match elsewhere in the window scores nearly as well (a
 periodic or featureless place aliases: the rival may be the true one).
-Consistency with the graph (a Mahalanobis gate) is the pose graph's job.
+Consistency with the graph (the residual check after the batch optimisation)
+is the pose graph's job.
 
 Keys index the ``poses`` arrays: ``poses[k]`` is the pose of keyframe ``k``.
 """

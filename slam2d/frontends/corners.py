@@ -538,7 +538,7 @@ class CornerFrontend:
             matched, match_pose, match_cov = self._match(ext, guess, predicted, step, odom_delta)
             if matched is not None and self.gate.check(self._previous, points, matched, odom_delta) is matched:
                 result, pose, cov = matched, match_pose, match_cov
-                self.calibration.observe(float(geometry.wrap_angle(pose[2] - guess[2])))
+                self.calibration.observe(pose, guess)
         self._commit(pose, cov, ext)
         self._previous = points
         return result

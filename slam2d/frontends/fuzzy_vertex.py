@@ -811,7 +811,7 @@ class FuzzyVertexFrontend:
         if reason:
             self.events[reason] += 1
             return self._accept(pred, odom_delta, units, local, None, prior)
-        self.calibration.observe(float(geometry.wrap_angle(pose[2] - pred[2])))
+        self.calibration.observe(pose, pred)
         return self._accept(pose, odom_delta, units, local, pairs, info)
 
     def extract(self, scan: Scan, delta_a: float = 0.0, heading_error: float = 0.0) -> tuple[Units, Vertices]:

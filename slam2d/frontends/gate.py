@@ -140,8 +140,10 @@ class HeadingCalibration:
         delta[2] += float(self.applied @ phi)
         return delta
 
-    def observe(self, heading_error: float) -> None:
-        """An accepted match moved the predicted heading by ``heading_error`` (rad): refine, restart the span."""
+    def observe(self, matched, predicted) -> None:
+        """An accepted match put the base at pose ``matched`` (3,) where odometry predicted ``predicted``:
+        refine from their heading difference, restart the span."""
+        heading_error = geometry.wrap_angle(float(matched[2]) - float(predicted[2]))
         cfg = self.config
         phi, travel = self._since, self._travel
         applied = self.applied

@@ -35,7 +35,8 @@ matches fall back to odometry with confidence 0, counted in ``events``.
 Motion filter: while odometry says the robot moved less than ``still_distance``
 and ``still_angle_deg`` since the last registered scan, a scan is not
 registered (nor added to the map); its delta is the odometry one with the
-tightest information, counted in ``events`` as STILL_EVENT. A third of ACES is such scans.
+tightest information, counted in ``events`` under ``STILL_EVENT`` (a third
+of ACES is such scans).
 The filter applies only after a registration that agreed with odometry
 (within ``STILL_TRUST_XY`` and ``STILL_TRUST_THETA``): after a large correction
 the next scan is registered whatever odometry says.

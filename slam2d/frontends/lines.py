@@ -777,7 +777,7 @@ class LineFrontend:
                 if gated is not result:
                     result, pose = gated, guess
                 else:
-                    self.calibration.observe(float(geometry.wrap_angle(pose[2] - guess[2])))
+                    self.calibration.observe(pose, guess)
         self._commit(pose, segs, scan)
         self._previous = points
         return result
