@@ -7,6 +7,8 @@ dimensions, so ``compose(a, b)`` works for one pose with many or many with many.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = [
@@ -42,9 +44,18 @@ def rotation(theta) -> np.ndarray:
     return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
 
 
+def _wrap(a: float) -> float:
+    """``wrap_angle`` of one Python float."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
 def compose(a, b) -> np.ndarray:
     """a ⊕ b: pose ``b`` expressed in frame ``a``, mapped to the world frame."""
     a, b = as_pose(a), as_pose(b)
+    if a.ndim == 1 and b.ndim == 1:  # one pose: Python floats, a tenth of numpy's per-call cost
+        (ax, ay, at), (bx, by, bt) = a.tolist(), b.tolist()
+        c, s = math.cos(at), math.sin(at)
+        return np.array([ax + c * bx - s * by, ay + s * bx + c * by, _wrap(at + bt)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
@@ -54,6 +65,10 @@ def compose(a, b) -> np.ndarray:
 def inverse(a) -> np.ndarray:
     """⊖a, so that compose(a, inverse(a)) is the identity."""
     a = as_pose(a)
+    if a.ndim == 1:
+        x, y, t = a.tolist()
+        c, s = math.cos(t), math.sin(t)
+        return np.array([-c * x - s * y, s * x - c * y, _wrap(-t)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]
@@ -63,6 +78,11 @@ def inverse(a) -> np.ndarray:
 def between(a, b) -> np.ndarray:
     """Relative pose of ``b`` seen from ``a``: ⊖a ⊕ b (as gtsam.Pose2.between)."""
     a, b = as_pose(a), as_pose(b)
+    if a.ndim == 1 and b.ndim == 1:
+        (ax, ay, at), (bx, by, bt) = a.tolist(), b.tolist()
+        c, s = math.cos(at), math.sin(at)
+        dx, dy = bx - ax, by - ay
+        return np.array([c * dx + s * dy, -s * dx + c * dy, _wrap(bt - at)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
     return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], -1)

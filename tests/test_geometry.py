@@ -45,9 +45,13 @@ def test_transform_points_matches_gtsam(a, pts):
 def test_vectorised_equals_loop():
     rng = np.random.default_rng(1)
     a, b = rng.normal(size=(50, 3)) * 5, rng.normal(size=(50, 3)) * 5
-    batch = geometry.compose(a, b)
+    for f in (geometry.compose, geometry.between):  # one pose takes a scalar path
+        batch = f(a, b)
+        for i in range(50):
+            close_pose(batch[i], f(a[i], b[i]))
+    batch = geometry.inverse(a)
     for i in range(50):
-        close_pose(batch[i], geometry.compose(a[i], b[i]))
+        close_pose(batch[i], geometry.inverse(a[i]))
     close_pose(geometry.compose(a[0], b), np.array([geometry.compose(a[0], bi) for bi in b]))
 
 

@@ -12,7 +12,7 @@ sets the correspondence distance and the robust kernel.
 Two solvers share the map, the threshold and the checks:
 
 - ``point_to_line`` (default): 2D Gauss-Newton over (x, y, theta). Each scan
-  point is matched to its ``neighbours`` nearest map points (a hashed grid
+  point is matched to its ``neighbours`` nearest map points (a bucketed grid
   searched in numba); where they form a line the residual is the distance
   across it, where they do not but the scan's own neighbouring beams do, the
   residual is across the scan's line, else it is point-to-point (isolated
@@ -62,6 +62,7 @@ log = logging.getLogger(__name__)
 STILL_EVENT = "scans not registered (no motion)"  # key in ``events``
 STILL_TRUST_XY = 0.02  # m; a registration corrected by less than this (and ...
 STILL_TRUST_THETA = np.deg2rad(1.0)  # ... this) lets the motion filter skip the next still scans
+GRID_CELLS_PER_POINT = 16  # the neighbour-search grid has at most this many cells per map point
 
 __all__ = ["IcpFrontend"]
 
@@ -104,18 +105,30 @@ class _Correspondences(NamedTuple):
 
 
 class _Grid(NamedTuple):
-    """The local map's points (N, 2) hashed on a grid of ``cell`` m for neighbour search."""
+    """The local map's points bucketed on a dense grid for neighbour search.
+
+    ``points`` (N, 2) are sorted by cell; those of cell (ix, iy) are
+    ``points[start[ix * ny + iy]:start[ix * ny + iy + 1]]``. Cell (0, 0) has
+    its lower corner at (x0, y0); cells are ``cell`` m wide.
+    """
 
     points: np.ndarray
-    keys: np.ndarray
-    order: np.ndarray
+    start: np.ndarray
+    nx: int
+    ny: int
+    x0: float
+    y0: float
     cell: float
 
     @classmethod
     def build(cls, points: np.ndarray, cell: float) -> _Grid:
-        keys = _cell_keys(points, cell)
-        order = np.argsort(keys, kind="stable")
-        return cls(points, keys[order], order, cell)
+        """Bucket ``points`` (N >= 1, 2) in cells of at least ``cell`` m (wider over sparse maps)."""
+        lo = points.min(axis=0)
+        extent = points.max(axis=0) - lo
+        cell = max(cell, float(np.sqrt(extent[0] * extent[1] / (GRID_CELLS_PER_POINT * len(points)))))
+        nx, ny = (extent // cell).astype(np.int64) + 1
+        ordered, start = _bucket(points, lo[0], lo[1], cell, nx, ny)
+        return cls(ordered, start, int(nx), int(ny), float(lo[0]), float(lo[1]), cell)
 
 
 @register_frontend("icp")
@@ -347,7 +360,7 @@ class IcpFrontend:
             if kernel <= 0:
                 continue
             pose, ok = _icp_line(
-                grid.points, grid.keys, grid.order, grid.cell, source, pose, guess, self._prior,
+                grid, source, pose, guess, self._prior,
                 cfg.correspondence_factor * threshold, kernel, cfg.neighbours, cfg.along_weight, cfg.line_ratio,
                 cfg.min_cluster, cfg.max_iterations, cfg.inner_iterations, cfg.convergence,
             )
@@ -359,7 +372,7 @@ class IcpFrontend:
         """Map neighbourhoods (line fits over ``information_neighbours`` points) of ``source`` at ``pose``."""
         cfg = self.config
         return _Correspondences(*_correspond(
-            grid.points, grid.keys, grid.order, grid.cell, source, pose, cfg.information_neighbours,
+            grid, source, pose, cfg.information_neighbours,
             cfg.correspondence_factor * threshold, cfg.along_weight, cfg.line_ratio, cfg.min_cluster,
         ))
 
@@ -484,59 +497,50 @@ def _scan_normals(points, line_ratio, max_gap, half_window=2):
     return out
 
 
-_KEY_OFFSET = 1 << 20  # cell indices are shifted by this to make keys non-negative
+@njit(cache=True, nogil=True)
+def _bucket(points, x0, y0, cell, nx, ny):
+    """``points`` (N, 2) sorted by grid cell and the cells' start offsets (nx * ny + 1,); see ``_Grid``."""
+    n = len(points)
+    cells = np.empty(n, np.int64)
+    start = np.zeros(nx * ny + 1, np.int64)
+    for i in range(n):
+        ix = min(int((points[i, 0] - x0) / cell), nx - 1)
+        iy = min(int((points[i, 1] - y0) / cell), ny - 1)
+        cells[i] = ix * ny + iy
+        start[cells[i] + 1] += 1
+    for c in range(nx * ny):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    ordered = np.empty((n, 2))
+    for i in range(n):
+        ordered[fill[cells[i]]] = points[i]
+        fill[cells[i]] += 1
+    return ordered, start
 
 
 @njit(cache=True, nogil=True)
-def _cell_key(cx, cy):
-    """Integer key of grid cell (cx, cy)."""
-    return (np.int64(cx) + _KEY_OFFSET) * (2 * _KEY_OFFSET) + (np.int64(cy) + _KEY_OFFSET)
-
-
-@njit(cache=True, nogil=True)
-def _cell_keys(xy, cell):
-    """Cell keys (N,) of points ``xy`` (N, 2) on a grid of ``cell`` metres."""
-    keys = np.empty(len(xy), np.int64)
-    for i in range(len(xy)):
-        keys[i] = _cell_key(int(np.floor(xy[i, 0] / cell)), int(np.floor(xy[i, 1] / cell)))
-    return keys
-
-
-@njit(cache=True, nogil=True)
-def _lower_bound(keys, key):
-    """First index of sorted ``keys`` whose value is >= ``key`` (binary search)."""
-    lo, hi = 0, len(keys)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if keys[mid] < key:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@njit(cache=True, nogil=True)
-def _knn(map_xy, keys, order, cell, x, y, radius, idx, d2):
+def _knn(grid, x, y, radius, idx, d2):
     """The up to ``len(idx)`` map points nearest to (x, y) within ``radius``; returns their count.
 
-    ``keys`` are the sorted cell keys of ``map_xy[order]``. Rings of cells are
-    searched outwards until the next ring cannot hold a closer point. Fills
-    ``idx`` / ``d2`` (squared m) in increasing distance.
+    Rings of cells of ``grid`` (a ``_Grid``) are searched outwards until the
+    next ring cannot hold a closer point. Fills ``idx`` (rows of
+    ``grid.points``) and ``d2`` (squared m) in increasing distance.
     """
+    pts, start, nx, ny, cell = grid.points, grid.start, grid.nx, grid.ny, grid.cell
     k, n = len(idx), 0
-    cx, cy = int(np.floor(x / cell)), int(np.floor(y / cell))
+    cx, cy = int(np.floor((x - grid.x0) / cell)), int(np.floor((y - grid.y0) / cell))
     r2 = radius * radius
     ring = 0
     while (ring - 1) * cell <= radius and (n < k or ((ring - 1) * cell) ** 2 <= d2[n - 1]):
-        for ix in range(cx - ring, cx + ring + 1):
-            for iy in range(cy - ring, cy + ring + 1):
-                if max(abs(ix - cx), abs(iy - cy)) != ring:
+        for ix in range(max(cx - ring, 0), min(cx + ring + 1, nx)):
+            edge = ix == cx - ring or ix == cx + ring
+            step = 1 if edge else 2 * ring
+            for iy in range(cy - ring, cy + ring + 1, max(step, 1)):
+                if iy < 0 or iy >= ny:
                     continue
-                key = _cell_key(ix, iy)
-                j = _lower_bound(keys, key)
-                while j < len(keys) and keys[j] == key:
-                    p = order[j]
-                    dd = (map_xy[p, 0] - x) ** 2 + (map_xy[p, 1] - y) ** 2
+                c = ix * ny + iy
+                for p in range(start[c], start[c + 1]):
+                    dd = (pts[p, 0] - x) ** 2 + (pts[p, 1] - y) ** 2
                     if dd <= r2 and (n < k or dd < d2[n - 1]):
                         m = min(n, k - 1)
                         while m > 0 and d2[m - 1] > dd:
@@ -544,7 +548,6 @@ def _knn(map_xy, keys, order, cell, x, y, radius, idx, d2):
                             m -= 1
                         d2[m], idx[m] = dd, p
                         n = min(n + 1, k)
-                    j += 1
         ring += 1
     return n
 
@@ -599,7 +602,7 @@ def _line_fit(map_xy, idx, n, along, line_ratio, out_target, out_omega):
 
 
 @njit(cache=True, nogil=True)
-def _correspond(map_xy, keys, order, cell, source, pose, k, radius, along, line_ratio, min_cluster):
+def _correspond(grid, source, pose, k, radius, along, line_ratio, min_cluster):
     """Correspondences (valid (M,), target (M, 2), omega (M, 2, 2)) of ``source`` moved to ``pose``.
 
     ``source`` (M, 4) holds points and scan-line normals. The residual is
@@ -616,11 +619,11 @@ def _correspond(map_xy, keys, order, cell, source, pose, k, radius, along, line_
     for i in range(m):
         x = pose[0] + c * source[i, 0] - s * source[i, 1]
         y = pose[1] + s * source[i, 0] + c * source[i, 1]
-        n = _knn(map_xy, keys, order, cell, x, y, radius, idx, d2)
+        n = _knn(grid, x, y, radius, idx, d2)
         if n == 0:
             continue
         valid[i] = True
-        if _line_fit(map_xy, idx, n, along, line_ratio, target[i], omega[i]):
+        if _line_fit(grid.points, idx, n, along, line_ratio, target[i], omega[i]):
             continue
         if source[i, 2] != 0.0:
             nx = c * source[i, 2] - s * source[i, 3]  # the scan's own line, in the local frame
@@ -713,7 +716,7 @@ def _gauss_newton(source, pose, valid, target, omega, kernel, guess, prior, iter
 
 
 @njit(cache=True, nogil=True)
-def _icp_line(map_xy, keys, order, cell, source, start, guess, prior, radius, kernel, k, along, line_ratio,
+def _icp_line(grid, source, start, guess, prior, radius, kernel, k, along, line_ratio,
               min_cluster, iterations, inner, convergence):
     """Point-to-line ICP from ``start``: correspondences re-found each outer iteration.
 
@@ -723,7 +726,7 @@ def _icp_line(map_xy, keys, order, cell, source, start, guess, prior, radius, ke
     """
     pose, before = start.copy(), np.full(3, np.inf)
     for _ in range(iterations):
-        valid, target, omega = _correspond(map_xy, keys, order, cell, source, pose, k, radius, along, line_ratio,
+        valid, target, omega = _correspond(grid, source, pose, k, radius, along, line_ratio,
                                            min_cluster)
         if valid.sum() < 3:
             return pose, False
