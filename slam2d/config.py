@@ -140,6 +140,7 @@ class OutputConfig(Section):
 class ExperimentConfig(Section):
     name: str = "sim"
     seed: int = 0
+    parallel: bool = Field(True, description="reader and frontend in a worker process ahead of the back end")
     dataset: DatasetConfig = DatasetConfig()
     frontend: FrontendConfig = FrontendConfig()
     backend: BackendConfig = BackendConfig()

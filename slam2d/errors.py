@@ -10,3 +10,6 @@ class InputError(ValueError):
         self.where = str(where)
         self.what = what
         super().__init__(f"{self.where}: {what}")
+
+    def __reduce__(self):
+        return type(self), (self.where, self.what)

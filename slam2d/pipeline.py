@@ -1,10 +1,23 @@
-"""SlamPipeline: scans -> frontend -> back end -> poses for every scan."""
+"""SlamPipeline: scans -> frontend -> back end -> poses for every scan.
+
+With ``parallel`` (the default where processes can be forked) the reader and
+the frontend run in a forked worker process that streams ``(scan, result)``
+pairs to the back end in this process, so the two use two cores. The
+worker's frontend is a copy: its ``events`` come back in ``SlamResult.stats``
+and the reader's skip counts are copied back onto the source.
+"""
 
 from __future__ import annotations
 
+import logging
+import logging.handlers
+import multiprocessing
+import pickle
+import queue
 import time
+import traceback
 from collections import Counter
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,7 +41,7 @@ class SlamResult:
     odometry: np.ndarray
     ground_truth: np.ndarray | None
     confidences: np.ndarray
-    cpu_s: float  # process CPU time of the run (reading, frontend, back end)
+    cpu_s: float  # CPU time (s) of the run: reading, frontend, back end, in every process
     skipped: Counter = field(default_factory=Counter)
     stats: dict[str, Any] = field(default_factory=dict)
     graph: Any = None  # the PoseGraph when the back end is 'pose_graph'
@@ -58,6 +71,121 @@ class ChainBackend:
         return {}
 
 
+def frontend_steps(frontend, scans: Iterable[Scan]) -> Iterator[tuple[Scan, FrontendResult]]:
+    """Each scan with ``frontend``'s result on it; the odometry delta is taken from the previous scan."""
+    previous = None
+    for scan in scans:
+        odom_delta = np.zeros(3) if previous is None else geometry.between(previous.odom, scan.odom)
+        yield scan, frontend.process(scan, odom_delta)
+        previous = scan
+
+
+WORKER_BATCH = 32  # (scan, result) pairs per message from the worker
+SOURCE_COUNTS = ("skipped", "invalid_beams")  # reader attributes copied back from the worker
+
+
+def can_fork() -> bool:
+    """Whether a frontend worker process can be forked here (POSIX, not inside a daemonic process)."""
+    return "fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon
+
+
+class FrontendWorker:
+    """``frontend_steps(frontend, scans)`` computed in a forked process; iterate once for the pairs.
+
+    After the iteration ``events`` holds the worker frontend's events and
+    ``cpu_s`` the worker's CPU time (s). An exception in the worker is raised
+    here; leaving the ``with`` block early stops the worker.
+    """
+
+    def __init__(self, frontend, scans: Iterable[Scan]):
+        self.scans = scans
+        self.events: Counter[str] = Counter()
+        self.cpu_s = 0.0
+        ctx = multiprocessing.get_context("fork")
+        self._queue = ctx.Queue()  # unbounded: the worker never waits for the back end
+        self._process = ctx.Process(target=_work, args=(frontend, scans, self._queue), daemon=True,
+                                    name="slam2d-frontend")
+        self._process.start()
+
+    def __enter__(self) -> FrontendWorker:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._process.is_alive():
+            self._process.terminate()
+        self._process.join()
+        self._queue.close()
+
+    def __iter__(self) -> Iterator[tuple[Scan, FrontendResult]]:
+        while True:
+            kind, payload = self._next_message()
+            if kind == "pairs":
+                yield from payload
+            elif kind == "log":
+                logging.getLogger(payload.name).handle(payload)
+            elif kind == "error":
+                raise payload
+            else:
+                self.events, self.cpu_s = payload["events"], payload["cpu_s"]
+                for name, value in payload["source"].items():
+                    setattr(self.scans, name, value)
+                return
+
+    def _next_message(self):
+        """The worker's next message; RuntimeError if it died without a word."""
+        while True:
+            try:
+                return self._queue.get(timeout=1.0)
+            except queue.Empty:
+                if not self._process.is_alive():
+                    raise RuntimeError(f"frontend worker died (exit code {self._process.exitcode})") from None
+
+
+class _QueueSink:
+    """The ``put_nowait`` of a queue for logging's QueueHandler: records go up as ("log", record)."""
+
+    def __init__(self, out):
+        self.out = out
+
+    def put_nowait(self, record: logging.LogRecord) -> None:
+        self.out.put(("log", record))
+
+
+def _log_through(out) -> None:
+    """In the worker: every log record goes to the parent's handlers, none to the inherited ones."""
+    loggers = [logging.getLogger()] + [
+        lg for lg in logging.root.manager.loggerDict.values() if isinstance(lg, logging.Logger)
+    ]
+    for logger in loggers:
+        for handler in list(logger.handlers):
+            logger.removeHandler(handler)
+    logging.getLogger().addHandler(logging.handlers.QueueHandler(_QueueSink(out)))
+
+
+def _work(frontend, scans, out) -> None:
+    """Worker body: send batches of pairs, then the frontend's events and the reader's counts."""
+    try:
+        _log_through(out)
+        batch = []
+        for pair in frontend_steps(frontend, scans):
+            batch.append(pair)
+            if len(batch) == WORKER_BATCH:
+                out.put(("pairs", batch))
+                batch = []
+        out.put(("pairs", batch))
+        out.put(("done", {
+            "events": Counter(getattr(frontend, "events", {})),
+            "cpu_s": time.process_time(),
+            "source": {name: getattr(scans, name) for name in SOURCE_COUNTS if hasattr(scans, name)},
+        }))
+    except BaseException as err:  # noqa: BLE001 - every failure is reported to the parent
+        try:
+            pickle.dumps(err)
+        except Exception:  # noqa: BLE001
+            err = RuntimeError(f"frontend worker failed:\n{traceback.format_exc()}")
+        out.put(("error", err))
+
+
 class SlamPipeline:
     """Runs the configured frontend and back end over a scan stream."""
 
@@ -74,11 +202,22 @@ class SlamPipeline:
     def run(self, scans: Iterable[Scan], on_scan: Callable[[], None] | None = None) -> SlamResult:
         """Process every scan; ``on_scan`` is called after each one (progress)."""
         t0 = time.process_time()
+        if self.cfg.parallel and can_fork():
+            with FrontendWorker(self.frontend, scans) as worker:
+                result = self._consume(worker, scans, on_scan)
+            result.stats.update({f"frontend {k}": v for k, v in worker.events.items()})
+            result.cpu_s += worker.cpu_s
+        else:
+            result = self._consume(frontend_steps(self.frontend, scans), scans, on_scan)
+            result.stats.update({f"frontend {k}": v for k, v in getattr(self.frontend, "events", {}).items()})
+        result.cpu_s += time.process_time() - t0
+        return result
+
+    def _consume(self, steps, scans, on_scan) -> SlamResult:
+        """Feed the (scan, result) pairs to the back end; the result without the frontend's events."""
         kept: list[Scan] = []
         confidences = []
-        for scan in scans:
-            odom_delta = np.zeros(3) if not kept else geometry.between(kept[-1].odom, scan.odom)
-            result = self.frontend.process(scan, odom_delta)
+        for scan, result in steps:
             self.backend.add(scan, result)
             confidences.append(result.confidence)
             kept.append(scan)
@@ -89,8 +228,6 @@ class SlamPipeline:
             raise InputError(getattr(scans, "name", "dataset"), f"no usable scan (skipped: {skipped})")
         poses = self.backend.finish()
         gts = [s.ground_truth for s in kept]
-        stats = dict(self.backend.summary())
-        stats.update({f"frontend {k}": v for k, v in getattr(self.frontend, "events", {}).items()})
         return SlamResult(
             scans=kept,
             stamps=np.array([s.stamp for s in kept]),
@@ -98,8 +235,8 @@ class SlamPipeline:
             odometry=np.array([s.odom for s in kept]),
             ground_truth=None if any(g is None for g in gts) else np.array(gts),
             confidences=np.array(confidences),
-            cpu_s=time.process_time() - t0,
+            cpu_s=0.0,
             skipped=Counter(getattr(scans, "skipped", {})),
-            stats=stats,
+            stats=dict(self.backend.summary()),
             graph=self.backend.graph,
         )

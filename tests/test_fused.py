@@ -187,7 +187,7 @@ def test_fused_frontend_beats_odometry_on_the_simulator():
     odo = ate(result.odometry, result.ground_truth)["rmse"]
     assert est < 0.5 * odo, (est, odo)
     assert set(pipeline.frontend.sources) == {"lines", "corners", "icp"}
-    assert pipeline.frontend.accepted["lines"] > 150
+    assert result.stats["frontend fused lines"] > 150
 
 
 def test_fused_weights_scale_each_source_information():

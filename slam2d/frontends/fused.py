@@ -117,7 +117,6 @@ class FusedFrontend:
         self.gate = SimilarityGate(cfg.gate)
         self._own: Counter[str] = Counter()
         self.gate.events = self._own
-        self.accepted: Counter[str] = Counter()  # scans on which each source was fused
         self._previous: np.ndarray | None = None
 
     def _options(self, name: str) -> dict[str, Any]:
@@ -129,7 +128,8 @@ class FusedFrontend:
 
     @property
     def events(self) -> Counter:
-        """This frontend's events and gate rejections, and each source's own, prefixed by its name."""
+        """Scans each source was fused on ("fused lines"), gate rejections, fallbacks, and each source's own
+        events prefixed by its name."""
         out = Counter(self._own)
         for name, fe in self.sources.items():
             out.update({f"{name}: {k}": v for k, v in getattr(fe, "events", {}).items()})
@@ -151,7 +151,7 @@ class FusedFrontend:
                 accepted[name] = res
         if not accepted:
             return self._fallback("no source accepted", odom_delta)
-        self.accepted.update(accepted.keys())
+        self._own.update(f"fused {name}" for name in accepted)
         weights = [self.config.weights.get(name, 1.0) for name in accepted]
         delta, info = fuse_deltas(odom_delta, [r.delta for r in accepted.values()],
                                   [w * r.information for w, r in zip(weights, accepted.values())],
