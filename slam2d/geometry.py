@@ -114,6 +114,8 @@ def interpolate(stamps, poses, query) -> np.ndarray:
     if len(stamps) == 1:
         out = np.repeat(poses[None, 0], len(q), axis=0)
         return out if np.ndim(query) else out[0]
+    if not np.ndim(query):  # one stamp (a reader's per-scan call): Python floats
+        return _interpolate_one(stamps, poses, float(q[0]))
     i = np.clip(np.searchsorted(stamps, q, side="right") - 1, 0, len(stamps) - 2)
     t0, t1 = stamps[i], stamps[i + 1]
     dt = t1 - t0
@@ -124,6 +126,15 @@ def interpolate(stamps, poses, query) -> np.ndarray:
     th = wrap_angle(p0[:, 2] + w * wrap_angle(p1[:, 2] - p0[:, 2]))
     out = np.column_stack([xy, th])
     return out if np.ndim(query) else out[0]
+
+
+def _interpolate_one(stamps: np.ndarray, poses: np.ndarray, q: float) -> np.ndarray:
+    """``interpolate`` at one time ``q`` (s); ``stamps`` has at least two entries."""
+    i = min(max(int(np.searchsorted(stamps, q, side="right")) - 1, 0), len(stamps) - 2)
+    t0, t1 = stamps[i].item(), stamps[i + 1].item()
+    w = min(max((q - t0) / (t1 - t0), 0.0), 1.0) if t1 > t0 else 0.0
+    (x0, y0, a0), (x1, y1, a1) = poses[i].tolist(), poses[i + 1].tolist()
+    return np.array([x0 + w * (x1 - x0), y0 + w * (y1 - y0), _wrap(a0 + w * _wrap(a1 - a0))])
 
 
 def adjoint(pose) -> np.ndarray:

@@ -71,6 +71,17 @@ def test_interpolate_midpoint_and_shortest_arc():
     assert np.allclose(clamped, poses)
 
 
+def test_interpolate_one_stamp_equals_many():
+    rng = np.random.default_rng(2)
+    stamps = np.sort(rng.uniform(0, 10, 30))
+    stamps[5] = stamps[4]  # a repeated stamp
+    poses = rng.normal(size=(30, 3)) * 3
+    query = np.concatenate([rng.uniform(-1, 11, 200), stamps[3:7]])
+    batch = geometry.interpolate(stamps, poses, query)
+    for q, expected in zip(query, batch):
+        close_pose(geometry.interpolate(stamps, poses, q), expected)
+
+
 def test_bad_pose_shape():
     with pytest.raises(ValueError, match="3 values"):
         geometry.compose([1, 2], [0, 0, 0])

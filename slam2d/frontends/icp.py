@@ -16,8 +16,9 @@ Two solvers share the map, the threshold and the checks:
   searched in numba); where they form a line the residual is the distance
   across it, where they do not but the scan's own neighbouring beams do, the
   residual is across the scan's line, else it is point-to-point (isolated
-  points are dropped). Geman-McClure weights with the adaptive scale, then a
-  refinement with the fixed ``refine_kernel``; a weak prior on the odometry
+  points are dropped). Geman-McClure weights with the adaptive scale to
+  ``coarse_convergence``, then a refinement with the fixed ``refine_kernel``
+  to ``convergence``; a weak prior on the odometry
   delta keeps directions the scan cannot see (corridors) at odometry.
 - ``point_to_point``: kiss-icp's own 6-DoF ``Registration`` on (x, y, 0)
   points, projected to SE(2). With every point at z = 0 the z rows of the
@@ -172,6 +173,9 @@ class IcpFrontend:
         max_iterations: int = Field(20, gt=0, description="correspondence searches per scan")
         inner_iterations: int = Field(3, gt=0, description="Gauss-Newton steps per correspondence search")
         convergence: float = Field(1e-4, gt=0, description="stop when the update is below this (m and rad)")
+        coarse_convergence: float = Field(
+            3e-3, gt=0, description="... in the adaptive-kernel pass before a refinement (m and rad)"
+        )
         odom_prior: bool = Field(True, description="regularise the match with the odometry delta (point_to_line)")
         point_sigma: float = Field(0.03, gt=0, description="m; std of one point residual: prior weight vs points")
         inlier_distance: float = Field(0.1, gt=0, description="m; residual of a point counted as matched")
@@ -356,13 +360,15 @@ class IcpFrontend:
         """Point-to-line ICP with the adaptive kernel, then refined with ``refine_kernel``; None if it failed."""
         cfg = self.config
         pose = start
-        for kernel in (cfg.kernel_factor * threshold, cfg.refine_kernel):
-            if kernel <= 0:
-                continue
+        if cfg.refine_kernel > 0:
+            passes = ((cfg.kernel_factor * threshold, cfg.coarse_convergence), (cfg.refine_kernel, cfg.convergence))
+        else:
+            passes = ((cfg.kernel_factor * threshold, cfg.convergence),)
+        for kernel, convergence in passes:
             pose, ok = _icp_line(
                 grid, source, pose, guess, self._prior,
                 cfg.correspondence_factor * threshold, kernel, cfg.neighbours, cfg.along_weight, cfg.line_ratio,
-                cfg.min_cluster, cfg.max_iterations, cfg.inner_iterations, cfg.convergence,
+                cfg.min_cluster, cfg.max_iterations, cfg.inner_iterations, convergence,
             )
             if not ok:
                 return None
