@@ -92,17 +92,15 @@ def _to3d(points: np.ndarray) -> np.ndarray:
     return np.column_stack([points, np.zeros(len(points))])
 
 
-class _Correspondences(NamedTuple):
-    """Map neighbourhoods of the scan points (M of them), in the local frame.
+class _Fit(NamedTuple):
+    """A registered pose's fit to the map: the fraction of scan points matched within
+    ``inlier_distance`` and the robust normal equations (H (3, 3), sum of w e^2 in m^2,
+    sum of w) of its residuals, for the information."""
 
-    valid (M,): a map point lies within the search distance; target (M, 2):
-    the point a residual is measured from; omega (M, 2, 2): the residual's
-    weighting (line normal, or identity where the neighbourhood is no line).
-    """
-
-    valid: np.ndarray
-    target: np.ndarray
-    omega: np.ndarray
+    matched: float
+    h: np.ndarray
+    weighted_sq: float
+    weight_sum: float
 
 
 class _Grid(NamedTuple):
@@ -256,19 +254,19 @@ class IcpFrontend:
         if found is None:
             return self._fallback("registration failed (non-finite, non-planar or < 3 matches)", guess, odom_delta,
                                   points)
-        pose, corr, matched = found
+        pose, fit = found
         reason = self._diverged(pose, guess)
         if reason:
             return self._fallback(reason, guess, odom_delta, points)
-        if matched < cfg.min_inlier_fraction:
+        if fit.matched < cfg.min_inlier_fraction:
             return self._fallback(f"matched fraction below {cfg.min_inlier_fraction}", guess, odom_delta, points)
-        information = self._information(source, pose, corr, threshold)
+        information = self._information(fit)
         correction = geometry.between(guess, pose)
         self._threshold._update_model_deviation(_pose_to_matrix(correction))
         self._trust_still = bool(
             np.hypot(correction[0], correction[1]) < STILL_TRUST_XY and abs(correction[2]) < STILL_TRUST_THETA
         )
-        return self._accept(pose, points, information, matched)
+        return self._accept(pose, points, information, fit.matched)
 
     def _is_still(self, motion: np.ndarray) -> bool:
         cfg = self.config
@@ -315,23 +313,23 @@ class IcpFrontend:
         return _Grid.build(points, max(cfg.correspondence_factor * threshold / 3, 0.5 * cfg.map_voxel_size))
 
     def _best_match(self, source, guess, threshold, grid):
-        """(pose, correspondences, matched fraction) of the best start, or None if all failed.
+        """(pose, fit) of the best start, or None if all failed.
 
         Starts from the odometry guess; if under ``retry_below`` of the points
         match, also from the constant-velocity and the no-motion predictions
         (odometry glitches), keeping the start that matches most points.
         """
         best = self._match(source, guess, guess, threshold, grid)
-        if best is not None and best[2] >= self.config.retry_below:
+        if best is not None and best[1].matched >= self.config.retry_below:
             return best
         for start in (geometry.compose(self.pose, self._last_delta), self.pose):
             other = self._match(source, start, guess, threshold, grid)
-            if other is not None and (best is None or other[2] > best[2]):
+            if other is not None and (best is None or other[1].matched > best[1].matched):
                 best = other
         return best
 
     def _match(self, source, start, guess, threshold, grid):
-        """Register from ``start`` (prior at ``guess``); (pose, correspondences, matched fraction) or None."""
+        """Register from ``start`` (prior at ``guess``); (pose, its _Fit) or None."""
         cfg = self.config
         if cfg.method == "point_to_point":
             pose = self._register_kiss(source, start, threshold)
@@ -339,8 +337,12 @@ class IcpFrontend:
             pose = self._register_line(source, start, guess, threshold, grid)
         if pose is None:
             return None
-        corr = self._correspondences(grid, source, pose, threshold)
-        return pose, corr, self._matched_fraction(source, pose, corr)
+        refined = cfg.method == "point_to_line" and cfg.refine_kernel > 0
+        kernel = cfg.refine_kernel if refined else cfg.kernel_factor * threshold
+        return pose, _Fit(*_fit(
+            grid, source, pose, cfg.information_neighbours, cfg.correspondence_factor * threshold,
+            cfg.along_weight, cfg.line_ratio, cfg.min_cluster, kernel, cfg.inlier_distance,
+        ))
 
     def _register_kiss(self, source, start, threshold) -> np.ndarray | None:
         """kiss-icp's 6-DoF point-to-point ICP, checked planar and projected to SE(2)."""
@@ -374,32 +376,15 @@ class IcpFrontend:
                 return None
         return pose
 
-    def _correspondences(self, grid: _Grid, source, pose, threshold) -> _Correspondences:
-        """Map neighbourhoods (line fits over ``information_neighbours`` points) of ``source`` at ``pose``."""
-        cfg = self.config
-        return _Correspondences(*_correspond(
-            grid, source, pose, cfg.information_neighbours,
-            cfg.correspondence_factor * threshold, cfg.along_weight, cfg.line_ratio, cfg.min_cluster,
-        ))
-
-    def _matched_fraction(self, source, pose, corr: _Correspondences) -> float:
-        """Fraction of scan points whose residual at ``pose`` is within ``inlier_distance``."""
-        r = geometry.transform_points(pose, source[:, :2]) - corr.target
-        e2 = np.einsum("ki,kij,kj->k", r, corr.omega, r)
-        return float(np.mean(corr.valid & (e2 <= self.config.inlier_distance**2)))
-
-    def _information(self, source, pose, corr, threshold) -> np.ndarray:
+    def _information(self, fit: _Fit) -> np.ndarray:
         """Information (3, 3) of the delta: J^T W J / sigma^2 (+ odometry prior), bounded.
 
         Computed for the pose in the local frame, then expressed in the
         previous base frame (the frame of the delta).
         """
         cfg = self.config
-        refined = cfg.method == "point_to_line" and cfg.refine_kernel > 0
-        kernel = cfg.refine_kernel if refined else cfg.kernel_factor * threshold
-        h, _, sq, wsum = _normal_equations(source, pose, corr.valid, corr.target, corr.omega, kernel)
-        sigma2 = max(sq / max(wsum - 3, 1.0), cfg.min_sigma_xy**2)
-        info = h / sigma2 + (self._odom_information if cfg.odom_prior and cfg.method == "point_to_line" else 0.0)
+        sigma2 = max(fit.weighted_sq / max(fit.weight_sum - 3, 1.0), cfg.min_sigma_xy**2)
+        info = fit.h / sigma2 + (self._odom_information if cfg.odom_prior and cfg.method == "point_to_line" else 0.0)
         a = np.eye(3)
         a[:2, :2] = geometry.rotation(self.pose[2])
         return _bounded(a.T @ info @ a, cfg)
@@ -678,6 +663,22 @@ def _normal_equations(source, pose, valid, target, omega, kernel):
 
 
 @njit(cache=True, nogil=True)
+def _fit(grid, source, pose, k, radius, along, line_ratio, min_cluster, kernel, inlier_distance):
+    """(matched fraction, H, sum w e^2, sum w) of ``source`` at ``pose``: see ``_Fit``."""
+    valid, target, omega = _correspond(grid, source, pose, k, radius, along, line_ratio, min_cluster)
+    h, _, weighted_sq, weight_sum = _normal_equations(source, pose, valid, target, omega, kernel)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    matched = 0
+    for i in range(len(source)):
+        if valid[i]:
+            rx = pose[0] + c * source[i, 0] - s * source[i, 1] - target[i, 0]
+            ry = pose[1] + s * source[i, 0] + c * source[i, 1] - target[i, 1]
+            e2 = rx * (omega[i, 0, 0] * rx + omega[i, 0, 1] * ry) + ry * (omega[i, 1, 0] * rx + omega[i, 1, 1] * ry)
+            matched += e2 <= inlier_distance * inlier_distance
+    return matched / max(len(source), 1), h, weighted_sq, weight_sum
+
+
+@njit(cache=True, nogil=True)
 def _abs_max(v):
     """max |v_i| of a 3-vector."""
     return max(abs(v[0]), abs(v[1]), abs(v[2]))
@@ -756,7 +757,8 @@ def _bounded(info: np.ndarray, cfg) -> np.ndarray:
     return _clip_eigen(info, lo, floor=False)
 
 
-def _clip_eigen(info: np.ndarray, scale: np.ndarray, floor: bool) -> np.ndarray:
+@njit(cache=True, nogil=True)
+def _clip_eigen(info, scale, floor):
     """Clip eigenvalues of diag(scale) info diag(scale) at 1 from below (floor) or above."""
     normalised = scale[:, None] * info * scale[None, :]
     vals, vecs = np.linalg.eigh(normalised)
