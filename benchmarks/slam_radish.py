@@ -1,26 +1,32 @@
 """Relations metric, wall clock and peak memory of `slam2d run` on the Radish logs.
 
-Usage: .venv/bin/python benchmarks/slam_radish.py [intel aces ...] [--set KEY=VALUE ...]
-Runs each experiments/<log>.yaml in a fresh process (as a user would), then
-prints the relations metric beside the published figures.
+Usage: .venv/bin/python benchmarks/slam_radish.py [intel aces ...] [--repeat N] [--set KEY=VALUE ...]
+Runs each experiments/<log>.yaml in a fresh process (as a user would), N times
+(default 3) alternating with the same run in one process (``parallel=false``)
+as the peer: the table gives the median wall clock of each, their ratio, the
+real-time factor beside Cartographer's, and the relations metric of the last
+run beside the published figures.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import re
+import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-PUBLISHED = {  # absolute translational error (m), mean ± std; Cartographer wall clock (s)
-    "intel": {"graph mapping": "0.031 ± 0.026", "Cartographer": "0.0229 ± 0.0239", "carto_s": 179},
-    "aces": {"graph mapping": "0.044 ± 0.044", "Cartographer": "0.0375 ± 0.0426", "carto_s": 41},
+PUBLISHED = {  # absolute translational error (m), mean ± std; Cartographer wall clock (s) and log length (s)
+    "intel": {"graph mapping": "0.031 ± 0.026", "Cartographer": "0.0229 ± 0.0239", "carto_s": 179, "log_s": 2691},
+    "aces": {"graph mapping": "0.044 ± 0.044", "Cartographer": "0.0375 ± 0.0426", "carto_s": 41, "log_s": 1366},
 }
 
 
 def run(log: str, overrides: list[str]) -> dict:
+    """metrics.json of one `slam2d run` plus its wall clock (s) seen from outside."""
     root = Path("results/bench")
     cmd = [sys.executable, "-m", "slam2d.cli", "run", f"experiments/{log}.yaml", "-q", "--set", f"output.root={root}"]
     for o in overrides:
@@ -34,20 +40,33 @@ def run(log: str, overrides: list[str]) -> dict:
 
 
 def main(argv: list[str]) -> None:
-    overrides = [a for a in argv if "=" in a and not a.startswith("--")]
-    logs = [a for a in argv if a in PUBLISHED] or list(PUBLISHED)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("logs", nargs="*", help=f"some of {', '.join(PUBLISHED)} (default: all)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per log and mode; medians are reported")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
+    args = ap.parse_args(argv)
+    unknown = set(args.logs) - set(PUBLISHED)
+    if unknown:
+        ap.error(f"unknown log(s) {sorted(unknown)}; choose from {list(PUBLISHED)}")
     print("| log | trans. abs (m) | trans. sq (m²) | rot. abs (deg) | rot. sq (deg²) | odometry trans. abs (m) "
-          "| graph mapping | Cartographer | wall clock (s) | peak RSS (MB) |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for log in logs:
-        m = run(log, overrides)
-        r, o = m["relations"], m["odometry_relations"]
-        p = PUBLISHED[log]
+          "| graph mapping | Cartographer | wall clock (s), median [min–max] | one process (s) | speed-up "
+          "| × real time (Cartographer on 6 cores) | peak RSS (MB) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for log in args.logs or list(PUBLISHED):
+        walls, singles = [], []
+        for _ in range(args.repeat):
+            m = run(log, args.overrides)
+            walls.append(m["wall_s"])
+            singles.append(run(log, [*args.overrides, "parallel=false"])["wall_s"])
+        r, o, p = m["relations"], m["odometry_relations"], PUBLISHED[log]
+        wall, single = statistics.median(walls), statistics.median(singles)
         print(
             f"| {log} | {r['trans_abs_mean']:.4f} ± {r['trans_abs_std']:.4f} | {r['trans_sq_mean']:.5f} ± {r['trans_sq_std']:.5f} "
             f"| {r['rot_abs_mean']:.3f} ± {r['rot_abs_std']:.3f} | {r['rot_sq_mean']:.3f} ± {r['rot_sq_std']:.3f} "
             f"| {o['trans_abs_mean']:.3f} | {p['graph mapping']} | {p['Cartographer']} "
-            f"| {m['wall_s']:.1f} (Cartographer {p['carto_s']} on 6 cores) | {m['peak_rss_mb']:.0f} |"
+            f"| {wall:.1f} [{min(walls):.1f}–{max(walls):.1f}] | {single:.1f} | {single / wall:.2f} "
+            f"| {p['log_s'] / wall:.0f} ({p['log_s'] / p['carto_s']:.0f}) | {m['peak_rss_mb']:.0f} |",
+            flush=True,
         )
 
 

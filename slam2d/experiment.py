@@ -178,7 +178,8 @@ def _publish(work: Path, root: Path, name: str) -> Path:
 
 
 def _peak_rss_mb() -> float:
-    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    """Peak resident memory (MB) of this process plus its largest finished child (the frontend worker)."""
+    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss + resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     return kb / 1024.0
 
 

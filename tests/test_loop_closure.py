@@ -233,3 +233,16 @@ def test_likelihood_field_matches_the_distance_transform():
     near = d <= FIELD_CUTOFF_SIGMAS * sigma
     assert np.allclose(field[near], np.exp(-0.5 * (d[near] / sigma) ** 2), atol=1e-6)
     assert np.all(field[~near] == 0) and field.max() == 1.0
+
+
+def test_pyramid_levels_bound_every_cell_they_cover():
+    """Level k holds, per cell, the max of the field over the 2^k x 2^k cells from it (branch and bound's bound)."""
+    rng = np.random.default_rng(4)
+    grid = ProbabilityGrid(rng.uniform(0, 3, (60, 2)), resolution=0.1)
+    pyr = grid.pyramid(window=4, depth=3)
+    ny, nx = pyr.shape
+    base = pyr.levels[0].reshape(ny, nx)
+    for k in range(1, 4):
+        level, w = pyr.levels[k].reshape(ny, nx), 2**k
+        for i, j in zip(rng.integers(0, ny, 300), rng.integers(0, nx, 300)):
+            assert level[i, j] == base[i:i + w, j:j + w].max()

@@ -147,11 +147,7 @@ class ProbabilityGrid:
         level = np.pad(self.field, pad)
         levels = [level]
         for k in range(1, depth + 1):
-            h = 2 ** (k - 1)
-            nxt = level.copy()
-            np.maximum(nxt[:-h], level[h:], out=nxt[:-h])
-            np.maximum(nxt[:, :-h], nxt[:, h:].copy(), out=nxt[:, :-h])
-            level = nxt
+            level = _pool(level, 2 ** (k - 1))
             levels.append(level)
         return _Pyramid(
             levels=[lv.ravel() for lv in levels],
@@ -169,6 +165,19 @@ class ProbabilityGrid:
             return 0.0
         d, _ = self.tree.query(pts, distance_upper_bound=5.0 * self.sigma)
         return float(np.mean(np.exp(-0.5 * (np.minimum(d, 1e3) / self.sigma) ** 2)))
+
+
+@njit(cache=True, nogil=True)
+def _pool(level, h):  # pragma: no cover - compiled
+    """Each cell's max over the 2 x 2 cells ``h`` apart: itself, right, below, below right (clipped)."""
+    ny, nx = level.shape
+    out = np.empty_like(level)
+    for i in range(ny):
+        i2 = i + h if i + h < ny else i
+        for j in range(nx):
+            j2 = j + h if j + h < nx else j
+            out[i, j] = max(max(level[i, j], level[i, j2]), max(level[i2, j], level[i2, j2]))
+    return out
 
 
 def _likelihood_field(cells: np.ndarray, shape: tuple[int, int], sigma_cells: float) -> np.ndarray:
