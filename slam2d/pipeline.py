@@ -152,14 +152,13 @@ class _QueueSink:
 
 
 def _log_through(out) -> None:
-    """In the worker: every log record goes to the parent's handlers, none to the inherited ones."""
-    loggers = [logging.getLogger()] + [
-        lg for lg in logging.root.manager.loggerDict.values() if isinstance(lg, logging.Logger)
-    ]
-    for logger in loggers:
-        for handler in list(logger.handlers):
-            logger.removeHandler(handler)
-    logging.getLogger().addHandler(logging.handlers.QueueHandler(_QueueSink(out)))
+    """In the worker: every record propagates to one handler at the root that sends it to the parent,
+    where its logger handles it with the parent's handlers; the inherited handlers are removed."""
+    for logger in [lg for lg in logging.root.manager.loggerDict.values() if isinstance(lg, logging.Logger)]:
+        logger.handlers.clear()
+        logger.propagate = True
+    logging.root.handlers.clear()
+    logging.root.addHandler(logging.handlers.QueueHandler(_QueueSink(out)))
 
 
 def _work(frontend, scans, out) -> None:

@@ -49,10 +49,20 @@ class FailsAtScan5:
         return FrontendResult(delta=np.asarray(odom_delta, float), information=np.eye(3), confidence=1.0)
 
 
-def test_worker_error_is_raised_with_its_type_and_logs_reach_the_parent(caplog):
-    with caplog.at_level(logging.WARNING), pytest.raises(InputError, match="scan 5: unreadable"):
-        run("dataset.max_scans=20", "frontend.name=fails_at_scan_5", "parallel=true")
-    assert "scan 3 looked odd" in caplog.text
+def test_worker_error_is_raised_with_its_type_and_logs_reach_the_parent():
+    records = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = records.append
+    logger = logging.getLogger("slam2d")
+    propagate, logger.propagate = logger.propagate, False  # as the command line sets it
+    logger.addHandler(handler)
+    try:
+        with pytest.raises(InputError, match="scan 5: unreadable"):
+            run("dataset.max_scans=20", "frontend.name=fails_at_scan_5", "parallel=true")
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
+    assert [r.getMessage() for r in records if r.name == "slam2d.test"] == ["scan 3 looked odd"]
 
 
 class WithEmptyScans(ScanSource):
