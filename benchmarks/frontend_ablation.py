@@ -8,8 +8,8 @@ table from each run's ``metrics.json``:
 - relations metric (absolute translational error, m, and rotational error, deg,
   mean ± std) where a relations file is given, and the odometry's beside it;
 - ATE RMSE (m) against ground truth where there is one (the simulator);
-- CPU ms per scan (``cpu_ms_per_scan``: process CPU time of the run's
-  reading, frontend and back end over the scans); the wall-clock figure
+- CPU ms per scan (``cpu_ms_per_scan``: CPU time of the run's reading,
+  frontend and back end over the scans, the frontend worker's included); the wall-clock figure
   (``timings_s.slam``) goes to the CSV;
 - loop closures accepted (``slam.loop closures kept``: added and kept after
   the final optimisation) and rejected (``slam.loop closures rejected``: by the
