@@ -144,15 +144,11 @@ class ProbabilityGrid:
 
     def _build_pyramid(self, window: int, depth: int) -> _Pyramid:
         pad = 2 * window + 2 ** (depth + 1) + 2
-        level = np.pad(self.field, pad)
-        levels = [level]
-        for k in range(1, depth + 1):
-            level = _pool(level, 2 ** (k - 1))
-            levels.append(level)
+        levels = _pooled_levels(self.field, depth, pad)
         return _Pyramid(
             levels=[lv.ravel() for lv in levels],
             origin=self.origin - pad * self.resolution,
-            shape=level.shape,
+            shape=levels.shape[1:],
             resolution=self.resolution,
             window=window,
             depth=depth,
@@ -168,15 +164,29 @@ class ProbabilityGrid:
 
 
 @njit(cache=True, nogil=True)
-def _pool(level, h):  # pragma: no cover - compiled
-    """Each cell's max over the 2 x 2 cells ``h`` apart: itself, right, below, below right (clipped)."""
-    ny, nx = level.shape
-    out = np.empty_like(level)
-    for i in range(ny):
-        i2 = i + h if i + h < ny else i
-        for j in range(nx):
-            j2 = j + h if j + h < nx else j
-            out[i, j] = max(max(level[i, j], level[i, j2]), max(level[i2, j], level[i2, j2]))
+def _pooled_levels(field, depth, pad):  # pragma: no cover - compiled
+    """Levels 0..depth (depth + 1, ny + 2 pad, nx + 2 pad) of ``field`` (ny, nx) zero-padded by ``pad``
+    cells: level k holds each cell's max over the 2^k x 2^k cells from it (clipped at the far edges).
+
+    Only the field and the 2^depth cells around it are pooled (farther cells stay 0);
+    ``pad`` >= 2^depth.
+    """
+    ny, nx = field.shape
+    reach = 2**depth
+    out = np.zeros((depth + 1, ny + 2 * pad, nx + 2 * pad), np.float32)
+    out[0, pad:pad + ny, pad:pad + nx] = field
+    lo, hgt, wid = pad - reach, ny + 2 * reach, nx + 2 * reach
+    rows = np.empty((hgt, wid), np.float32)
+    for k in range(1, depth + 1):
+        h = 2 ** (k - 1)
+        src = out[k - 1, lo:lo + hgt, lo:lo + wid]
+        dst = out[k, lo:lo + hgt, lo:lo + wid]
+        for i in range(hgt):
+            for j in range(wid):
+                rows[i, j] = max(src[i, j], src[i, j + h]) if j + h < wid else src[i, j]
+        for i in range(hgt):
+            for j in range(wid):
+                dst[i, j] = max(rows[i, j], rows[i + h, j]) if i + h < hgt else rows[i, j]
     return out
 
 
