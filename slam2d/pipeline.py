@@ -186,17 +186,22 @@ def _work(frontend, scans, out) -> None:
 
 
 class SlamPipeline:
-    """Runs the configured frontend and back end over a scan stream."""
+    """Runs the configured frontend and back end over a scan stream.
+
+    Each ``run`` builds a fresh back end, after the frontend worker has
+    started (its set-up, gtsam's import included, overlaps the worker's start).
+    """
 
     def __init__(self, cfg: ExperimentConfig):
         self.cfg = cfg
         self.frontend = create_frontend(cfg.frontend.name, cfg.frontend.options)
-        if cfg.backend.name == "pose_graph":
+
+    def _new_backend(self):
+        if self.cfg.backend.name == "pose_graph":
             from slam2d.backend.slam import GraphSlamBackend
 
-            self.backend = GraphSlamBackend(cfg.backend)
-        else:
-            self.backend = ChainBackend()
+            return GraphSlamBackend(self.cfg.backend)
+        return ChainBackend()
 
     def run(self, scans: Iterable[Scan], on_scan: Callable[[], None] | None = None) -> SlamResult:
         """Process every scan; ``on_scan`` is called after each one (progress)."""
@@ -213,11 +218,12 @@ class SlamPipeline:
         return result
 
     def _consume(self, steps, scans, on_scan) -> SlamResult:
-        """Feed the (scan, result) pairs to the back end; the result without the frontend's events."""
+        """Feed the (scan, result) pairs to a new back end; the result without the frontend's events."""
+        backend = self._new_backend()
         kept: list[Scan] = []
         confidences = []
         for scan, result in steps:
-            self.backend.add(scan, result)
+            backend.add(scan, result)
             confidences.append(result.confidence)
             kept.append(scan)
             if on_scan:
@@ -225,7 +231,7 @@ class SlamPipeline:
         if not kept:
             skipped = dict(getattr(scans, "skipped", {}))
             raise InputError(getattr(scans, "name", "dataset"), f"no usable scan (skipped: {skipped})")
-        poses = self.backend.finish()
+        poses = backend.finish()
         gts = [s.ground_truth for s in kept]
         return SlamResult(
             scans=kept,
@@ -236,6 +242,6 @@ class SlamPipeline:
             confidences=np.array(confidences),
             cpu_s=0.0,
             skipped=Counter(getattr(scans, "skipped", {})),
-            stats=dict(self.backend.summary()),
-            graph=self.backend.graph,
+            stats=dict(backend.summary()),
+            graph=backend.graph,
         )

@@ -59,7 +59,9 @@ class RosbagSource(ScanSource):
 
     Each scan's odometry is the base pose interpolated at the scan's header
     stamp (s); the laser mounting pose comes from /tf_static (identity if absent).
-    Ranges in metres, angles in radians, limits from the message.
+    Ranges in metres, angles in radians, limits from the message. Opening
+    reads the bag's index only; the odometry and /tf_static are read when the
+    scans are first read (or ``odom`` is asked for).
     """
 
     name = "rosbag"
@@ -77,9 +79,20 @@ class RosbagSource(ScanSource):
             self.scan_topic = _pick_topic(self.path, topics, LASER_TYPE, scan_topic, "/scan")
             self.odom_topic = _pick_topic(self.path, topics, ODOM_TYPE, odom_topic, "/odom")
             self._count = topics[self.scan_topic].msgcount
-            self.odom = self._read_odometry(reader)
-            self._static_tf = self._read_static_tf(reader, topics)
+            if not topics[self.odom_topic].msgcount:
+                raise InputError(self.path, f"no messages on odometry topic {self.odom_topic!r}")
+        self._odom: tuple[np.ndarray, np.ndarray] | None = None
+        self._static_tf: dict[str, tuple[str, np.ndarray]] = {}
         self._mounts: dict[str, np.ndarray] = {}
+
+    @property
+    def odom(self) -> tuple[np.ndarray, np.ndarray]:
+        """All odometry: stamps (N,) s and base poses (N, 3), sorted by stamp (read on first use)."""
+        if self._odom is None:
+            with self._open() as reader:
+                self._odom = self._read_odometry(reader)
+                self._static_tf = self._read_static_tf(reader, reader.topics)
+        return self._odom
 
     def __len__(self) -> int:
         return self._count if self.max_scans is None else min(self._count, self.max_scans)
@@ -151,7 +164,7 @@ class RosbagSource(ScanSource):
 
     def _raw_scans(self) -> Iterator[Scan]:
         self.notes = Counter()
-        t_odom, p_odom = self.odom
+        t_odom, p_odom = self.odom  # before mounting_pose: sets the base frame and /tf_static
         with self._open() as reader:
             for i, msg in enumerate(self._messages(reader, self.scan_topic)):
                 if self.max_scans is not None and i >= self.max_scans:
