@@ -209,12 +209,12 @@ class SlamPipeline:
         if self.cfg.parallel and can_fork():
             with FrontendWorker(self.frontend, scans) as worker:
                 result = self._consume(worker, scans, on_scan)
-            result.stats.update({f"frontend {k}": v for k, v in worker.events.items()})
-            result.cpu_s += worker.cpu_s
+            events, worker_cpu_s = worker.events, worker.cpu_s
         else:
             result = self._consume(frontend_steps(self.frontend, scans), scans, on_scan)
-            result.stats.update({f"frontend {k}": v for k, v in getattr(self.frontend, "events", {}).items()})
-        result.cpu_s += time.process_time() - t0
+            events, worker_cpu_s = getattr(self.frontend, "events", {}), 0.0
+        result.stats.update({f"frontend {k}": v for k, v in events.items()})
+        result.cpu_s = time.process_time() - t0 + worker_cpu_s
         return result
 
     def _consume(self, steps, scans, on_scan) -> SlamResult:

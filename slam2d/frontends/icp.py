@@ -525,8 +525,7 @@ def _knn(grid, x, y, radius, idx, d2):
     while (ring - 1) * cell <= radius and (n < k or ((ring - 1) * cell) ** 2 <= d2[n - 1]):
         for ix in range(max(cx - ring, 0), min(cx + ring + 1, nx)):
             edge = ix == cx - ring or ix == cx + ring
-            step = 1 if edge else 2 * ring
-            for iy in range(cy - ring, cy + ring + 1, max(step, 1)):
+            for iy in range(cy - ring, cy + ring + 1, 1 if edge else 2 * ring):  # a ring's cells only
                 if iy < 0 or iy >= ny:
                     continue
                 c = ix * ny + iy
@@ -626,16 +625,17 @@ def _correspond(grid, source, pose, k, radius, along, line_ratio, min_cluster):
 
 
 @njit(cache=True, nogil=True)
-def _normal_equations(source, pose, valid, target, omega, kernel):
+def _normal_equations(source, pose, valid, target, omega, kernel, inlier_distance=0.0):
     """Robust normal equations of the residuals T(pose) source - target over (x, y, theta).
 
     Geman-McClure weights w = (kernel^2 / (kernel^2 + e^2))^2, e^2 = r^T omega r.
-    Returns H (3, 3), g (3,), sum of w e^2 (m^2) and sum of w.
+    Returns H (3, 3), g (3,), sum of w e^2 (m^2), sum of w, and the number of
+    residuals with e <= ``inlier_distance`` (m).
     """
     c, s = np.cos(pose[2]), np.sin(pose[2])
     h = np.zeros((3, 3))
     g = np.zeros(3)
-    k2, wsq, wsum = kernel * kernel, 0.0, 0.0
+    k2, wsq, wsum, inliers = kernel * kernel, 0.0, 0.0, 0
     for i in range(len(source)):
         if not valid[i]:
             continue
@@ -658,24 +658,18 @@ def _normal_equations(source, pose, valid, target, omega, kernel):
         g[2] += w * (jx * ox + jy * oy)
         wsq += w * e2
         wsum += w
+        inliers += e2 <= inlier_distance * inlier_distance
     h[1, 0], h[2, 0], h[2, 1] = h[0, 1], h[0, 2], h[1, 2]
-    return h, g, wsq, wsum
+    return h, g, wsq, wsum, inliers
 
 
 @njit(cache=True, nogil=True)
 def _fit(grid, source, pose, k, radius, along, line_ratio, min_cluster, kernel, inlier_distance):
     """(matched fraction, H, sum w e^2, sum w) of ``source`` at ``pose``: see ``_Fit``."""
     valid, target, omega = _correspond(grid, source, pose, k, radius, along, line_ratio, min_cluster)
-    h, _, weighted_sq, weight_sum = _normal_equations(source, pose, valid, target, omega, kernel)
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    matched = 0
-    for i in range(len(source)):
-        if valid[i]:
-            rx = pose[0] + c * source[i, 0] - s * source[i, 1] - target[i, 0]
-            ry = pose[1] + s * source[i, 0] + c * source[i, 1] - target[i, 1]
-            e2 = rx * (omega[i, 0, 0] * rx + omega[i, 0, 1] * ry) + ry * (omega[i, 1, 0] * rx + omega[i, 1, 1] * ry)
-            matched += e2 <= inlier_distance * inlier_distance
-    return matched / max(len(source), 1), h, weighted_sq, weight_sum
+    h, _, weighted_sq, weight_sum, inliers = _normal_equations(source, pose, valid, target, omega, kernel,
+                                                               inlier_distance)
+    return inliers / max(len(source), 1), h, weighted_sq, weight_sum
 
 
 @njit(cache=True, nogil=True)
@@ -709,7 +703,7 @@ def _gauss_newton(source, pose, valid, target, omega, kernel, guess, prior, iter
     """
     out = pose.copy()
     for _ in range(iterations):
-        h, g, _, _ = _normal_equations(source, out, valid, target, omega, kernel)
+        h, g, _, _, _ = _normal_equations(source, out, valid, target, omega, kernel)
         off = out - guess
         off[2] = (off[2] + np.pi) % (2.0 * np.pi) - np.pi
         for i in range(3):
