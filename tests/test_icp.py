@@ -9,7 +9,7 @@ from slam2d import geometry
 from slam2d.datasets.simulator import World
 from slam2d.errors import InputError
 from slam2d.frontends import available_frontends, create_frontend
-from slam2d.frontends.icp import STILL_EVENT, IcpFrontend, _Grid, _knn
+from slam2d.frontends.icp import ODOMETRY_OVERRULED_EVENT, STILL_EVENT, IcpFrontend, _Grid, _knn
 from slam2d.types import Scan
 
 BEAMS = np.linspace(-np.pi, np.pi, 360, endpoint=False)
@@ -261,3 +261,62 @@ def test_non_finite_odometry_is_taken_as_no_motion(room):
     res = fe.process(scan_at(room, geometry.compose(P0, [0.05, 0.0, 0.0]), seed=6), np.array([np.nan, 0.0, 0.0]))
     assert np.all(np.isfinite(res.delta)) and np.all(np.isfinite(fe.pose))
     assert_close_pose(res.delta, [0.05, 0.0, 0.0])
+
+
+# --- odometry that lies ---------------------------------------------------------------------------
+
+
+def _chain(fe, world, true_poses, odom_deltas):
+    """Chained frontend poses over scans ray-cast at ``true_poses`` with the given odometry deltas."""
+    pose = true_poses[0]
+    fe.process(scan_at(world, pose, seed=0), np.zeros(3))
+    for k, (p, d) in enumerate(zip(true_poses[1:], odom_deltas), start=1):
+        pose = geometry.compose(pose, fe.process(scan_at(world, p, seed=k), np.asarray(d, float)).delta)
+    return pose
+
+
+def test_frozen_then_jumping_odometry_is_not_double_counted(room):
+    """Odometry reports no motion for four scans of a turn, then the whole turn in one step:
+    ICP tracks the turn while odometry is frozen, and the jump must not add it a second time."""
+    step = np.array([0.03, 0.0, np.deg2rad(10.0)])
+    true = [np.array([3.0, 1.5, 0.0])]
+    for _ in range(6):
+        true.append(geometry.compose(true[-1], step))
+    turning = step + [0.0, 0.0, np.deg2rad(3.0)]  # off by 3 deg: the motion filter stays off
+    frozen = [turning, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)]
+    jump = geometry.between(true[1], true[6])  # the five steps' motion at once
+    fe = create_frontend("icp", {})
+    end = _chain(fe, room, true, [*frozen, jump])
+    assert_close_pose(geometry.between(true[0], end), geometry.between(true[0], true[6]), xy=0.03, theta_deg=1.0)
+    assert fe.events[ODOMETRY_OVERRULED_EVENT] == 1
+
+
+def test_a_wild_odometry_step_is_overruled_by_a_good_match(room):
+    step = np.array([0.05, 0.0, 0.0])
+    true = [np.array([2.5, 1.2, 0.3])]
+    for _ in range(4):
+        true.append(geometry.compose(true[-1], step))
+    wild = np.array([0.9, -0.6, np.deg2rad(40.0)])
+    fe = create_frontend("icp", {})
+    end = _chain(fe, room, true, [step, step, wild, step])
+    assert_close_pose(geometry.between(true[0], end), geometry.between(true[0], true[4]), xy=0.02, theta_deg=0.5)
+    assert fe.events[ODOMETRY_OVERRULED_EVENT] == 1
+
+
+def test_mit_csail_freeze_and_jump_not_double_counted(data_file):
+    """Scans 280-420 of mit-csail hold its first odometry freeze and 49.7 deg jump (scan 325);
+    the chained ICP poses keep the relations across it (counted twice: 0.100 m, 1.86 deg)."""
+    from slam2d.datasets.carmen import CarmenSource
+    from slam2d.evaluation.relations import read_relations, relations_metric
+
+    scans = list(CarmenSource(data_file("radish/mit-csail.clf"), max_scans=420))[280:]
+    fe = create_frontend("icp", {})
+    poses = [np.zeros(3)]
+    for prev, scan in zip([None, *scans[:-1]], scans):
+        odom_delta = np.zeros(3) if prev is None else geometry.between(prev.odom, scan.odom)
+        poses.append(geometry.compose(poses[-1], fe.process(scan, odom_delta).delta))
+    m = relations_metric(np.array([s.stamp for s in scans]), np.array(poses[1:]),
+                         read_relations(data_file("radish/mit-csail.relations")))
+    assert m["matched"] >= 60
+    assert m["rot_abs_mean"] < 0.8 and m["trans_abs_mean"] < 0.05
+    assert fe.events[ODOMETRY_OVERRULED_EVENT] >= 1

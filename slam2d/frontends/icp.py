@@ -33,6 +33,12 @@ residual is within ``inlier_distance``. Too few points, a non-finite or
 non-planar result, a correction beyond the divergence bound or too few
 matches fall back to odometry with confidence 0, counted in ``events``.
 
+Odometry that lies (frozen then jumping, a wild step, slip): when the match
+from the odometry prediction diverges from it, the constant-velocity and the
+no-motion predictions are tried as starts and priors of their own; a match
+that agrees with one of them and matches well overrules odometry (counted
+under ``ODOMETRY_OVERRULED_EVENT``) instead of falling back to it.
+
 Motion filter: while odometry says the robot moved less than ``still_distance``
 and ``still_angle_deg`` since the last registered scan, a scan is not
 registered (nor added to the map); its delta is the odometry one with the
@@ -61,6 +67,7 @@ from slam2d.types import Scan
 log = logging.getLogger(__name__)
 
 STILL_EVENT = "scans not registered (no motion)"  # key in ``events``
+ODOMETRY_OVERRULED_EVENT = "odometry overruled by the scan match"  # key in ``events``
 STILL_TRUST_XY = 0.02  # m; a registration corrected by less than this (and ...
 STILL_TRUST_THETA = np.deg2rad(1.0)  # ... this) lets the motion filter skip the next still scans
 GRID_CELLS_PER_POINT = 16  # the neighbour-search grid has at most this many cells per map point
@@ -254,17 +261,22 @@ class IcpFrontend:
         if found is None:
             return self._fallback("registration failed (non-finite, non-planar or < 3 matches)", guess, odom_delta,
                                   points)
-        pose, fit = found
-        reason = self._diverged(pose, guess)
+        pose, fit, start = found
+        reason = self._diverged(pose, start)
         if reason:
             return self._fallback(reason, guess, odom_delta, points)
         if fit.matched < cfg.min_inlier_fraction:
             return self._fallback(f"matched fraction below {cfg.min_inlier_fraction}", guess, odom_delta, points)
+        if start is not guess:
+            self.events[ODOMETRY_OVERRULED_EVENT] += 1
+            log.debug("odometry delta %s overruled by the scan match", np.round(odom_delta, 3))
         information = self._information(fit)
-        correction = geometry.between(guess, pose)
+        correction = geometry.between(start, pose)
         self._threshold._update_model_deviation(_pose_to_matrix(correction))
         self._trust_still = bool(
-            np.hypot(correction[0], correction[1]) < STILL_TRUST_XY and abs(correction[2]) < STILL_TRUST_THETA
+            start is guess
+            and np.hypot(correction[0], correction[1]) < STILL_TRUST_XY
+            and abs(correction[2]) < STILL_TRUST_THETA
         )
         return self._accept(pose, points, information, fit.matched)
 
@@ -313,20 +325,36 @@ class IcpFrontend:
         return _Grid.build(points, max(cfg.correspondence_factor * threshold / 3, 0.5 * cfg.map_voxel_size))
 
     def _best_match(self, source, guess, threshold, grid):
-        """(pose, fit) of the best start, or None if all failed.
+        """(pose, fit, start) of the best start, or None if all failed.
 
-        Starts from the odometry guess; if under ``retry_below`` of the points
-        match, also from the constant-velocity and the no-motion predictions
-        (odometry glitches), keeping the start that matches most points.
+        Starts from the odometry ``guess``; if under ``retry_below`` of the
+        points match, also from the constant-velocity and the no-motion
+        predictions (prior still at ``guess``), keeping the result matching
+        most points. If that result diverges from ``guess``, odometry may be
+        lying (frozen then jumping, a wild step, slip): each of the two
+        predictions is tried as its own start and prior, and one whose match
+        stays within the divergence bound of it and matches at least
+        ``retry_below`` of the points overrules odometry. ``start`` is the
+        prediction the result is judged against (``guess`` when odometry held).
         """
+        cfg = self.config
         best = self._match(source, guess, guess, threshold, grid)
-        if best is not None and best[1].matched >= self.config.retry_below:
-            return best
-        for start in (geometry.compose(self.pose, self._last_delta), self.pose):
-            other = self._match(source, start, guess, threshold, grid)
-            if other is not None and (best is None or other[1].matched > best[1].matched):
-                best = other
-        return best
+        predictions = (geometry.compose(self.pose, self._last_delta), self.pose)
+        if best is None or best[1].matched < cfg.retry_below:
+            for start in predictions:
+                other = self._match(source, start, guess, threshold, grid)
+                if other is not None and (best is None or other[1].matched > best[1].matched):
+                    best = other
+        if best is not None and not self._diverged(best[0], guess):
+            return (*best, guess)
+        overruling = []
+        for start in predictions:
+            other = self._match(source, start, start, threshold, grid)
+            if other is not None and other[1].matched >= cfg.retry_below and not self._diverged(other[0], start):
+                overruling.append((*other, start))
+        if overruling:
+            return max(overruling, key=lambda r: r[1].matched)
+        return None if best is None else (*best, guess)
 
     def _match(self, source, start, guess, threshold, grid):
         """Register from ``start`` (prior at ``guess``); (pose, its _Fit) or None."""
