@@ -10,9 +10,9 @@ import yaml
 
 from slam2d.config import MappingConfig
 from slam2d.errors import InputError
-from slam2d.mapping.occupancy import OccupancyGrid
+from slam2d.mapping.occupancy import OccupancyGrid, logit
 
-__all__ = ["save_map_server", "load_map_server", "save_map_png", "FREE", "OCCUPIED", "UNKNOWN"]
+__all__ = ["save_map_server", "load_map_server", "save_map_png", "downsample", "FREE", "OCCUPIED", "UNKNOWN"]
 
 FREE, OCCUPIED, UNKNOWN = 254, 0, 205
 """PGM pixel values written by map_server's map_saver (trinary)."""
@@ -20,25 +20,42 @@ FREE, OCCUPIED, UNKNOWN = 254, 0, 205
 LOADED_LOG_ODDS = float(np.log(0.999 / 0.001))
 """|log-odds| given to occupied / free cells of a loaded trinary map (p = 0.999 / 0.001)."""
 
+CHUNK_CELLS = 1 << 22
+"""Cells classified and written at a time by :func:`save_map_server` (a few MB of temporaries)."""
+
+MAX_FIGURE_PX = 2000
+"""Longest side, px, of the grid image drawn by :func:`save_map_png` (it never exceeds the axes either)."""
+
 
 def save_map_server(grid: OccupancyGrid, path_stem, cfg: MappingConfig) -> tuple[Path, Path]:
     """Write ``STEM.pgm`` (P5) and ``STEM.yaml`` as map_server's map_saver does.
 
     Pixels: 0 where p > cfg.occupied_thresh, 254 where p < cfg.free_thresh,
-    205 otherwise; image row 0 is the top of the map (largest y).
+    205 otherwise; image row 0 is the top of the map (largest y). The image
+    is classified and streamed :data:`CHUNK_CELLS` cells at a time.
     Returns the (pgm, yaml) paths.
     """
     stem = Path(path_stem)
     pgm, yml = stem.with_name(stem.name + ".pgm"), stem.with_name(stem.name + ".yaml")
     pgm.parent.mkdir(parents=True, exist_ok=True)
-    img = np.full(grid.shape, UNKNOWN, np.uint8)
-    img[grid.free_mask(cfg.free_thresh)] = FREE
-    img[grid.occupied_mask(cfg.occupied_thresh)] = OCCUPIED
     h, w = grid.shape
-    header = f"P5\n# CREATOR: slam2d {grid.resolution:.3f} m/pix\n{w} {h}\n255\n".encode("ascii")
-    pgm.write_bytes(header + np.flipud(img).tobytes())
+    occupied, free = np.float64(logit(cfg.occupied_thresh)), np.float64(logit(cfg.free_thresh))
+    with pgm.open("wb") as f:
+        f.write(f"P5\n# CREATOR: slam2d {grid.resolution:.3f} m/pix\n{w} {h}\n255\n".encode("ascii"))
+        step = max(1, CHUNK_CELLS // max(w, 1))
+        for top in range(h, 0, -step):  # image rows top first: grid rows from the last
+            block = grid.log_odds[max(top - step, 0) : top]
+            f.write(_trinary(block, occupied, free)[::-1].tobytes())
     yml.write_text(_map_yaml(pgm.name, grid, cfg))
     return pgm, yml
+
+
+def _trinary(log_odds: np.ndarray, occupied: np.float64, free: np.float64) -> np.ndarray:
+    """PGM values (uint8, same shape) of log-odds cells given the thresholds as log-odds."""
+    img = np.full(log_odds.shape, UNKNOWN, np.uint8)
+    img[log_odds < free] = FREE
+    img[log_odds > occupied] = OCCUPIED
+    return img
 
 
 def _map_yaml(image: str, grid: OccupancyGrid, cfg: MappingConfig) -> str:
@@ -65,14 +82,21 @@ def load_map_server(yaml_path) -> OccupancyGrid:
     """
     yaml_path = Path(yaml_path)
     meta = _read_map_yaml(yaml_path)
-    occ = _read_occupancy(yaml_path, meta)
+    pixels = _read_pixels(yaml_path, meta)
+    return OccupancyGrid(_pixel_log_odds(meta)[pixels[::-1]], meta["resolution"], meta["origin"][:2])
+
+
+def _pixel_log_odds(meta: dict) -> np.ndarray:
+    """Log-odds (256,) float32 of each 8-bit pixel value under the YAML's mode and thresholds."""
+    v = np.arange(256, dtype=np.float64)
+    occ = v / 255.0 if meta["negate"] else (255.0 - v) / 255.0
     if meta["mode"] == "trinary":
         occupied, free = occ > meta["occupied_thresh"], occ < meta["free_thresh"]
         lo = np.where(occupied, LOADED_LOG_ODDS, np.where(free, -LOADED_LOG_ODDS, 0.0))
     else:
         p = np.clip(occ, 0.001, 0.999)
         lo = np.log(p / (1.0 - p))
-    return OccupancyGrid(np.flipud(lo), meta["resolution"], meta["origin"][:2])
+    return lo.astype(np.float32)
 
 
 def _read_map_yaml(path: Path) -> dict:
@@ -99,8 +123,8 @@ def _read_map_yaml(path: Path) -> dict:
     return meta
 
 
-def _read_occupancy(yaml_path: Path, meta: dict) -> np.ndarray:
-    """Occupancy in [0, 1] per pixel, image rows (row 0 = top), as map_server computes it."""
+def _read_pixels(yaml_path: Path, meta: dict) -> np.ndarray:
+    """8-bit grey value (uint8) per pixel, image rows (row 0 = top)."""
     from PIL import Image
 
     image = Path(meta["image"])
@@ -108,8 +132,7 @@ def _read_occupancy(yaml_path: Path, meta: dict) -> np.ndarray:
     if not image.is_file():
         raise InputError(yaml_path, f"key 'image': file not found: {image}")
     with Image.open(image) as im:
-        px = np.asarray(im.convert("L"), dtype=np.float64)
-    return px / 255.0 if meta["negate"] else (255.0 - px) / 255.0
+        return np.asarray(im.convert("L"), dtype=np.uint8)
 
 
 def save_map_png(
@@ -120,7 +143,9 @@ def save_map_png(
 ) -> Path:
     """Figure of the map (grey: black occupied, white free) with trajectories (N, 3) overlaid.
 
-    Axes in metres, equal aspect, one colour per trajectory and a legend.
+    Axes in metres, equal aspect, one colour per trajectory and a legend. The
+    grid is drawn :func:`downsample`-d to no more pixels than the axes have
+    and at most :data:`MAX_FIGURE_PX` on its long side.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -132,8 +157,7 @@ def save_map_png(
     fig = Figure(figsize=(8.0, float(np.clip(8.0 * aspect, 3.0, 16.0))), dpi=150)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
-    ax.imshow(1.0 - grid.probability(), cmap="gray", vmin=0.0, vmax=1.0, origin="lower",
-              extent=grid.extent, interpolation="nearest")  # fmt: skip
+    _draw_grid(ax, grid)
     for name, poses in (trajectories or {}).items():
         p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
         ax.plot(p[:, 0], p[:, 1], linewidth=1.0, label=name)
@@ -146,3 +170,44 @@ def save_map_png(
         ax.set_title(title)
     fig.savefig(path, bbox_inches="tight")
     return path
+
+
+def _draw_grid(ax, grid: OccupancyGrid) -> None:
+    """Draw the grid downsampled to the axes' pixels, grey 255 (1 - p), in metres."""
+    k = _block_size(grid.shape, ax.get_window_extent())
+    shown = downsample(grid.log_odds, k)
+    ox, oy = grid.origin
+    size = k * grid.resolution  # m per image pixel
+    rgba = np.full((*shown.shape, 4), 255, np.uint8)  # opaque uint8 RGBA: Agg resamples it with the fewest copies
+    rgba[..., :3] = np.round(255.0 / (1.0 + np.exp(shown.astype(np.float64))))[..., None]
+    ax.imshow(rgba, origin="lower", interpolation="nearest",
+              extent=(ox, ox + shown.shape[1] * size, oy, oy + shown.shape[0] * size))  # fmt: skip
+
+
+def _block_size(shape: tuple[int, int], box) -> int:
+    """Cells per side of the square blocks drawn as one pixel in the axes ``box`` (display px)."""
+    h, w = shape
+    fit = max(h / max(box.height, 1.0), w / max(box.width, 1.0), max(h, w) / MAX_FIGURE_PX)
+    return max(1, int(np.ceil(fit)))
+
+
+def downsample(log_odds: np.ndarray, k: int) -> np.ndarray:
+    """Log-odds (ceil(H / k), ceil(W / k)) of the k x k blocks of ``log_odds`` (H, W).
+
+    A block takes its largest log-odds when that is positive (occupied wins, so
+    one-cell walls stay visible), else its smallest (free wins over unknown).
+    """
+    if k <= 1:
+        return log_odds
+    hi = _reduce_rows(np.maximum, _reduce_rows(np.maximum, log_odds, k).T, k).T
+    lo = _reduce_rows(np.minimum, _reduce_rows(np.minimum, log_odds, k).T, k).T
+    return np.where(hi > 0, hi, lo)
+
+
+def _reduce_rows(ufunc, a: np.ndarray, k: int) -> np.ndarray:
+    """``ufunc`` (np.maximum or np.minimum) over each run of k rows of ``a`` (H, W): (ceil(H / k), W)."""
+    out = a[::k].copy()
+    for i in range(1, k):
+        part = a[i::k]
+        ufunc(out[: len(part)], part, out=out[: len(part)])
+    return out

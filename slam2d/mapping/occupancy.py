@@ -32,7 +32,7 @@ from slam2d import geometry
 from slam2d.config import MappingConfig
 from slam2d.types import GridFrame, Scan
 
-__all__ = ["OccupancyGrid", "build_grid", "NO_RETURN_CLEAR_M", "MARGIN_M", "MAX_CELLS"]
+__all__ = ["OccupancyGrid", "build_grid", "logit", "NO_RETURN_CLEAR_M", "MARGIN_M", "MAX_CELLS"]
 
 NO_RETURN_CLEAR_M = 5.0
 """Farthest a no-return beam clears free space when ``cfg.max_range`` is unset, m.
@@ -82,12 +82,20 @@ class OccupancyGrid(GridFrame):
         return 1.0 / (1.0 + np.exp(-self.log_odds.astype(np.float64)))
 
     def occupied_mask(self, thresh: float = 0.65) -> np.ndarray:
-        """Cells with occupancy probability > ``thresh`` (as map_server reads a map)."""
-        return self.probability() > thresh
+        """Cells with occupancy probability > ``thresh`` (as map_server reads a map), bool (H, W)."""
+        return self.log_odds > np.float64(logit(thresh))
 
     def free_mask(self, thresh: float = 0.196) -> np.ndarray:
-        """Cells with occupancy probability < ``thresh`` (as map_server reads a map)."""
-        return self.probability() < thresh
+        """Cells with occupancy probability < ``thresh`` (as map_server reads a map), bool (H, W)."""
+        return self.log_odds < np.float64(logit(thresh))
+
+
+def logit(p: float) -> float:
+    """Log-odds ``log(p / (1 - p))`` of a probability ``p`` in (0, 1).
+
+    ``log_odds > logit(t)`` is ``probability > t`` without a float64 copy of the grid.
+    """
+    return float(np.log(p) - np.log1p(-p))
 
 
 def build_grid(poses, scans: Sequence[Scan], cfg: MappingConfig) -> OccupancyGrid:
