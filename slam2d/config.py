@@ -66,6 +66,10 @@ class DatasetConfig(Section):
     scan_topic: str | None = Field(None, description="rosbag LaserScan topic (default: the only one, or /scan)")
     odom_topic: str | None = Field(None, description="rosbag Odometry topic (default: the only one, or /odom)")
     max_scans: int | None = Field(None, gt=0, description="stop after this many scans")
+    max_skipped: float = Field(
+        0.05, ge=0, le=1, description="fraction of the scans that may be unusable (bad lines, stamps, poses, "
+        "empty) before the run fails"
+    )
     simulator: SimulatorConfig = SimulatorConfig()
 
 

@@ -3,14 +3,85 @@
 from __future__ import annotations
 
 import logging
-from collections import Counter
+import math
+from collections import Counter, deque
 from collections.abc import Iterator
 
 import numpy as np
 
+from slam2d.errors import InputError
 from slam2d.types import Scan
 
 log = logging.getLogger(__name__)
+
+LOOKAHEAD = 16  # following scans whose stamps and poses outvote a scan that disagrees with them
+MAX_COORD = 1e6  # m; a pose farther from the origin is absurd
+MAX_SPEED = 50.0  # m/s; odometry moving faster between two scans has jumped ...
+MAX_STEP = 10.0  # m; ... by more than this
+
+BAD_STAMP = "scans with a non-finite timestamp"
+BAD_POSE = "scans with a non-finite or absurd pose (beyond 1000 km)"
+BAD_ANGLES = "scans with non-finite beam angles"
+EARLY = "scans stamped before the scan kept before them"
+LATE = "scans stamped after most of the scans that follow them"
+JUMP = "scans whose odometry jumps away from the scans around them"
+EMPTY = "empty scans (no valid beam)"
+
+
+def _with_followers(scans: Iterator[Scan], k: int) -> Iterator[tuple[Scan, list[Scan]]]:
+    """Each scan with the plausible ones among the ``k`` scans that follow it."""
+    window: deque[tuple[Scan, bool]] = deque()
+    for scan in scans:
+        window.append((scan, _plausible(scan)))
+        if len(window) > k:
+            yield window.popleft()[0], [s for s, ok in window if ok]
+    while window:
+        yield window.popleft()[0], [s for s, ok in window if ok]
+
+
+def _poses_ok(scan: Scan) -> bool:
+    """Finite odometry and mounting poses within MAX_COORD of the origin."""
+    return bool(np.abs(scan.odom).max() < MAX_COORD and np.abs(scan.sensor_pose).max() < MAX_COORD)
+
+
+def _plausible(scan: Scan) -> bool:
+    """Finite stamp, finite angles and finite poses within MAX_COORD of the origin."""
+    return math.isfinite(scan.stamp) and _poses_ok(scan) and bool(np.isfinite(scan.angles).all())
+
+
+def _jumped_from(scan: Scan, other: Scan) -> bool:
+    """Whether ``scan``'s odometry is farther from ``other``'s than a robot drives."""
+    dist = math.hypot(scan.odom[0] - other.odom[0], scan.odom[1] - other.odom[1])
+    return dist > MAX_STEP + MAX_SPEED * abs(scan.stamp - other.stamp)
+
+
+def _jumped(scan: Scan, others: list[Scan]) -> np.ndarray:
+    """Per scan in ``others``: whether ``scan``'s odometry is farther from it than a robot drives."""
+    odom = np.array([s.odom for s in others], dtype=np.float64).reshape(-1, 3)
+    dt = np.abs(np.array([s.stamp for s in others], dtype=np.float64) - scan.stamp)
+    return np.hypot(*(odom[:, :2] - np.asarray(scan.odom)[:2]).T) > MAX_STEP + MAX_SPEED * dt
+
+
+def _outvoted(flags: np.ndarray) -> bool:
+    """More than half of the votes are against."""
+    return 2 * int(np.count_nonzero(flags)) > len(flags)
+
+
+def _stamp_or_pose_problem(scan: Scan, last: Scan | None, followers: list[Scan]) -> str | None:
+    """Why ``scan`` cannot be used, judged against the last kept scan and the plausible scans after it."""
+    if not math.isfinite(scan.stamp):
+        return BAD_STAMP
+    if not _poses_ok(scan):
+        return BAD_POSE
+    if not np.isfinite(scan.angles).all():
+        return BAD_ANGLES
+    if last is not None and scan.stamp < last.stamp:
+        return EARLY
+    if followers and _outvoted(np.array([s.stamp for s in followers]) < scan.stamp):
+        return LATE
+    if (last is not None and _jumped_from(scan, last)) or (followers and _outvoted(_jumped(scan, followers))):
+        return JUMP
+    return None
 
 
 class ScanSource:
@@ -18,11 +89,16 @@ class ScanSource:
 
     Subclasses implement :meth:`_raw_scans`; iteration passes every scan through
     :meth:`_checked`, which replaces invalid ranges with NaN (counted in
-    ``self.invalid_beams``) and skips empty or out-of-order scans, counting
-    each reason in ``self.skipped``.
+    ``self.invalid_beams``) and skips empty scans and scans whose stamp, angles
+    or pose are invalid or disagree with the scans around them, counting each
+    reason in ``self.skipped``. A stamp or odometry pose that disagrees with
+    most of the next LOOKAHEAD scans is the outlier, not the new reference.
+    When more than ``max_skipped`` (a fraction of ``len(self)``) is skipped,
+    iteration stops with an :class:`InputError`.
     """
 
     name: str = "scans"
+    max_skipped: float = 0.05
 
     def __init__(self) -> None:
         self.skipped: Counter[str] = Counter()
@@ -31,6 +107,11 @@ class ScanSource:
     def __len__(self) -> int:
         """Number of scans the source expects to yield (before skips)."""
         raise NotImplementedError
+
+    @property
+    def where(self) -> str:
+        """The file (or name) errors are reported against."""
+        return str(getattr(self, "path", self.name))
 
     def _raw_scans(self) -> Iterator[Scan]:
         raise NotImplementedError
@@ -41,10 +122,19 @@ class ScanSource:
         yield from self._checked(self._raw_scans())
         self.log_skips()
 
+    def skip(self, reason: str) -> None:
+        """Count one unusable scan; an InputError once more than ``max_skipped`` of the input is lost."""
+        self.skipped[reason] += 1
+        n, total = sum(self.skipped.values()), max(len(self), 1)
+        if n > self.max_skipped * total:
+            reasons = ", ".join(f"{count} {what}" for what, count in sorted(self.skipped.items()))
+            raise InputError(self.where, f"{n} of {total} scans ({n / total:.0%}) unusable ({reasons}); "
+                             f"more than the {self.max_skipped:.0%} allowed (dataset.max_skipped)")
+
     def _checked(self, scans: Iterator[Scan]) -> Iterator[Scan]:
-        last_stamp = -np.inf
+        last = None
         index = 0
-        for scan in scans:
+        for scan, followers in _with_followers(scans, LOOKAHEAD):
             ranges = np.asarray(scan.ranges, dtype=np.float64)
             with np.errstate(invalid="ignore"):
                 bad = ~np.isfinite(ranges) | (ranges < 0)
@@ -52,13 +142,13 @@ class ScanSource:
             if n_bad:
                 self.invalid_beams += n_bad
                 ranges = np.where(bad, np.nan, ranges)
-            if not np.isfinite(scan.stamp) or scan.stamp < last_stamp:
-                self.skipped["scans with out-of-order or invalid timestamp"] += 1
+            problem = _stamp_or_pose_problem(scan, last, followers)
+            if problem is None and not np.any(~bad & (ranges >= scan.range_min) & (ranges < scan.range_max)):
+                problem = EMPTY
+            if problem is not None:
+                self.skip(problem)
                 continue
-            if not np.any(~bad & (ranges >= scan.range_min) & (ranges < scan.range_max)):
-                self.skipped["empty scans (no valid beam)"] += 1
-                continue
-            last_stamp = scan.stamp
+            last = scan
             yield Scan(
                 stamp=float(scan.stamp),
                 ranges=ranges,
@@ -73,8 +163,11 @@ class ScanSource:
             index += 1
 
     def log_skips(self) -> None:
-        """Log one line per skip reason with its count, and the invalid-beam count."""
+        """Log one line per skip reason with its count, the fraction skipped, and the invalid-beam count."""
         for reason, count in sorted(self.skipped.items()):
             log.warning("%s: skipped %d %s", self.name, count, reason)
+        n = sum(self.skipped.values())
+        if n:
+            log.warning("%s: %d of %d scans (%.1f%%) skipped", self.where, n, len(self), 100 * n / max(len(self), 1))
         if self.invalid_beams:
             log.info("%s: %d beams had no valid range (NaN, inf or negative) and were ignored", self.name, self.invalid_beams)

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d import geometry
-from slam2d.datasets.base import ScanSource
+from slam2d.datasets.base import MAX_COORD, ScanSource
 from slam2d.errors import InputError
 from slam2d.types import Scan
 
@@ -76,6 +76,8 @@ def _parse_robotlaser(tokens, range_max: float):
     m = _count(tokens, 9 + n)
     _need(tokens, n + m + 24)
     head = _floats(tokens[2:8])  # start_angle fov angular_res max_range accuracy remission_mode
+    if not np.all(np.isfinite(head[[0, 2, 3]])):
+        raise _BadLine("non-finite start angle, angular resolution or maximum range")
     ranges = _floats(tokens[9:9 + n])
     tail = _floats(tokens[10 + n + m:22 + n + m])  # laser pose, robot pose, tv rv ..., ipc_timestamp
     angles = head[0] + head[2] * np.arange(n)
@@ -126,10 +128,15 @@ class CarmenSource(ScanSource):
             raise InputError(self.path, f"cannot read ({err.strerror})") from err
 
     def _bad(self, lineno: int, tag: str, err: Exception) -> None:
+        """Log the first bad line of ``tag``; count bad laser lines as skipped scans, bad ODOM lines as notes."""
         reason = f"malformed {tag} lines"
-        if not self.skipped[reason]:
+        counts = self.notes if tag == "ODOM" else self.skipped
+        if not counts[reason]:
             log.warning("%s:%d: %s line skipped: %s", self.path, lineno, tag, err)
-        self.skipped[reason] += 1
+        if tag == "ODOM":
+            self.notes[reason] += 1
+        else:
+            self.skip(reason)
 
     def _odometry(self):
         """(stamps (N,) s, poses (N, 3)) from ODOM lines, sorted by stamp; None if there are none."""
@@ -140,8 +147,8 @@ class CarmenSource(ScanSource):
                 try:
                     _need(tokens, 10)
                     v = _floats(tokens[1:8])
-                    if not np.all(np.isfinite(v)):
-                        raise _BadLine("non-finite pose or timestamp")
+                    if not np.all(np.isfinite(v)) or np.any(np.abs(v[:3]) >= MAX_COORD):
+                        raise _BadLine("non-finite or absurd pose or timestamp")
                     rows.append(v[[6, 0, 1, 2]])
                 except _BadLine as err:
                     self._bad(lineno, "ODOM", err)

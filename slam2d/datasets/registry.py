@@ -27,7 +27,13 @@ def resolve_data_path(path: str | Path, key: str = "dataset.path") -> Path:
 
 
 def open_dataset(cfg: DatasetConfig, seed: int = 0) -> ScanSource:
-    """The ScanSource a dataset config names."""
+    """The ScanSource a dataset config names, allowed to skip ``cfg.max_skipped`` of its scans."""
+    source = _open(cfg, seed)
+    source.max_skipped = cfg.max_skipped
+    return source
+
+
+def _open(cfg: DatasetConfig, seed: int) -> ScanSource:
     if cfg.kind == "simulator":
         from slam2d.datasets.simulator import SimulatorSource
 

@@ -6,6 +6,7 @@ Read with the pure-Python ``rosbags`` package; no ROS installation needed.
 from __future__ import annotations
 
 import logging
+import math
 from collections import Counter
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -14,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d import geometry
-from slam2d.datasets.base import ScanSource
+from slam2d.datasets.base import MAX_COORD, ScanSource
 from slam2d.errors import InputError
 from slam2d.types import Scan
 
@@ -33,6 +34,11 @@ def _stamp(t) -> float:
 def _yaw(q) -> float:
     """Heading (rad) of a quaternion about z."""
     return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
+
+
+def _finite(*values) -> bool:
+    """Whether every value is finite and below MAX_COORD in magnitude."""
+    return all(abs(v) < MAX_COORD for v in values)
 
 
 def _pick_topic(path, topics, msgtype: str, name: str | None, default: str) -> str:
@@ -113,21 +119,40 @@ class RosbagSource(ScanSource):
             reader.close()
 
     def _messages(self, reader, topic: str):
-        """Deserialised messages of ``topic`` in bag order."""
+        """Deserialised messages of ``topic`` in bag order; an unreadable one is an InputError naming it."""
         conns = [c for c in reader.connections if c.topic == topic]
-        for conn, _, raw in reader.messages(connections=conns):
-            yield reader.deserialize(raw, conn.msgtype)
+        stream = reader.messages(connections=conns)
+        index = 0
+        while True:
+            try:
+                item = next(stream, None)
+                if item is None:
+                    return
+                msg = reader.deserialize(item[2], item[0].msgtype)
+            except Exception as err:  # rosbags raises many types for a corrupt chunk or message
+                raise InputError(self.path, f"{topic} message {index}: unreadable ({str(err)[:200]})") from err
+            yield msg
+            index += 1
 
     def _read_odometry(self, reader):
         """All odometry as (stamps (N,) s, poses (N, 3)), sorted by stamp; sets the base frame."""
-        stamps, poses, child = [], [], ""
-        for msg in self._messages(reader, self.odom_topic):
+        stamps, poses, child, dropped = [], [], "", 0
+        for i, msg in enumerate(self._messages(reader, self.odom_topic)):
             p = msg.pose.pose
-            stamps.append(_stamp(msg.header.stamp))
-            poses.append((p.position.x, p.position.y, _yaw(p.orientation)))
+            stamp, pose = _stamp(msg.header.stamp), (p.position.x, p.position.y, _yaw(p.orientation))
+            if not (math.isfinite(stamp) and _finite(*pose)):
+                if not dropped:
+                    log.warning("%s: %s message %d: non-finite or absurd pose or stamp; dropped",
+                                self.path, self.odom_topic, i)
+                dropped += 1
+                continue
+            stamps.append(stamp)
+            poses.append(pose)
             child = msg.child_frame_id
+        if dropped:
+            log.warning("%s: dropped %d odometry messages with a non-finite or absurd pose or stamp", self.path, dropped)
         if not stamps:
-            raise InputError(self.path, f"no messages on odometry topic {self.odom_topic!r}")
+            raise InputError(self.path, f"no usable messages on odometry topic {self.odom_topic!r}")
         self.base_frame = child.lstrip("/") or "base_link"
         stamps, poses = np.asarray(stamps), np.asarray(poses, dtype=np.float64)
         order = np.argsort(stamps, kind="stable")
@@ -162,6 +187,13 @@ class RosbagSource(ScanSource):
             self._mounts[frame] = pose
         return self._mounts[frame]
 
+    def _bad_scan(self, index: int) -> None:
+        """Skip scan message ``index``, whose angle or range limits are not finite numbers."""
+        reason = "scans with a non-finite angle or range limit"
+        if not self.skipped[reason]:
+            log.warning("%s: %s message %d skipped: non-finite angle or range limit", self.path, self.scan_topic, index)
+        self.skip(reason)
+
     def _raw_scans(self) -> Iterator[Scan]:
         self.notes = Counter()
         t_odom, p_odom = self.odom  # before mounting_pose: sets the base frame and /tf_static
@@ -170,6 +202,9 @@ class RosbagSource(ScanSource):
                 if self.max_scans is not None and i >= self.max_scans:
                     break
                 stamp = _stamp(msg.header.stamp)
+                if not _finite(msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max):
+                    self._bad_scan(i)
+                    continue
                 if not t_odom[0] <= stamp <= t_odom[-1]:
                     self.notes["scans outside the odometry time span (odometry clamped)"] += 1
                 ranges = np.asarray(msg.ranges, dtype=np.float64)

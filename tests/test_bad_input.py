@@ -1,0 +1,146 @@
+"""Bad input: outlier stamps and poses, non-finite fields, corrupt bags; counted skips or one-line errors."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+from test_readers import _flaser, _write_bag
+
+from slam2d.datasets import base
+from slam2d.datasets.carmen import CarmenSource
+from slam2d.datasets.rosbag import RosbagSource
+from slam2d.errors import InputError
+
+N = 300
+RANGES = [1.0, 2.0, 3.0, 4.0]
+
+
+def _log(tmp_path, lines, name="run.clf"):
+    path = tmp_path / name
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _walk(n=N):
+    """FLASER lines of a robot driving 0.1 m per 0.2 s along x, stamps from 100 s."""
+    return [_flaser(RANGES, 100.0 + 0.2 * i, odom=(0.1 * i, 0.0, 0.0)) for i in range(n)]
+
+
+# ---------------------------------------------------------------- item 1: one bad stamp
+
+
+def test_extra_digit_in_first_stamp_drops_only_that_scan(tmp_path):
+    lines = _walk()
+    lines[0] = lines[0].replace(" 100.0 host", " 1000.0 host")
+    source = CarmenSource(_log(tmp_path, lines))
+    scans = list(source)
+    assert len(scans) == N - 1 and source.skipped == {base.LATE: 1}
+    assert scans[0].stamp == pytest.approx(100.2)
+
+
+def test_line_moved_earlier_drops_only_that_line(tmp_path):
+    lines = _walk()
+    lines.insert(20, lines.pop(200))
+    source = CarmenSource(_log(tmp_path, lines))
+    stamps = [s.stamp for s in source]
+    assert len(stamps) == N - 1 and source.skipped == {base.LATE: 1}
+    assert np.all(np.diff(stamps) > 0)
+
+
+def test_bag_scan_stamped_far_ahead_is_the_outlier(tmp_path):
+    scans = [(100.0 + 0.2 * i, RANGES) for i in range(N)]
+    scans[50] = (scans[50][0], RANGES, None, 2e9)  # header stamp, recorded in place
+    odoms = [(100.0 + 0.2 * i, (0.1 * i, 0.0, 0.0)) for i in range(N)]
+    source = RosbagSource(_write_bag("ros1", tmp_path / "a.bag", scans=scans, odoms=odoms))
+    assert len(list(source)) == N - 1 and source.skipped == {base.LATE: 1}
+
+
+def _clock_reset():
+    """A log whose clock goes back 70 s after 100 scans: the last 200 cannot be ordered."""
+    return _walk(100) + [_flaser(RANGES, 50.0 + 0.2 * i, odom=(10.0, 0.0, 0.0)) for i in range(200)]
+
+
+def test_losing_more_than_a_small_fraction_fails_naming_it(tmp_path):
+    with pytest.raises(InputError, match=r"run.clf: 16 of 300 scans \(5%\) unusable \(8 scans stamped after .*"
+                                         r"more than the 5% allowed \(dataset.max_skipped\)$"):
+        list(CarmenSource(_log(tmp_path, _clock_reset())))
+
+
+def test_max_skipped_lets_a_lossy_log_through_with_a_warning(tmp_path, caplog):
+    source = CarmenSource(_log(tmp_path, _clock_reset()))
+    source.max_skipped = 1.0
+    with caplog.at_level(logging.WARNING):
+        assert len(list(source)) == 92  # the 8 scans before the reset are outvoted by the 200 after it
+    assert "208 of 300 scans (69.3%) skipped" in caplog.text
+
+
+# ---------------------------------------------------------------- item 2: numeric fields
+
+
+def test_absurd_pose_and_odometry_jump_are_skipped(tmp_path):
+    lines = _walk()
+    lines[40] = _flaser(RANGES, 108.0, odom=(1e15, 0.0, 0.0))
+    lines[80] = _flaser(RANGES, 116.0, odom=(10_000.0, 0.0, 0.0))
+    lines[0] = _flaser(RANGES, 100.0, odom=(-10_000.0, 0.0, 0.0))  # the first scan has no predecessor
+    source = CarmenSource(_log(tmp_path, lines))
+    scans = list(source)
+    assert len(scans) == N - 3 and source.skipped == {base.BAD_POSE: 1, base.JUMP: 2}
+    assert max(abs(s.odom[0]) for s in scans) < 30
+
+
+def test_robotlaser_non_finite_angular_resolution(tmp_path, caplog):
+    def robotlaser(res, t):
+        return (f"ROBOTLASER1 0 -1.0 2.0 {res} 20.0 0.01 0 3 1.0 2.0 3.0 0 0 0 0 0 0 0 "
+                f"0.1 0.0 0.5 0.5 0.0 {t} host {t}")
+
+    lines = [robotlaser(1.0, 0.2 * i) for i in range(40)]
+    lines[3] = robotlaser("nan", 0.6)
+    lines[5] = robotlaser("inf", 1.0)
+    source = CarmenSource(_log(tmp_path, lines))
+    source.max_skipped = 0.1
+    with caplog.at_level(logging.WARNING):
+        assert len(list(source)) == 38
+    assert source.skipped == {"malformed ROBOTLASER1 lines": 2}
+    assert "run.clf:4: ROBOTLASER1 line skipped: non-finite start angle, angular resolution" in caplog.text
+
+
+@pytest.mark.parametrize("increment", [np.nan, np.inf])
+def test_bag_non_finite_angle_increment(tmp_path, increment):
+    scans = [(1.0 + 0.2 * i, RANGES) for i in range(40)]
+    scans[7] = (scans[7][0], RANGES, increment)
+    odoms = [(1.0 + 0.2 * i, (0.0, 0.0, 0.0)) for i in range(40)]
+    source = RosbagSource(_write_bag("ros1", tmp_path / "a.bag", scans=scans, odoms=odoms))
+    scans = list(source)
+    assert len(scans) == 39 and source.skipped == {"scans with a non-finite angle or range limit": 1}
+    assert all(np.isfinite(s.angles).all() for s in scans)
+
+
+@pytest.mark.parametrize("bad", [(np.nan, 0.0, 0.0), (0.0, 0.0, np.nan), (1e15, 0.0, 0.0)])
+def test_bag_odometry_message_with_nan_or_absurd_pose_is_dropped(tmp_path, bad, caplog):
+    scans = [(1.0 + 0.2 * i, RANGES) for i in range(40)]
+    odoms = [(1.0 + 0.2 * i, (0.1 * i, 0.0, 0.0)) for i in range(40)]
+    odoms[10] = (odoms[10][0], bad)
+    source = RosbagSource(_write_bag("ros1", tmp_path / "a.bag", scans=scans, odoms=odoms))
+    with caplog.at_level(logging.WARNING):
+        scans = list(source)
+    assert len(scans) == 40 and not source.skipped
+    assert np.isfinite([s.odom for s in scans]).all() and abs(scans[10].odom[0] - 1.0) < 1e-9
+    assert "a.bag: /odom message 10: non-finite or absurd pose or stamp; dropped" in caplog.text
+
+
+# ---------------------------------------------------------------- item 5: corrupt bag chunk
+
+
+def test_corrupt_bag_chunk_names_the_file(tmp_path):
+    scans = [(1.0 + 0.2 * i, np.linspace(1.0, 5.0, 180)) for i in range(200)]
+    odoms = [(1.0 + 0.2 * i, (0.0, 0.0, 0.0)) for i in range(200)]
+    path = _write_bag("ros1", tmp_path / "c.bag", scans=scans, odoms=odoms, compression="BZ2")
+    data = bytearray(path.read_bytes())
+    mid = len(data) // 3
+    data[mid:mid + 64] = bytes(64)
+    path.write_bytes(bytes(data))
+    source = RosbagSource(path)  # the index at the end is intact
+    with pytest.raises(InputError, match=r"c.bag: /(scan|odom) message \d+: unreadable"):
+        list(source)
