@@ -91,6 +91,10 @@ class LoopClosureConfig(Section):
     window_xy: float = Field(
         2.0, gt=0, description="m; half-width of the translational search window (the drift it can undo)"
     )
+    drift: float = Field(
+        0.03, ge=0, description="m of drift allowed per m of graph path between two keyframes: widens window_xy ..."
+    )
+    max_window_xy: float = Field(30.0, gt=0, description="m; ... and search_radius by as much, up to this window")
     window_theta_deg: float = Field(30.0, gt=0, description="half-width of the rotational search window")
     resolution: float = Field(0.05, gt=0, description="m; finest grid of the correlative matcher")
     min_score: float = Field(

@@ -127,10 +127,12 @@ def _evaluate(cfg: ExperimentConfig, result, relations) -> dict[str, Any]:
             out[f"{label}ate"] = ate(est, result.ground_truth, align=ev.align)
             out[f"{label}rpe"] = rpe(est, result.ground_truth, delta_m=ev.rpe_delta)
     if relations is not None:
+        from slam2d import geometry
         from slam2d.evaluation.relations import relations_metric
 
+        sensor = np.array([s.sensor_pose for s in result.scans])  # relations relate scans: the laser's poses
         for label, est in (("", result.poses), ("odometry_", result.odometry)):
-            m = relations_metric(result.stamps, est, relations, tolerance=ev.relation_tolerance)
+            m = relations_metric(result.stamps, geometry.compose(est, sensor), relations, tolerance=ev.relation_tolerance)
             out[f"{label}relations"] = m
         if out["relations"]["unmatched"]:
             log.warning(

@@ -76,3 +76,33 @@ def test_icp_pose_graph_beats_odometry_on_the_start_of_intel(data_file):
     assert odo["trans_abs_mean"] > 1.0  # odometry alone fails the bound by far
     assert est["trans_abs_mean"] < 0.03, est
     assert est["rot_abs_mean"] < 0.5, est
+
+
+@register_frontend("test_bent_odometry")
+class BentOdometry:
+    """True motion bent by 0.5 deg per metre travelled (a wheel-radius mismatch): drift beyond the local window."""
+
+    def __init__(self):
+        self._last = None
+
+    def process(self, scan, odom_delta):
+        true = np.zeros(3) if self._last is None else geometry.between(self._last, scan.ground_truth)
+        self._last = scan.ground_truth
+        bent = true + [0.0, 0.0, np.deg2rad(0.5) * np.hypot(true[0], true[1])]
+        info = np.diag([1 / 0.02**2, 1 / 0.02**2, 1 / np.deg2rad(0.5) ** 2])
+        return FrontendResult(delta=bent, information=info, confidence=1.0)
+
+
+def test_a_loop_beyond_the_local_window_is_found_by_the_drift_grown_search():
+    """After a lap of bent odometry the return to the start lies more than the +-2 m window away:
+    with a window that grows with the path between the keyframes the loop closes; with a fixed one it does not."""
+    common = ("dataset.max_scans=800", "frontend.name=test_bent_odometry")
+
+    def end_error(result):
+        return np.hypot(*(result.poses[-1, :2] - result.ground_truth[-1, :2]))
+
+    assert end_error(run(*common, "backend.name=none")) > 3.0
+    assert end_error(run(*common, "backend.loop_closure.drift=0")) > 2.0
+    grown = run(*common)
+    assert end_error(grown) < 0.1
+    assert grown.stats["loop matcher accepted_wide"] > 0

@@ -6,6 +6,13 @@ one; :meth:`LoopCloser.verify` matches the new keyframe's scan against the
 submap around a candidate with the correlative matcher and accepts on score
 when no rival match elsewhere in the window scores nearly as well (a
 periodic or featureless place aliases: the rival may be the true one).
+
+How far a revisit can be from where the graph puts it grows with the path
+between the two keyframes in the graph (along the trajectory, and across
+loops already closed): the search radius and window widen by ``drift`` per
+metre of that path, up to ``max_window_xy``. A window wider than
+``window_xy`` is searched on a proportionally coarser grid first, then
+refined on the fine one, so a wide search costs about as much as a local one.
 Consistency with the graph (the residual check after the batch optimisation)
 is the pose graph's job.
 
@@ -16,13 +23,15 @@ from __future__ import annotations
 
 import logging
 from collections import Counter, OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from slam2d import geometry
-from slam2d.backend.correlative import ProbabilityGrid, match, voxel_filter
+from slam2d.backend.correlative import ProbabilityGrid, angular_step, match, voxel_filter
 from slam2d.config import LoopClosureConfig
 
 __all__ = ["LoopClosure", "LoopCloser"]
@@ -57,6 +66,14 @@ class _Submap:
     members: tuple[int, ...]
     relative: np.ndarray  # (n, 3) member poses in the anchor's frame when built
     grid: ProbabilityGrid
+    points: np.ndarray  # (M, 2) member points in the anchor's frame
+    coarse: dict[int, ProbabilityGrid] = field(default_factory=dict)  # coarsening factor -> grid
+
+    def coarse_grid(self, factor: int) -> ProbabilityGrid:
+        """The submap on a grid ``factor`` times coarser (cached)."""
+        if factor not in self.coarse:
+            self.coarse[factor] = ProbabilityGrid(self.points, self.grid.resolution * factor)
+        return self.coarse[factor]
 
 
 class LoopCloser:
@@ -74,6 +91,8 @@ class LoopCloser:
         self._travelled: list[float] = []
         self._points: dict[int, np.ndarray] = {}
         self._submaps: OrderedDict[int, _Submap] = OrderedDict()
+        self._loop_edges: list[tuple[int, int]] = []  # positions of accepted loops' keyframes
+        self._path: tuple[int, np.ndarray] | None = None  # (key, graph path length to every keyframe)
 
     def __len__(self) -> int:
         return len(self._keys)
@@ -100,31 +119,63 @@ class LoopCloser:
         except KeyError:
             raise KeyError(f"keyframe {key} was never added") from None
 
-    def candidates(self, key: int, poses) -> list[int]:
-        """Keyframes within ``search_radius`` of ``key`` and at least ``min_travel`` away along the path.
+    def path_lengths(self, key: int) -> np.ndarray:
+        """Shortest path (m) from keyframe ``key`` to every keyframe (in insertion order) through
+        the graph: along the trajectory (the distance travelled between consecutive keyframes)
+        and across accepted loops (free). What a search must allow for grows with it."""
+        if self._path is not None and self._path[0] == key:
+            return self._path[1]
+        n = len(self._keys)
+        trav = np.asarray(self._travelled)
+        loops = np.array(self._loop_edges, dtype=np.int64).reshape(-1, 2)
+        i = np.concatenate([np.arange(n - 1), loops[:, 0]])
+        j = np.concatenate([np.arange(1, n), loops[:, 1]])
+        w = np.concatenate([np.diff(trav), np.zeros(len(loops))]) + 1e-9  # 0 would drop the edge
+        graph = coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
+        path = dijkstra(graph, directed=False, indices=self._position(key))
+        self._path = (key, path)
+        return path
 
-        poses: (K, 3) current keyframe poses, indexed by key. Nearest first, at
-        most ``max_candidates``; a candidate within ``submap_keyframes`` of one
-        already chosen is skipped, as its submap would be nearly the same.
+    def window(self, path_length) -> np.ndarray:
+        """Translational search half-width (m) for keyframes ``path_length`` (m) apart in the graph:
+        ``window_xy`` plus ``drift`` per metre of path, at most ``max_window_xy``."""
+        cfg = self.cfg
+        return np.minimum(cfg.window_xy + cfg.drift * np.asarray(path_length), max(cfg.max_window_xy, cfg.window_xy))
+
+    def candidates(self, key: int, poses) -> list[int]:
+        """Earlier keyframes that may be the place ``key`` is at, at least ``min_travel`` away along the path.
+
+        poses: (K, 3) current keyframe poses, indexed by key. A keyframe is a
+        candidate within ``search_radius`` of ``key``, widened by as much as
+        its search window (``window``) is wider than ``window_xy``: the drift
+        the graph may hold between them. Ranked by distance over that radius,
+        at most ``max_candidates``; a candidate within ``submap_keyframes`` of
+        one already chosen is skipped, as its submap would be nearly the same.
         """
+        cfg = self.cfg
         poses = geometry.as_pose(poses).reshape(-1, 3)
         keys = np.asarray(self._keys, dtype=np.int64)
         trav = np.asarray(self._travelled)
         here = self.travelled(key)
-        eligible = (keys < len(poses)) & (np.abs(trav - here) >= self.cfg.min_travel)
+        eligible = (keys < len(poses)) & (np.abs(trav - here) >= cfg.min_travel)
         if not eligible.any():
             return []
         positions = np.flatnonzero(eligible)
-        tree = cKDTree(poses[keys[positions], :2])
-        near = np.asarray(tree.query_ball_point(poses[key, :2], self.cfg.search_radius), dtype=np.int64)
-        if len(near) == 0:
+        dist = np.hypot(*(poses[keys[positions], :2] - poses[key, :2]).T)
+        near = dist <= cfg.search_radius + max(cfg.max_window_xy - cfg.window_xy, 0.0)
+        if cfg.drift > 0 and near.any():
+            radius = cfg.search_radius + self.window(self.path_lengths(key)[positions]) - cfg.window_xy
+        else:
+            radius = np.full(len(positions), cfg.search_radius)
+        near &= dist <= radius
+        if not near.any():
             return []
-        dist = np.hypot(*(poses[keys[positions[near]], :2] - poses[key, :2]).T)
+        ranked = positions[near][np.argsort(dist[near] / radius[near], kind="stable")]
         chosen: list[int] = []
-        for pos in positions[near[np.argsort(dist, kind="stable")]]:
-            if all(abs(pos - self._order[c]) > self.cfg.submap_keyframes for c in chosen):
+        for pos in ranked:
+            if all(abs(pos - self._order[c]) > cfg.submap_keyframes for c in chosen):
                 chosen.append(int(keys[pos]))
-                if len(chosen) == self.cfg.max_candidates:
+                if len(chosen) == cfg.max_candidates:
                     break
         self.stats["candidates"] += len(chosen)
         return chosen
@@ -137,7 +188,8 @@ class LoopCloser:
         ``submap_keyframes``-th keyframe, reaching ``submap_keyframes`` to each
         side (in insertion order, leaving out any within ``min_travel`` of
         ``key``), in the anchor's frame. The closure links the anchor and
-        ``key``; the initial guess is ``between(poses[anchor], poses[key])``.
+        ``key``; the initial guess is ``between(poses[anchor], poses[key])``;
+        the search window is ``window`` of their path length in the graph.
         """
         cfg = self.cfg
         poses = geometry.as_pose(poses).reshape(-1, 3)
@@ -151,12 +203,10 @@ class LoopCloser:
             log.debug("loop %d -> %d rejected: too few points", anchor, key)
             return None
         guess = geometry.between(poses[anchor], poses[key])
-        window_theta = np.deg2rad(cfg.window_theta_deg)
-        prune = max(0.0, cfg.min_score - SEARCH_MARGIN)
-        result = match(
-            submap.grid, points, guess, cfg.window_xy, window_theta, min_score=prune,
-            ambiguity_xy=cfg.ambiguity_distance, ambiguity_ratio=cfg.ambiguity_ratio,
-        )  # fmt: skip
+        window_xy = cfg.window_xy
+        if cfg.drift > 0:
+            window_xy = float(self.window(self.path_lengths(key)[self._position(anchor)]))
+        result = self._match(submap, points, guess, window_xy)
         if result.score < cfg.min_score:
             self.stats["rejected_score"] += 1
             log.debug("loop %d -> %d rejected: score %.3f < %.3f", anchor, key, result.score, cfg.min_score)
@@ -167,13 +217,45 @@ class LoopCloser:
                       result.search_score)  # fmt: skip
             return None
         self.stats["accepted"] += 1
+        if window_xy > cfg.window_xy:
+            self.stats["accepted_wide"] += 1
+        self._loop_edges.append((self._position(anchor), self._position(key)))
+        self._path = None
         moved = geometry.between(guess, result.pose)
         log.debug(
-            "loop %d -> %d accepted: score %.3f, correction %.3f m %.2f deg",
-            anchor, key, result.score, np.hypot(moved[0], moved[1]), np.rad2deg(moved[2]),
+            "loop %d -> %d accepted: score %.3f, correction %.3f m %.2f deg (window %.1f m)",
+            anchor, key, result.score, np.hypot(moved[0], moved[1]), np.rad2deg(moved[2]), window_xy,
         )  # fmt: skip
         info = np.linalg.inv(result.covariance)
         return LoopClosure(int(anchor), int(key), result.pose, 0.5 * (info + info.T), result.score)
+
+    def _match(self, submap: _Submap, points, guess, window_xy: float):
+        """Branch and bound within ``window_xy`` (m) and ``window_theta_deg`` of ``guess``, with the rival check.
+
+        A window wider than ``window_xy`` of the config is searched on a grid
+        as many times coarser (the same number of cells), then the coarse pose
+        is refined on the submap's own grid within two coarse cells.
+        """
+        cfg = self.cfg
+        window_theta = np.deg2rad(cfg.window_theta_deg)
+        prune = max(0.0, cfg.min_score - SEARCH_MARGIN)
+        factor = int(np.ceil(window_xy / cfg.window_xy - 1e-9))
+        if factor <= 1:
+            return match(
+                submap.grid, points, guess, window_xy, window_theta, min_score=prune,
+                ambiguity_xy=cfg.ambiguity_distance, ambiguity_ratio=cfg.ambiguity_ratio,
+            )  # fmt: skip
+        coarse = submap.coarse_grid(factor)
+        found = match(
+            coarse, points, guess, window_xy, window_theta, min_score=prune,
+            ambiguity_xy=max(cfg.ambiguity_distance, 2 * coarse.resolution), ambiguity_ratio=cfg.ambiguity_ratio,
+        )  # fmt: skip
+        if found.search_score < prune:
+            return replace(found, score=found.search_score)
+        if found.runner_up > 0:
+            return found
+        step = angular_step(voxel_filter(points, coarse.resolution), coarse.resolution)
+        return match(submap.grid, points, found.pose, 2 * coarse.resolution, step, min_score=prune)
 
     def _anchor(self, cand: int) -> int:
         """The submap anchor for ``cand``: the nearest keyframe whose position is a multiple of ``submap_keyframes``."""
@@ -202,7 +284,7 @@ class LoopCloser:
         pts = np.vstack([geometry.transform_points(p, self._points[k]) for k, p in zip(members, relative)])
         if len(pts) < MIN_POINTS:
             return None
-        submap = _Submap(members, relative, ProbabilityGrid(pts, self.cfg.resolution))
+        submap = _Submap(members, relative, ProbabilityGrid(pts, self.cfg.resolution), pts)
         self._submaps[anchor] = submap
         if len(self._submaps) > SUBMAP_CACHE:
             self._submaps.popitem(last=False)
