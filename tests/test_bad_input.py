@@ -144,3 +144,77 @@ def test_corrupt_bag_chunk_names_the_file(tmp_path):
     source = RosbagSource(path)  # the index at the end is intact
     with pytest.raises(InputError, match=r"c.bag: /(scan|odom) message \d+: unreadable"):
         list(source)
+
+
+# ---------------------------------------------------------------- item 6: map.yaml, label images, robot radius
+
+
+def _map(tmp_path):
+    """A 20 x 20 free map with a wall row, written as map.pgm + map.yaml; the YAML's path."""
+    from slam2d.config import MappingConfig
+    from slam2d.mapping.export import save_map_server
+    from slam2d.mapping.occupancy import OccupancyGrid
+
+    lo = np.full((20, 20), -3.0, np.float32)
+    lo[10, 2:18] = 3.0
+    return save_map_server(OccupancyGrid(lo, 0.1, (0.0, 0.0)), tmp_path / "map", MappingConfig())[1]
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("resolution", "0", "key 'resolution': must be > 0"),
+    ("resolution", "-0.05", "key 'resolution': must be > 0"),
+    ("resolution", ".nan", "key 'resolution': expected a finite number, got nan"),
+    ("resolution", "abc", "key 'resolution': expected a finite number, got 'abc'"),
+    ("origin", "[0.0, abc, 0.0]", "key 'origin': expected a finite number, got 'abc'"),
+    ("origin", "[0.0, .inf, 0.0]", "key 'origin': expected a finite number, got inf"),
+    ("occupied_thresh", "high", "key 'occupied_thresh': expected a finite number, got 'high'"),
+    ("free_thresh", "0.9", "keys .free_thresh. 0.9 and .occupied_thresh. 0.65: expected 0 <= free_thresh <"),
+    ("negate", "2", "key 'negate': expected 0 or 1, got 2"),
+    ("image", "[1, 2]", "key 'image': expected a file name"),
+])
+def test_map_yaml_values_are_validated(tmp_path, key, value, message):
+    from slam2d.mapping.export import load_map_server
+
+    yml = _map(tmp_path)
+    lines = [f"{key}: {value}" if line.startswith(f"{key}:") else line for line in yml.read_text().splitlines()]
+    yml.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=f"map.yaml: {message}"):
+        load_map_server(yml)
+
+
+def test_map_image_that_is_not_an_image(tmp_path):
+    from slam2d.mapping.export import load_map_server
+
+    yml = _map(tmp_path)
+    (tmp_path / "map.pgm").write_bytes(b"\x00garbage" * 50)
+    with pytest.raises(InputError, match=r"map.pgm: not a readable image"):
+        load_map_server(yml)
+
+
+def test_16_bit_map_image_is_scaled_not_clipped(tmp_path):
+    from PIL import Image
+
+    from slam2d.mapping.export import load_map_server
+
+    yml = _map(tmp_path)
+    grey = np.full((4, 6), 65535, np.uint16)  # free
+    grey[1] = 0  # occupied
+    grey[2] = 205 * 257  # unknown
+    Image.fromarray(grey).save(tmp_path / "map16.png")
+    yml.write_text(yml.read_text().replace("image: map.pgm", "image: map16.png"))
+    grid = load_map_server(yml)
+    assert grid.free_mask(0.196)[::-1].sum(axis=1).tolist() == [6, 0, 0, 6]
+    assert grid.occupied_mask(0.65)[::-1].sum(axis=1).tolist() == [0, 6, 0, 0]
+
+
+def test_plan_rejects_bad_labels_and_radius(tmp_path):
+    from slam2d.planning.run import plan_on_map
+
+    yml = _map(tmp_path)
+    junk = tmp_path / "labels.png"
+    junk.write_text("not an image")
+    with pytest.raises(InputError, match="labels.png: not a readable label image"):
+        plan_on_map(yml, (0.5, 0.5), (1.5, 0.5), "rooms", tmp_path / "out", robot_radius=0.0, labels=junk)
+    for radius in (np.nan, np.inf, -0.1):
+        with pytest.raises(InputError, match="robot_radius: must be a finite number >= 0"):
+            plan_on_map(yml, (0.5, 0.5), (1.5, 0.5), None, tmp_path / "out", robot_radius=radius)

@@ -114,25 +114,66 @@ def _read_map_yaml(path: Path) -> dict:
     meta.setdefault("negate", 0)
     meta.setdefault("mode", "trinary")
     if meta["mode"] not in ("trinary", "scale"):
-        raise InputError(path, f"key 'mode': unsupported mode '{meta['mode']}' (trinary or scale)")
+        raise InputError(path, f"key 'mode': unsupported mode {_short(meta['mode'])} (trinary or scale)")
+    if not isinstance(meta["image"], str) or not meta["image"]:
+        raise InputError(path, f"key 'image': expected a file name, got {_short(meta['image'])}")
+    if meta["negate"] not in (0, 1):
+        raise InputError(path, f"key 'negate': expected 0 or 1, got {_short(meta['negate'])}")
+    _check_numbers(path, meta)
+    return meta
+
+
+def _short(value, limit: int = 60) -> str:
+    """``repr(value)``, cut to ``limit`` characters."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _number(path: Path, key: str, value) -> float:
+    """``value`` as a finite float; an InputError naming ``key`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise InputError(path, f"key '{key}': expected a finite number, got {_short(value)}")
+    return float(value)
+
+
+def _check_numbers(path: Path, meta: dict) -> None:
+    """Resolution > 0, origin [x, y, 0] finite, 0 <= free_thresh < occupied_thresh <= 1."""
+    if _number(path, "resolution", meta["resolution"]) <= 0:
+        raise InputError(path, f"key 'resolution': must be > 0 m per pixel, got {meta['resolution']}")
     origin = meta["origin"]
     if not isinstance(origin, list) or len(origin) != 3:
-        raise InputError(path, f"key 'origin': expected [x, y, yaw], got {origin!r}")
-    if float(origin[2]) != 0.0:
+        raise InputError(path, f"key 'origin': expected [x, y, yaw], got {_short(origin)}")
+    meta["origin"] = [_number(path, "origin", v) for v in origin]
+    if meta["origin"][2] != 0.0:
         raise InputError(path, f"key 'origin': a rotated map (yaw {origin[2]}) is not supported")
-    return meta
+    free, occupied = (_number(path, key, meta[key]) for key in ("free_thresh", "occupied_thresh"))
+    if not 0.0 <= free < occupied <= 1.0:
+        raise InputError(path, f"keys 'free_thresh' {free} and 'occupied_thresh' {occupied}: "
+                         "expected 0 <= free_thresh < occupied_thresh <= 1")
 
 
 def _read_pixels(yaml_path: Path, meta: dict) -> np.ndarray:
     """8-bit grey value (uint8) per pixel, image rows (row 0 = top)."""
-    from PIL import Image
+    from PIL import Image, UnidentifiedImageError
 
     image = Path(meta["image"])
     image = image if image.is_absolute() else yaml_path.parent / image
     if not image.is_file():
         raise InputError(yaml_path, f"key 'image': file not found: {image}")
-    with Image.open(image) as im:
-        return np.asarray(im.convert("L"), dtype=np.uint8)
+    try:
+        with Image.open(image) as im:
+            return _grey8(im)
+    except (UnidentifiedImageError, OSError, ValueError) as err:
+        raise InputError(image, f"not a readable image ({str(err)[:120]})") from None
+
+
+def _grey8(im) -> np.ndarray:
+    """8-bit grey values of a PIL image; 16- and 32-bit grey images are scaled, not clipped."""
+    if im.mode in ("I;16", "I;16B", "I;16L", "I"):
+        v = np.asarray(im).astype(np.int64)
+        top = 65535 if im.mode != "I" or v.max(initial=0) <= 65535 else max(int(v.max()), 1)
+        return np.round(np.clip(v, 0, top) * (255.0 / top)).astype(np.uint8)
+    return np.asarray(im.convert("L"), dtype=np.uint8)
 
 
 def save_map_png(

@@ -47,16 +47,24 @@ def _labels(labels, grid: PlanningGrid) -> np.ndarray:
         path = Path(labels)
         if not path.is_file():
             raise InputError(path, "labels file not found")
-        if path.suffix.lower() == ".png":
-            from PIL import Image
-
-            labels = np.flipud(np.asarray(Image.open(path)).astype(np.int32))
-        else:
-            labels = np.load(path)
+        labels = _read_labels(path)
     labels = np.asarray(labels)
     if labels.shape != shape:
         raise InputError("labels", f"shape {labels.shape} differs from the map {shape}")
     return labels
+
+
+def _read_labels(path: Path) -> np.ndarray:
+    """A label image (``.png``, row 0 the top, flipped to rows going up) or a ``.npy`` array."""
+    try:
+        if path.suffix.lower() != ".png":
+            return np.load(path, allow_pickle=False)
+        from PIL import Image
+
+        with Image.open(path) as im:
+            return np.flipud(np.asarray(im).astype(np.int32))
+    except Exception as err:  # PIL and numpy raise many types for a file that is not what it says
+        raise InputError(path, f"not a readable label image or .npy array ({str(err)[:120]})") from None
 
 
 def make_planner(grid: PlanningGrid, hierarchical: str | None = None, cluster_size: int = 16, labels=None, graph=None):
@@ -103,8 +111,8 @@ def plan_on_map(
     t_all = time.perf_counter()
     limits = limits or TrajectoryLimits()
     start, goal = _point(start, "start"), _point(goal, "goal")
-    if robot_radius < 0:
-        raise InputError("robot_radius", f"must be >= 0, got {robot_radius}")
+    if not 0 <= robot_radius < np.inf:
+        raise InputError("robot_radius", f"must be a finite number >= 0 m, got {robot_radius}")
     grid = load_grid(map_path, resolution=resolution)
     free = grid.inflated(robot_radius)
     out = Path(out_dir)
