@@ -36,18 +36,27 @@ def _fail(err: Exception) -> None:
     raise typer.Exit(2)
 
 
+def _stopped(what: str) -> None:
+    """Report a SIGINT / SIGTERM; exit 130 as shells do."""
+    typer.secho(f"stopped: {what}", fg=typer.colors.RED, err=True)
+    raise typer.Exit(130)
+
+
 @app.command()
 def run(config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, quiet: bool = QUIET_OPT) -> None:
     """Run one experiment; print the results folder."""
     from slam2d import config as config_mod
-    from slam2d.experiment import run_experiment
+    from slam2d.experiment import interrupt_on_sigterm, run_experiment
 
     _setup_logging(quiet)
+    interrupt_on_sigterm()
     try:
         cfg = config_mod.load(config, set_)
         folder = run_experiment(cfg, quiet=quiet)
     except InputError as err:
         _fail(err)
+    except KeyboardInterrupt:
+        _stopped("no results folder written")
     typer.echo(f"results: {folder}")
 
 
@@ -56,16 +65,21 @@ def ablate(
     sweep: Path = typer.Argument(..., help="sweep YAML: base config + grid or list of overrides"),
     workers: Optional[int] = typer.Option(None, "--workers", "-j", help="parallel processes (default: sweep's)"),
     executor: str = typer.Option("local", help="local (processes) or ray"),
+    resume: Optional[Path] = typer.Option(None, help="folder of a stopped sweep: run only its missing variants"),
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Run every variant of a sweep in parallel; write one table (Markdown + CSV)."""
-    from slam2d.experiment import run_sweep
+    from slam2d.experiment import SweepStopped, interrupt_on_sigterm, run_sweep
 
     _setup_logging(quiet)
+    interrupt_on_sigterm()
     try:
-        folder, rows = run_sweep(sweep, workers=workers, executor=executor, quiet=quiet)
+        folder, rows = run_sweep(sweep, workers=workers, executor=executor, quiet=quiet, resume=resume)
     except InputError as err:
         _fail(err)
+    except SweepStopped as stop:
+        _stopped(f"{stop.finished} of {stop.total} variants finished in {stop.folder}; "
+                 f"resume with: slam2d ablate {sweep} --resume {stop.folder}")
     if not quiet:
         typer.echo((folder / "table.md").read_text())
     failed = [r["variant"] for r in rows if r["error"]]
@@ -97,15 +111,18 @@ def segment(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Split a map into rooms: colour image, topological graph, metrics."""
-    from slam2d.experiment import results_folder
+    from slam2d.experiment import interrupt_on_sigterm, results_folder
     from slam2d.segmentation.run import segment_map
 
     _setup_logging(quiet)
+    interrupt_on_sigterm()
     try:
         with results_folder(root, f"segment-{map_path.stem}-{method}") as (work, published):
             metrics = segment_map(map_path, method, similarity, work, ground_truth=ground_truth)
     except InputError as err:
         _fail(err)
+    except KeyboardInterrupt:
+        _stopped("no results folder written")
     summary = {k: metrics[k] for k in ("rooms", "k", "recall", "precision", "seconds") if k in metrics}
     typer.echo(" ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in summary.items()))
     typer.echo(f"results: {published[0]}")
@@ -131,16 +148,19 @@ def plan(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Plan a path (A* or hierarchical), smooth it, time it with toppra; write figures."""
-    from slam2d.experiment import results_folder
+    from slam2d.experiment import interrupt_on_sigterm, results_folder
     from slam2d.planning.run import plan_on_map
 
     _setup_logging(quiet)
+    interrupt_on_sigterm()
     try:
         start_xy, goal_xy = _xy(start, "start"), _xy(goal, "goal")
         with results_folder(root, f"plan-{map_path.stem}") as (work, published):
             metrics = plan_on_map(map_path, start_xy, goal_xy, hierarchical, work, robot_radius, labels=labels)
     except InputError as err:
         _fail(err)
+    except KeyboardInterrupt:
+        _stopped("no results folder written")
     if not metrics.get("found", False):
         typer.secho(f"no path: {metrics.get('reason', 'unknown')}", fg="red", err=True)
     keys = ("length_m", "duration_s", "nodes_expanded", "plan_ms")

@@ -8,11 +8,15 @@ folder, and an existing folder is never overwritten.
 from __future__ import annotations
 
 import copy
+import glob
 import itertools
 import json
 import logging
+import os
+import re
 import resource
 import shutil
+import signal
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -320,58 +324,214 @@ def variant_config(base: dict[str, Any], variant: Variant, root: Path) -> Experi
 
 def _run_variant(cfg: ExperimentConfig) -> tuple[str, dict[str, Any] | None, str | None]:
     """Worker: (folder, metrics, error)."""
+    global _RUNNING_VARIANT
+    if _STOPPED:
+        raise KeyboardInterrupt
+    _RUNNING_VARIANT = True
     try:
         folder = run_experiment(cfg, quiet=True)
         return str(folder), json.loads((folder / "metrics.json").read_text()), None
     except Exception as err:  # reported in the table, the sweep goes on
         return "", None, f"{type(err).__name__}: {err}"
+    finally:
+        _RUNNING_VARIANT = False
 
 
-def run_sweep(path: str | Path, workers: int | None = None, executor: str = "local", quiet: bool = False):
-    """Run every variant of a sweep file; write table.md/.csv; return (folder, rows)."""
+class SweepStopped(KeyboardInterrupt):
+    """A sweep stopped by SIGINT or SIGTERM; ``folder`` keeps its finished variants and a table of them."""
+
+    def __init__(self, folder: Path, finished: int, total: int):
+        super().__init__(f"{folder}: stopped with {finished} of {total} variants finished")
+        self.folder, self.finished, self.total = folder, finished, total
+
+
+EXECUTORS = ("local", "ray")
+
+
+def run_sweep(path: str | Path, workers: int | None = None, executor: str = "local", quiet: bool = False,
+              resume: str | Path | None = None):
+    """Run every variant of a sweep file; write table.md/.csv; return (folder, rows).
+
+    ``resume``: the folder of a stopped sweep of the same file; only variants
+    without a finished results folder there are run. A SIGINT (or SIGTERM,
+    see :func:`interrupt_on_sigterm`) stops the running variants, writes the
+    table of the finished ones and raises :class:`SweepStopped`.
+    """
+    if executor not in EXECUTORS:
+        raise InputError("--executor", f"unknown executor '{executor}' ({', '.join(EXECUTORS)})")
+    base, variants, sweep_workers = load_sweep(path)
+    root = _sweep_folder(path, base, resume)
+    cfgs = [variant_config(base, v, root / "runs") for v in variants]
+    outcomes = [_finished(root / "runs", c.name) for c in cfgs]
+    todo = [i for i, o in enumerate(outcomes) if o is None]
+    if resume is not None:
+        log.info("%s: %d of %d variants already finished", root, len(variants) - len(todo), len(variants))
+    try:
+        for i, outcome in _execute([cfgs[i] for i in todo], workers or sweep_workers, executor, quiet):
+            outcomes[todo[i]] = outcome
+    except KeyboardInterrupt:
+        _write_sweep_table(root, variants, outcomes)
+        raise SweepStopped(root, sum(o is not None and not o[2] for o in outcomes), len(variants)) from None
+    return root, _write_sweep_table(root, variants, outcomes)
+
+
+def _sweep_folder(path, base: dict[str, Any], resume) -> Path:
+    """The sweep's folder: ``resume`` (checked), else a new ``ablate-NAME-YYYYmmdd-HHMMSS[-k]`` with a copy of the sweep."""
+    if resume is not None:
+        root = Path(resume)
+        if not (root / "sweep.yaml").is_file():
+            raise InputError(root, "not a sweep folder (no sweep.yaml): give the folder 'slam2d ablate' printed")
+        for stale in (root / "runs").glob(".*"):  # left by a process killed outright
+            shutil.rmtree(stale, ignore_errors=True)
+        return root
+    name = config_mod.load_dict(path).get("name") or Path(path).stem
+    parent = Path(base.get("output", {}).get("root", "results"))
+    root = _new_folder(parent, f"ablate-{name}-{datetime.now():%Y%m%d-%H%M%S}")
+    shutil.copyfile(path, root / "sweep.yaml")
+    return root
+
+
+def _new_folder(parent: Path, stem: str) -> Path:
+    """Create and return ``parent/stem``, or ``stem-2``, ``stem-3``... if taken (atomic: mkdir)."""
+    parent.mkdir(parents=True, exist_ok=True)
+    for k in itertools.count(1):
+        folder = parent / (stem if k == 1 else f"{stem}-{k}")
+        try:
+            folder.mkdir()
+            return folder
+        except FileExistsError:
+            continue
+    raise AssertionError("unreachable")
+
+
+def _finished(runs: Path, name: str) -> tuple[str, dict[str, Any], None] | None:
+    """(folder, metrics, None) of a finished run of variant ``name`` under ``runs``; None if there is none."""
+    pattern = re.compile(re.escape(name) + r"-\d{8}-\d{6}(-\d+)?")
+    for folder in sorted(runs.glob(f"{glob.escape(name)}-*")):
+        if pattern.fullmatch(folder.name) and (folder / "metrics.json").is_file():
+            return str(folder), json.loads((folder / "metrics.json").read_text()), None
+    return None
+
+
+def _write_sweep_table(root: Path, variants: list[Variant], outcomes: list) -> list[dict[str, Any]]:
+    """Write table.md/.csv: one row per variant (unfinished ones say so); return the rows."""
     from slam2d.evaluation.tables import flatten_metrics, write_table
 
-    base, variants, sweep_workers = load_sweep(path)
-    name = config_mod.load_dict(path).get("name") or Path(path).stem
-    root = Path(base.get("output", {}).get("root", "results")) / f"ablate-{name}-{datetime.now():%Y%m%d-%H%M%S}"
-    root.mkdir(parents=True, exist_ok=False)
-    cfgs = [variant_config(base, v, root / "runs") for v in variants]
-    outcomes = _execute(cfgs, workers or sweep_workers, executor, quiet)
     rows = []
-    for v, (folder, metrics, error) in zip(variants, outcomes):
-        row: dict[str, Any] = {"variant": v.name}
-        row.update({k: v2 for k, v2 in v.overrides.items()})
+    for v, outcome in zip(variants, outcomes):
+        folder, metrics, error = outcome or ("", None, "not run (sweep stopped)")
+        row: dict[str, Any] = {"variant": v.name, **v.overrides}
         if metrics is not None:
             row.update(flatten_metrics(metrics))
         row["error"] = error or ""
         row["folder"] = str(Path(folder).relative_to(root)) if folder else ""
         rows.append(row)
     write_table(rows, root / "table", leading=["variant", *dict.fromkeys(k for v in variants for k in v.overrides)])
-    return root, rows
+    return rows
 
 
 def _execute(cfgs: list[ExperimentConfig], workers: int, executor: str, quiet: bool):
+    """Yield (index, (folder, metrics, error)) as variants finish."""
     if executor == "ray":
-        try:
-            import ray
-        except ImportError:
-            raise InputError("--executor ray", "ray is not installed: pip install 'slam2d[ray]'") from None
-        ray.init(ignore_reinit_error=True, log_to_driver=False)
-        remote = ray.remote(_run_variant)
-        return ray.get([remote.remote(c) for c in cfgs])
-    if executor != "local":
-        raise InputError("--executor", f"unknown executor '{executor}' (local, ray)")
+        yield from _execute_ray(cfgs)
+        return
     bar = nullcontext(None)
     if not quiet:
         from rich.progress import Progress
 
         bar = Progress()
-    results: list[Any] = [None] * len(cfgs)
-    with bar as progress, ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+    with bar as progress:
         task = progress.add_task("variants", total=len(cfgs)) if progress else None
-        futures = {pool.submit(_run_variant, c): i for i, c in enumerate(cfgs)}
-        for fut in as_completed(futures):
-            results[futures[fut]] = fut.result()
+        for item in _execute_local(cfgs, workers):
+            yield item
             if progress:
                 progress.advance(task)
-    return results
+
+
+def _execute_ray(cfgs: list[ExperimentConfig]):
+    try:
+        import ray
+    except ImportError:
+        raise InputError("--executor ray", "ray is not installed: pip install 'slam2d[ray]'") from None
+    ray.init(ignore_reinit_error=True, log_to_driver=False)
+    remote = ray.remote(_run_variant)
+    refs = [remote.remote(c) for c in cfgs]
+    try:
+        yield from enumerate(ray.get(refs))
+    except KeyboardInterrupt:
+        for ref in refs:
+            ray.cancel(ref)
+        raise
+
+
+def _execute_local(cfgs: list[ExperimentConfig], workers: int):
+    """Variants in worker processes; on an interrupt the queued ones are dropped and the running ones stopped."""
+    if not cfgs:
+        return
+    pool = ProcessPoolExecutor(max_workers=max(1, workers), initializer=_init_sweep_worker)
+    try:
+        futures = {pool.submit(_run_variant, c): i for i, c in enumerate(cfgs)}
+        for fut in as_completed(futures):
+            yield futures[fut], fut.result()
+    except BaseException:
+        _stop_pool(pool)
+        raise
+    pool.shutdown()
+
+
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel queued work, send SIGTERM to the workers (each removes its half-written folder), wait for them."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(30)
+        if process.is_alive():
+            process.kill()
+            process.join()
+
+
+def _handler(stop):
+    """A signal handler calling ``stop()`` in this process; a forked child that inherits it dies as by default."""
+    pid = os.getpid()
+
+    def handler(signum, frame):
+        if os.getpid() != pid:
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+            return
+        stop()
+
+    return handler
+
+
+def interrupt_on_sigterm() -> None:
+    """Make SIGTERM raise KeyboardInterrupt in this process, as SIGINT does, so half-written folders are removed."""
+
+    def stop():
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _handler(stop))
+
+
+_RUNNING_VARIANT = False  # in a sweep worker: whether a variant is running ...
+_STOPPED = False  # ... and whether a signal has stopped the worker (variants still queued are not run)
+
+
+def _init_sweep_worker() -> None:
+    """The first SIGINT or SIGTERM stops a sweep worker: its running variant is interrupted (its folder
+    removed) and queued ones are not started; later signals are ignored so that the clean-up finishes."""
+
+    def stop():
+        global _STOPPED
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        _STOPPED = True
+        if _RUNNING_VARIANT:
+            raise KeyboardInterrupt
+
+    handler = _handler(stop)
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)

@@ -3,15 +3,24 @@
 from __future__ import annotations
 
 import logging
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from datetime import datetime
 
 import numpy as np
 import pytest
+import yaml
 from test_readers import _flaser, _write_bag
 
+from slam2d import experiment
 from slam2d.datasets import base
 from slam2d.datasets.carmen import CarmenSource
 from slam2d.datasets.rosbag import RosbagSource
 from slam2d.errors import InputError
+from slam2d.experiment import run_sweep
 
 N = 300
 RANGES = [1.0, 2.0, 3.0, 4.0]
@@ -218,3 +227,91 @@ def test_plan_rejects_bad_labels_and_radius(tmp_path):
     for radius in (np.nan, np.inf, -0.1):
         with pytest.raises(InputError, match="robot_radius: must be a finite number >= 0"):
             plan_on_map(yml, (0.5, 0.5), (1.5, 0.5), None, tmp_path / "out", robot_radius=radius)
+
+
+# ---------------------------------------------------------------- items 3-4: interrupted runs and sweeps
+
+
+def _cli(*args) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "slam2d.cli", *map(str, args)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for(predicate, timeout=120.0):
+    end = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < end, "timed out"
+        time.sleep(0.1)
+
+
+def _stop(proc: subprocess.Popen, sig) -> str:
+    """Send ``sig`` to ``proc`` alone (as a scheduler or `timeout` does); its stderr once it has exited 130."""
+    time.sleep(0.5)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    return err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_signal_during_run_leaves_no_folder(tmp_path, sig):
+    root = tmp_path / "results"
+    proc = _cli("run", "-q", "--set", f"output.root={root}")  # the whole default route: long enough
+    _wait_for(lambda: root.is_dir() and any(root.iterdir()))
+    assert "stopped: no results folder written" in _stop(proc, sig)
+    assert list(root.iterdir()) == []
+
+
+def _sweep(tmp_path, variants, name="sweep"):
+    path = tmp_path / f"{name}.yaml"
+    config = {"output": {"root": str(tmp_path / "res")}, "mapping": {"resolution": 0.1}}
+    path.write_text(yaml.safe_dump({"workers": 1, "config": config, "variants": variants}))
+    return path
+
+
+QUICK = {"dataset.max_scans": 10}
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_signal_during_ablate_stops_and_keeps_finished_variants(tmp_path, sig):
+    sweep = _sweep(tmp_path, [{"name": "quick", "set": QUICK}, {"name": "long", "set": {"seed": 1}},
+                              {"name": "queued", "set": {"seed": 2}}])
+    proc = _cli("ablate", "-q", sweep)
+    runs = lambda: list((tmp_path / "res").glob("ablate-sweep-*/runs/*"))  # noqa: E731
+    _wait_for(lambda: any(p.name.startswith(".long-") for p in runs()))
+    err = _stop(proc, sig)
+    (folder,) = (tmp_path / "res").iterdir()
+    assert [p.name[:6] for p in runs()] == ["quick-"]  # no hidden, no queued variant
+    assert f"1 of 3 variants finished in {folder}; resume with: slam2d ablate {sweep} --resume {folder}" in err
+    assert (folder / "table.md").read_text().count("not run (sweep stopped)") == 2
+
+
+def test_resume_runs_only_missing_variants(tmp_path):
+    sweep = _sweep(tmp_path, [{"name": "a", "set": QUICK}, {"name": "b", "set": {**QUICK, "seed": 1}}])
+    folder, _ = run_sweep(sweep, quiet=True)
+    (kept,) = (folder / "runs").glob("a-*")
+    shutil.rmtree(next((folder / "runs").glob("b-*")))
+    (folder / "runs" / ".b-stale").mkdir()  # left by a killed process
+    again, rows = run_sweep(sweep, quiet=True, resume=folder)
+    assert again == folder and [r["error"] for r in rows] == ["", ""]
+    names = sorted(p.name for p in (folder / "runs").iterdir())
+    assert len(names) == 2 and names[0] == kept.name and names[1].startswith("b-")
+    with pytest.raises(InputError, match="not a sweep folder"):
+        run_sweep(sweep, quiet=True, resume=tmp_path / "res")
+
+
+def test_bad_executor_leaves_no_folder_and_same_second_sweeps_do_not_collide(tmp_path, monkeypatch):
+    sweep = _sweep(tmp_path, [{"name": "a", "set": QUICK}])
+    with pytest.raises(InputError, match="unknown executor 'bogus'"):
+        run_sweep(sweep, executor="bogus", quiet=True)
+    assert not (tmp_path / "res").exists()
+
+    class Frozen(datetime):
+        @classmethod
+        def now(cls, tz=None):
+            return datetime(2026, 1, 2, 3, 4, 5)
+
+    monkeypatch.setattr(experiment, "datetime", Frozen)
+    first, _ = run_sweep(sweep, quiet=True)
+    second, _ = run_sweep(sweep, quiet=True)
+    assert (first.name, second.name) == ("ablate-sweep-20260102-030405", "ablate-sweep-20260102-030405-2")
