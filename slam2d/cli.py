@@ -157,17 +157,22 @@ def plan(
         start_xy, goal_xy = _xy(start, "start"), _xy(goal, "goal")
         with results_folder(root, f"plan-{map_path.stem}") as (work, published):
             metrics = plan_on_map(map_path, start_xy, goal_xy, hierarchical, work, robot_radius, labels=labels)
+            if not metrics.get("found", False):
+                raise _NoPath(metrics.get("reason", "unknown"))  # leaves no results folder
     except InputError as err:
         _fail(err)
     except KeyboardInterrupt:
         _stopped("no results folder written")
-    if not metrics.get("found", False):
-        typer.secho(f"no path: {metrics.get('reason', 'unknown')}", fg="red", err=True)
+    except _NoPath as err:
+        typer.secho(f"no path: {err}", fg="red", err=True)
+        raise typer.Exit(1) from None
     keys = ("length_m", "duration_s", "nodes_expanded", "plan_ms")
     typer.echo(" ".join(f"{k}={metrics[k]:.4g}" for k in keys if isinstance(metrics.get(k), (int, float))))
     typer.echo(f"results: {published[0]}")
-    if not metrics.get("found", False):
-        raise typer.Exit(1)
+
+
+class _NoPath(Exception):
+    """The planner found no path (its reason is the message)."""
 
 
 @app.command()

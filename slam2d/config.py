@@ -10,9 +10,9 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from slam2d.errors import InputError
+from slam2d.errors import InputError, read_text
 
 
 class Section(BaseModel):
@@ -130,7 +130,13 @@ class MappingConfig(Section):
     max_range: float | None = Field(None, gt=0, description="ignore hits farther than this, m")
     every_nth_scan: int = Field(1, gt=0, description="integrate every n-th scan")
     occupied_thresh: float = Field(0.65, gt=0, lt=1)
-    free_thresh: float = Field(0.196, gt=0, lt=1)
+    free_thresh: float = Field(0.196, gt=0, lt=1, description="below occupied_thresh")
+
+    @model_validator(mode="after")
+    def _thresholds_in_order(self):
+        if not self.free_thresh < self.occupied_thresh:
+            raise ValueError(f"free_thresh {self.free_thresh} must be below occupied_thresh {self.occupied_thresh}")
+        return self
 
 
 class EvaluationConfig(Section):
@@ -146,8 +152,8 @@ class OutputConfig(Section):
 
 
 class ExperimentConfig(Section):
-    name: str = "sim"
-    seed: int = 0
+    name: str = Field("sim", description="results folder name: no '/' or '\\', no leading '.'")
+    seed: int = Field(0, ge=0, lt=2**63, description="one seed for every random choice")
     parallel: bool = Field(True, description="reader and frontend in a worker process ahead of the back end")
     dataset: DatasetConfig = DatasetConfig()
     frontend: FrontendConfig = FrontendConfig()
@@ -156,13 +162,51 @@ class ExperimentConfig(Section):
     evaluation: EvaluationConfig = EvaluationConfig()
     output: OutputConfig = OutputConfig()
 
+    @field_validator("name")
+    @classmethod
+    def _folder_name(cls, name: str) -> str:
+        if not 0 < len(name) <= 200 or name.startswith(".") or any(c in name for c in "/\\\0"):
+            raise ValueError("must be a folder name: 1-200 characters, no '/', '\\' or NUL, no leading '.'")
+        return name
+
+
+def short_repr(value: Any, limit: int = 80) -> str:
+    """``repr(value)`` cut to ``limit`` characters, so that an error stays one short line."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit - 3]}..."
+
 
 def _format_error(err: ValidationError, source: str) -> InputError:
     e = err.errors()[0]
     key = ".".join(str(p) for p in e["loc"]) or "<root>"
     if e["type"] == "extra_forbidden":
         return InputError(source, f"unknown key '{key}'")
-    return InputError(source, f"key '{key}': {e['msg']} (got {e.get('input')!r})")
+    return InputError(source, f"key '{key}': {e['msg']} (got {short_repr(e.get('input'))})")
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """SafeLoader that refuses a mapping key given twice."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if isinstance(key, (str, int, float, bool)) and key in seen:
+                raise yaml.constructor.ConstructorError(None, None, f"duplicate key {short_repr(key)}",
+                                                        key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
+def read_yaml(path: Path) -> Any:
+    """The YAML document in ``path``: InputError (file:line) if it is not UTF-8 text, malformed or repeats a key."""
+    text = read_text(path)
+    try:
+        return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark else str(path)
+        raise InputError(where, f"malformed YAML ({str(getattr(err, 'problem', None) or err)[:200]})") from None
 
 
 def validate(data: dict[str, Any], source: str = "config") -> ExperimentConfig:
@@ -178,12 +222,7 @@ def load_dict(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "config file not found")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise InputError(where, f"malformed YAML ({getattr(err, 'problem', err)})") from None
+    data = read_yaml(path)
     if data is None:
         return {}
     if not isinstance(data, dict):

@@ -13,3 +13,13 @@ class InputError(ValueError):
 
     def __reduce__(self):
         return type(self), (self.where, self.what)
+
+
+def read_text(path) -> str:
+    """The UTF-8 text of ``path``; an InputError naming it if it cannot be read or is not text."""
+    try:
+        return open(path, "rb").read().decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise InputError(path, f"not a text file (byte {err.start} is not UTF-8)") from None
+    except OSError as err:
+        raise InputError(path, f"cannot read ({err.strerror})") from None

@@ -52,8 +52,7 @@ def results_folder(root: str | Path, name: str):
     """Yield ``(work, published)``: a hidden temporary folder to fill (its log in
     ``run.log``) and a list that receives the final path once the block succeeds.
     On failure the temporary folder is removed, so no half-written folder remains."""
-    root = Path(root)
-    root.mkdir(parents=True, exist_ok=True)
+    root = output_root(root)
     work = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=root))
     published: list[Path] = []
     try:
@@ -65,11 +64,25 @@ def results_folder(root: str | Path, name: str):
         raise
 
 
+def output_root(root: str | Path, key: str = "output.root") -> Path:
+    """``root`` with ``~`` expanded, created if missing; an InputError if it is a file or cannot be made."""
+    path = Path(root).expanduser()
+    if path.exists() and not path.is_dir():
+        raise InputError(key, f"{path} is a file, not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InputError(key, f"cannot create folder {path} ({err.strerror})") from None
+    return path
+
+
 def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
     from slam2d.datasets.registry import open_dataset
+    from slam2d.mapping.occupancy import check_resolution
     from slam2d.pipeline import SlamPipeline
 
     t0 = time.perf_counter()
+    check_resolution(cfg.mapping.resolution)
     (out / "config.yaml").write_text(config_mod.dump(resolved(cfg)))
     source = open_dataset(cfg.dataset, seed=cfg.seed)
     relations = _load_relations(cfg)
@@ -96,7 +109,7 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
     metrics["timings_s"] = {"slam": t_slam - t0, "evaluation": t_eval - t_slam, "outputs": t_end - t_eval}
     metrics["runtime_s"] = t_end - t0
     metrics["peak_rss_mb"] = _peak_rss_mb()
-    (out / "metrics.json").write_text(json.dumps(_jsonable(metrics), indent=2))
+    (out / "metrics.json").write_text(json.dumps(_jsonable(metrics), indent=2, allow_nan=False))
     _log_summary(metrics)
     return metrics
 
@@ -212,10 +225,12 @@ def _jsonable(obj):
         return {str(k): _jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return obj.item()
     if isinstance(obj, np.ndarray):
-        return obj.tolist()
+        return _jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None  # JSON has no NaN or infinity
     return obj
 
 
@@ -276,26 +291,41 @@ def load_sweep(path: str | Path) -> tuple[dict[str, Any], list[Variant], int]:
     unknown = set(sweep) - {"base", "config", "grid", "variants", "workers", "name"}
     if unknown:
         raise InputError(path, f"unknown sweep key '{sorted(unknown)[0]}'")
-    if "base" in sweep:
-        base = config_mod.load_dict(path.parent / sweep["base"])
-    else:
-        base = dict(sweep.get("config") or {})
+    base = _sweep_base(sweep, path)
     variants = _expand(sweep, path)
     if not variants:
         raise InputError(path, "a sweep needs 'grid' or 'variants'")
     names = [v.name for v in variants]
     if len(set(names)) != len(names):
         raise InputError(path, "variant names must be unique")
-    for v in variants:  # validate every variant before running any
-        config_mod.validate(_apply(base, v.overrides), f"{path} (variant '{v.name}')")
-    return base, variants, int(sweep.get("workers", 2))
+    for v in variants:  # validate every variant, its frontend included, before running any
+        resolved(variant_config(base, v, Path("runs"), f"{path} (variant '{v.name}')"))
+    workers = sweep.get("workers", 2)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise InputError(f"{path}: workers", f"expected a positive integer, got {config_mod.short_repr(workers)}")
+    return base, variants, workers
+
+
+def _sweep_base(sweep: dict[str, Any], path: Path) -> dict[str, Any]:
+    """The base config dict: the file ``base`` names, or the inline ``config`` mapping."""
+    if "base" in sweep:
+        if not isinstance(sweep["base"], str):
+            raise InputError(f"{path}: base", f"expected a config file name, got {config_mod.short_repr(sweep['base'])}")
+        return config_mod.load_dict(path.parent / sweep["base"])
+    base = sweep.get("config") or {}
+    if not isinstance(base, dict):
+        raise InputError(f"{path}: config", f"expected a mapping of config keys, got {config_mod.short_repr(base)}")
+    return dict(base)
 
 
 def _expand(sweep: dict[str, Any], path: Path) -> list[Variant]:
     variants = []
+    for key, kind in (("variants", list), ("grid", dict)):
+        if not isinstance(sweep.get(key) or kind(), kind):
+            raise InputError(f"{path}: {key}", f"expected a {kind.__name__}, got {config_mod.short_repr(sweep[key])}")
     for i, item in enumerate(sweep.get("variants") or []):
-        if not isinstance(item, dict) or "set" not in item:
-            raise InputError(f"{path}: variants[{i}]", "each variant needs 'set' (and optionally 'name')")
+        if not isinstance(item, dict) or not isinstance(item.get("set"), dict):
+            raise InputError(f"{path}: variants[{i}]", "each variant needs 'set', a mapping (and optionally 'name')")
         variants.append(Variant(str(item.get("name", f"v{i}")), dict(item["set"])))
     grid = sweep.get("grid") or {}
     if grid:
@@ -317,9 +347,10 @@ def _apply(data: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     return data
 
 
-def variant_config(base: dict[str, Any], variant: Variant, root: Path) -> ExperimentConfig:
+def variant_config(base: dict[str, Any], variant: Variant, root: Path, source: str | None = None) -> ExperimentConfig:
+    """The config of ``variant``: named after it (``/`` replaced by ``_``), results under ``root``."""
     data = _apply(base, {**variant.overrides, "name": variant.name.replace("/", "_"), "output.root": str(root)})
-    return config_mod.validate(data, f"variant '{variant.name}'")
+    return config_mod.validate(data, source or f"variant '{variant.name}'")
 
 
 def _run_variant(cfg: ExperimentConfig) -> tuple[str, dict[str, Any] | None, str | None]:
@@ -384,8 +415,9 @@ def _sweep_folder(path, base: dict[str, Any], resume) -> Path:
         for stale in (root / "runs").glob(".*"):  # left by a process killed outright
             shutil.rmtree(stale, ignore_errors=True)
         return root
-    name = config_mod.load_dict(path).get("name") or Path(path).stem
-    parent = Path(base.get("output", {}).get("root", "results"))
+    name = str(config_mod.load_dict(path).get("name") or Path(path).stem)
+    config_mod.validate({"name": name}, f"{path}: name")  # a folder name
+    parent = output_root(config_mod.validate(base, str(path)).output.root)
     root = _new_folder(parent, f"ablate-{name}-{datetime.now():%Y%m%d-%H%M%S}")
     shutil.copyfile(path, root / "sweep.yaml")
     return root
@@ -393,7 +425,6 @@ def _sweep_folder(path, base: dict[str, Any], resume) -> Path:
 
 def _new_folder(parent: Path, stem: str) -> Path:
     """Create and return ``parent/stem``, or ``stem-2``, ``stem-3``... if taken (atomic: mkdir)."""
-    parent.mkdir(parents=True, exist_ok=True)
     for k in itertools.count(1):
         folder = parent / (stem if k == 1 else f"{stem}-{k}")
         try:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import shutil
 import signal
@@ -158,14 +159,14 @@ def test_corrupt_bag_chunk_names_the_file(tmp_path):
 # ---------------------------------------------------------------- item 6: map.yaml, label images, robot radius
 
 
-def _map(tmp_path):
-    """A 20 x 20 free map with a wall row, written as map.pgm + map.yaml; the YAML's path."""
+def _map(tmp_path, wall=slice(2, 18)):
+    """A 20 x 20 free map with a wall on row 10, written as map.pgm + map.yaml; the YAML's path."""
     from slam2d.config import MappingConfig
     from slam2d.mapping.export import save_map_server
     from slam2d.mapping.occupancy import OccupancyGrid
 
     lo = np.full((20, 20), -3.0, np.float32)
-    lo[10, 2:18] = 3.0
+    lo[10, wall] = 3.0
     return save_map_server(OccupancyGrid(lo, 0.1, (0.0, 0.0)), tmp_path / "map", MappingConfig())[1]
 
 
@@ -315,3 +316,121 @@ def test_bad_executor_leaves_no_folder_and_same_second_sweeps_do_not_collide(tmp
     first, _ = run_sweep(sweep, quiet=True)
     second, _ = run_sweep(sweep, quiet=True)
     assert (first.name, second.name) == ("ablate-sweep-20260102-030405", "ablate-sweep-20260102-030405-2")
+
+
+# ---------------------------------------------------------------- item 7: one-line errors before the work starts
+
+
+def test_binary_config_and_relations_files(tmp_path):
+    from slam2d import config
+    from slam2d.evaluation.relations import read_relations
+
+    blob = tmp_path / "blob.yaml"
+    blob.write_bytes(bytes(range(256)) * 4)
+    with pytest.raises(InputError, match=r"blob.yaml: not a text file \(byte 128 is not UTF-8\)"):
+        config.load(blob)
+    with pytest.raises(InputError, match=r"blob.yaml: not a text file"):
+        read_relations(blob)
+
+
+@pytest.mark.parametrize("sweep, message", [
+    ({"workers": "abc", "variants": [{"set": {"seed": 1}}]}, r"sweep.yaml: workers: expected a positive integer"),
+    ({"workers": 0, "variants": [{"set": {"seed": 1}}]}, r"sweep.yaml: workers: expected a positive integer"),
+    ({"variants": [{"set": 5}]}, r"sweep.yaml: variants\[0\]: each variant needs 'set', a mapping"),
+    ({"config": 5, "variants": [{"set": {"seed": 1}}]}, r"sweep.yaml: config: expected a mapping"),
+    ({"variants": 5}, r"sweep.yaml: variants: expected a list, got 5"),
+    ({"grid": [1]}, r"sweep.yaml: grid: expected a dict"),
+    ({"variants": [{"name": "ok", "set": {"seed": 1}}, {"name": "typo", "set": {"frontend.name": "icpp"}}]},
+     r"frontend.name: unknown frontend 'icpp'"),
+    ({"variants": [{"name": ".hidden", "set": {"seed": 1}}]}, r"variant '.hidden'.*key 'name': .*no leading '.'"),
+])
+def test_bad_sweep_files(tmp_path, sweep, message):
+    from slam2d.experiment import load_sweep
+
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(sweep))
+    with pytest.raises(InputError, match=message):
+        load_sweep(path)
+
+
+@pytest.mark.parametrize("override, message", [
+    ("name=a/b", r"key 'name': .*must be a folder name"),
+    ("seed=-1", r"key 'seed': Input should be greater than or equal to 0"),
+    ("mapping.free_thresh=0.9", r"key 'mapping': .*free_thresh 0.9 must be below occupied_thresh 0.65"),
+])
+def test_bad_overrides_refused_by_the_config(override, message):
+    from slam2d import config
+
+    with pytest.raises(InputError, match=message):
+        config.load(None, [override])
+
+
+def test_output_root_that_is_a_file_and_tilde(tmp_path, monkeypatch):
+    from slam2d import config
+    from slam2d.experiment import run_experiment
+
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    with pytest.raises(InputError, match=r"output.root: .*afile is a file, not a folder"):
+        run_experiment(config.load(None, [f"output.root={afile}", "dataset.max_scans=5"]), quiet=True)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    folder = run_experiment(config.load(None, ["output.root=~/res", "dataset.max_scans=5",
+                                               "mapping.resolution=0.1"]), quiet=True)
+    assert folder.parent == tmp_path / "res"
+
+
+def test_resolution_too_fine_for_any_map_is_refused_before_the_run(tmp_path, monkeypatch):
+    from slam2d import config, pipeline
+    from slam2d.experiment import run_experiment
+
+    monkeypatch.setattr(pipeline.SlamPipeline, "run", lambda *a, **k: pytest.fail("the SLAM ran"))
+    cfg = config.load(None, [f"output.root={tmp_path}", "mapping.resolution=1e-7"])
+    with pytest.raises(InputError, match=r"mapping.resolution: 1e-07 m per cell: even the 1 m margin alone"):
+        run_experiment(cfg, quiet=True)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_long_offending_input_is_cut_in_the_message(tmp_path):
+    from slam2d import config
+
+    path = tmp_path / "bomb.yaml"
+    path.write_text("a: &a [x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a]\n"
+                    "c: &c [*b, *b, *b, *b, *b, *b, *b, *b]\nseed: &d [*c, *c, *c, *c, *c, *c, *c, *c]\n")
+    with pytest.raises(InputError) as err:
+        config.load(path)
+    assert len(str(err.value)) < 300 and "\n" not in str(err.value)
+
+
+def test_duplicate_yaml_key_is_an_error_naming_the_line(tmp_path):
+    from slam2d import config
+
+    path = tmp_path / "dup.yaml"
+    path.write_text("seed: 1\nmapping:\n  resolution: 0.1\n  resolution: 0.2\n")
+    with pytest.raises(InputError, match=r"dup.yaml:4: malformed YAML \(duplicate key 'resolution'\)"):
+        config.load(path)
+
+
+# ---------------------------------------------------------------- item 8: smaller
+
+
+def test_metrics_json_has_null_not_nan(tmp_path):
+    from slam2d.experiment import _jsonable
+
+    text = json.dumps(_jsonable({"a": float("nan"), "b": np.array([1.0, np.inf]), "c": np.float64(2.0)}),
+                      allow_nan=False)
+    assert json.loads(text) == {"a": None, "b": [1.0, None], "c": 2.0}
+
+
+def test_plan_without_path_writes_no_folder_and_segment_needs_free_space(tmp_path):
+    from typer.testing import CliRunner
+
+    from slam2d.cli import app
+
+    yml = _map(tmp_path, wall=slice(None))  # the wall splits the map
+    res = CliRunner().invoke(app, ["plan", "-q", str(yml), "--start", "1.0,0.5", "--goal", "1.0,1.5",
+                                   "--robot-radius", "0", "--out", str(tmp_path / "out")])
+    assert res.exit_code == 1 and "no path" in res.output
+    assert list((tmp_path / "out").iterdir()) == []
+    (tmp_path / "map.pgm").write_bytes((tmp_path / "map.pgm").read_bytes().replace(b"\xfe", b"\x00"))  # all walls
+    res = CliRunner().invoke(app, ["segment", "-q", str(yml), "--out", str(tmp_path / "seg")])
+    assert res.exit_code == 2 and "no free cell" in res.output

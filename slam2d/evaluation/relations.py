@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d import geometry
-from slam2d.errors import InputError
+from slam2d.errors import InputError, read_text
 from slam2d.evaluation.trajectory import _parse_row
 
 __all__ = ["Relations", "read_relations", "relations_metric", "format_relations"]
@@ -44,7 +44,7 @@ def read_relations(path) -> Relations:
         raise InputError(path, "relations file not found")
     rows = [
         _parse_row(text, f"{path}:{n}", 8)
-        for n, line in enumerate(path.read_text().splitlines(), start=1)
+        for n, line in enumerate(read_text(path).splitlines(), start=1)
         if (text := line.strip()) and not text.startswith("#")
     ]
     if not rows:

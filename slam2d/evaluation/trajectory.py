@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d import geometry
-from slam2d.errors import InputError
+from slam2d.errors import InputError, read_text
 from slam2d.types import Trajectory
 
 __all__ = ["write_tum", "read_tum", "align_se2", "ate", "rpe"]
@@ -41,7 +41,7 @@ def read_tum(path) -> Trajectory:
     if not path.is_file():
         raise InputError(path, "trajectory file not found")
     rows, lines = [], []
-    for n, line in enumerate(path.read_text().splitlines(), start=1):
+    for n, line in enumerate(read_text(path).splitlines(), start=1):
         text = line.strip()
         if text and not text.startswith("#"):
             rows.append(_parse_row(text, f"{path}:{n}", 8))

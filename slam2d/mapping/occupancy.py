@@ -30,9 +30,10 @@ from numba import njit
 
 from slam2d import geometry
 from slam2d.config import MappingConfig
+from slam2d.errors import InputError
 from slam2d.types import GridFrame, Scan
 
-__all__ = ["OccupancyGrid", "build_grid", "logit", "NO_RETURN_CLEAR_M", "MARGIN_M", "MAX_CELLS"]
+__all__ = ["OccupancyGrid", "build_grid", "check_resolution", "logit", "NO_RETURN_CLEAR_M", "MARGIN_M", "MAX_CELLS"]
 
 NO_RETURN_CLEAR_M = 5.0
 """Farthest a no-return beam clears free space when ``cfg.max_range`` is unset, m.
@@ -160,6 +161,14 @@ def _classify_beams(ranges, r_min, r_max, max_range):
 def _cell_coords(grid: OccupancyGrid, xy: np.ndarray) -> np.ndarray:
     """Continuous (row, col) coordinates (M, 2) of points ``xy`` (M, 2) m; floor gives the cell."""
     return np.column_stack([xy[:, 1] - grid.origin[1], xy[:, 0] - grid.origin[0]]) / grid.resolution
+
+
+def check_resolution(resolution: float) -> None:
+    """InputError (mapping.resolution) if even the smallest grid, the margin alone, would exceed MAX_CELLS."""
+    side = 2 * MARGIN_M / resolution + 1
+    if side * side > MAX_CELLS:
+        raise InputError("mapping.resolution", f"{resolution} m per cell: even the {2 * MARGIN_M:g} m margin "
+                         f"alone would exceed {MAX_CELLS:.0e} cells")
 
 
 def _empty_grid(points: np.ndarray, resolution: float) -> OccupancyGrid:

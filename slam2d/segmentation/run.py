@@ -118,6 +118,8 @@ def segment_map(map_path, method="spectral", similarity="visibility", out_dir=No
     if method not in METHODS:
         raise InputError("method", f"unknown method {method!r}; choose from {list(METHODS)}")
     m = load_map(map_path, resolution)
+    if not m["free"].any():
+        raise InputError(map_path, "no free cell: nothing to segment (check the image, negate and free_thresh)")
     run = _run_method(m["free"], m["resolution"], method, similarity, params)
     labels = run.pop("labels")
     graph = region_graph(labels, m["resolution"], m["origin"], row0_top=m["row0_top"])
