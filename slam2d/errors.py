@@ -8,11 +8,22 @@ class InputError(ValueError):
 
     def __init__(self, where: str, what: str):
         self.where = str(where)
-        self.what = what
-        super().__init__(f"{self.where}: {what}")
+        self.what = _one_line(str(what))
+        super().__init__(f"{self.where}: {self.what}")
 
     def __reduce__(self):
         return type(self), (self.where, self.what)
+
+
+MAX_MESSAGE = 400
+"""Longest ``what`` of an InputError, characters (an echoed input is cut)."""
+
+
+def _one_line(text: str) -> str:
+    """``text`` on one line (whitespace runs with a line break collapsed), at most MAX_MESSAGE characters."""
+    if "\n" in text or "\r" in text:
+        text = " ".join(text.split())
+    return text if len(text) <= MAX_MESSAGE else text[: MAX_MESSAGE - 3] + "..."
 
 
 def read_text(path) -> str:

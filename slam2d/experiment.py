@@ -299,11 +299,22 @@ def load_sweep(path: str | Path) -> tuple[dict[str, Any], list[Variant], int]:
     if len(set(names)) != len(names):
         raise InputError(path, "variant names must be unique")
     for v in variants:  # validate every variant, its frontend included, before running any
-        resolved(variant_config(base, v, Path("runs"), f"{path} (variant '{v.name}')"))
+        _check_variant(base, v, path)
     workers = sweep.get("workers", 2)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise InputError(f"{path}: workers", f"expected a positive integer, got {config_mod.short_repr(workers)}")
     return base, variants, workers
+
+
+def _check_variant(base: dict[str, Any], variant: Variant, path: Path) -> None:
+    """Validate ``variant``'s config and frontend options; an InputError names the sweep file and variant."""
+    source = f"{path} (variant '{variant.name}')"
+    try:
+        resolved(variant_config(base, variant, Path("runs"), source))
+    except InputError as err:
+        if err.where.startswith(source):
+            raise
+        raise InputError(f"{source}: {err.where}", err.what) from None
 
 
 def _sweep_base(sweep: dict[str, Any], path: Path) -> dict[str, Any]:

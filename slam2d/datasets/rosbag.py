@@ -36,6 +36,12 @@ def _yaw(q) -> float:
     return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
 
 
+def _reason(err: Exception) -> str:
+    """The first line of an error from rosbags, at most 120 characters."""
+    text = (str(err).strip().splitlines() or [type(err).__name__])[0]
+    return text if len(text) <= 120 else text[:117] + "..."
+
+
 def _finite(*values) -> bool:
     """Whether every value is finite and below MAX_COORD in magnitude."""
     return all(abs(v) < MAX_COORD for v in values)
@@ -112,7 +118,7 @@ class RosbagSource(ScanSource):
             reader = AnyReader([self.path])
             reader.open()
         except Exception as err:  # rosbags raises many types for a corrupt file
-            raise InputError(self.path, f"not a readable ROS bag ({err})") from err
+            raise InputError(self.path, f"not a readable ROS bag ({_reason(err)})") from err
         try:
             yield reader
         finally:
@@ -130,7 +136,7 @@ class RosbagSource(ScanSource):
                     return
                 msg = reader.deserialize(item[2], item[0].msgtype)
             except Exception as err:  # rosbags raises many types for a corrupt chunk or message
-                raise InputError(self.path, f"{topic} message {index}: unreadable ({str(err)[:200]})") from err
+                raise InputError(self.path, f"{topic} message {index}: unreadable ({_reason(err)})") from err
             yield msg
             index += 1
 
@@ -197,10 +203,14 @@ class RosbagSource(ScanSource):
     def _raw_scans(self) -> Iterator[Scan]:
         self.notes = Counter()
         t_odom, p_odom = self.odom  # before mounting_pose: sets the base frame and /tf_static
+        count = 0
         with self._open() as reader:
             for i, msg in enumerate(self._messages(reader, self.scan_topic)):
-                if self.max_scans is not None and i >= self.max_scans:
-                    break
+                if i == len(self):
+                    if len(self) == self.max_scans:
+                        break
+                    raise self._corrupt_index("more")
+                count += 1
                 stamp = _stamp(msg.header.stamp)
                 if not _finite(msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max):
                     self._bad_scan(i)
@@ -217,5 +227,11 @@ class RosbagSource(ScanSource):
                     sensor_pose=self.mounting_pose(msg.header.frame_id),
                     odom=geometry.interpolate(t_odom, p_odom, stamp),
                 )
-        for what, count in self.notes.items():
-            log.warning("%s: %d %s", self.path, count, what)
+        if count < len(self):
+            raise self._corrupt_index(str(count))
+        for what, n in self.notes.items():
+            log.warning("%s: %d %s", self.path, n, what)
+
+    def _corrupt_index(self, found: str) -> InputError:
+        return InputError(self.path, f"corrupt index: it lists {self._count} messages on {self.scan_topic}, "
+                          f"the bag holds {found}")

@@ -6,9 +6,8 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from slam2d.config import MappingConfig
+from slam2d.config import MappingConfig, read_yaml
 from slam2d.errors import InputError
 from slam2d.mapping.occupancy import OccupancyGrid, logit
 
@@ -102,10 +101,7 @@ def _pixel_log_odds(meta: dict) -> np.ndarray:
 def _read_map_yaml(path: Path) -> dict:
     if not path.is_file():
         raise InputError(path, "map YAML not found")
-    try:
-        meta = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as err:
-        raise InputError(path, f"malformed YAML ({err})") from None
+    meta = read_yaml(path)
     if not isinstance(meta, dict):
         raise InputError(path, "a map YAML must be a mapping")
     for key in ("image", "resolution", "origin", "occupied_thresh", "free_thresh"):
