@@ -321,7 +321,8 @@ def _sweep_base(sweep: dict[str, Any], path: Path) -> dict[str, Any]:
     """The base config dict: the file ``base`` names, or the inline ``config`` mapping."""
     if "base" in sweep:
         if not isinstance(sweep["base"], str):
-            raise InputError(f"{path}: base", f"expected a config file name, got {config_mod.short_repr(sweep['base'])}")
+            got = config_mod.short_repr(sweep["base"])
+            raise InputError(f"{path}: base", f"expected a config file name, got {got}")
         return config_mod.load_dict(path.parent / sweep["base"])
     base = sweep.get("config") or {}
     if not isinstance(base, dict):
@@ -418,11 +419,13 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
 
 
 def _sweep_folder(path, base: dict[str, Any], resume) -> Path:
-    """The sweep's folder: ``resume`` (checked), else a new ``ablate-NAME-YYYYmmdd-HHMMSS[-k]`` with a copy of the sweep."""
+    """``resume`` (checked), else a new folder ``ablate-NAME-YYYYmmdd-HHMMSS[-k]`` holding a copy of the sweep file."""
     if resume is not None:
-        root = Path(resume)
+        root = Path(resume).expanduser()
         if not (root / "sweep.yaml").is_file():
             raise InputError(root, "not a sweep folder (no sweep.yaml): give the folder 'slam2d ablate' printed")
+        if (root / "sweep.yaml").read_bytes() != Path(path).read_bytes():
+            log.warning("%s differs from the sweep %s was started with; variants are matched by name", path, root)
         for stale in (root / "runs").glob(".*"):  # left by a process killed outright
             shutil.rmtree(stale, ignore_errors=True)
         return root

@@ -149,15 +149,17 @@ SCAN_FIELD = st.sampled_from([None, np.nan, np.inf, -np.inf, 0.0, -0.01, 1e15])
     stamps=st.lists(st.sampled_from([None, 2e9, 0.0, 5.0]), min_size=12, max_size=12),
     odom=st.lists(st.sampled_from([None, np.nan, np.inf, 1e15, -1e4]), min_size=12, max_size=12),
     max_skipped=st.sampled_from([0.05, 1.0]),
+    kind=st.sampled_from(["ros1", "ros2"]),
 )
-def test_fuzz_bag_fields(tmp_path_factory, increments, stamps, odom, max_skipped):
+def test_fuzz_bag_fields(tmp_path_factory, increments, stamps, odom, max_skipped, kind):
     from slam2d.datasets.rosbag import RosbagSource
 
     ranges = [1.0, 2.0, 3.0, 4.0]
     scans = [(10.0 + 0.2 * i, ranges, increments[i], 10.0 + 0.2 * i if stamps[i] is None else stamps[i])
              for i in range(12)]
     odoms = [(10.0 + 0.2 * i, (0.1 * i if odom[i] is None else odom[i], 0.0, 0.0)) for i in range(12)]
-    path = _write_bag("ros1", _fuzz_dir(tmp_path_factory, "bag") / "fuzz.bag", scans=scans, odoms=odoms)
+    name = "fuzz.bag" if kind == "ros1" else "fuzz_ros2"
+    path = _write_bag(kind, _fuzz_dir(tmp_path_factory, "bag") / name, scans=scans, odoms=odoms)
     _read_scans(RosbagSource, path, max_skipped)
 
 

@@ -156,7 +156,8 @@ class RosbagSource(ScanSource):
             poses.append(pose)
             child = msg.child_frame_id
         if dropped:
-            log.warning("%s: dropped %d odometry messages with a non-finite or absurd pose or stamp", self.path, dropped)
+            log.warning("%s: dropped %d odometry messages with a non-finite or absurd pose or stamp",
+                        self.path, dropped)
         if not stamps:
             raise InputError(self.path, f"no usable messages on odometry topic {self.odom_topic!r}")
         self.base_frame = child.lstrip("/") or "base_link"
