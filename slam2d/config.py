@@ -6,6 +6,7 @@ CLI's ``--set a.b=c``; values are parsed as YAML (``--set mapping.resolution=0.1
 
 from __future__ import annotations
 
+import reprlib
 from pathlib import Path
 from typing import Any, Literal
 
@@ -171,8 +172,13 @@ class ExperimentConfig(Section):
 
 
 def short_repr(value: Any, limit: int = 80) -> str:
-    """``repr(value)`` cut to ``limit`` characters, so that an error stays one short line."""
-    text = repr(value)
+    """``repr(value)`` cut to ``limit`` characters, so that an error stays one short line.
+
+    Nested and long containers are abbreviated before they are printed (a YAML alias bomb is not expanded).
+    """
+    shorter = reprlib.Repr()
+    shorter.maxlevel, shorter.maxstring, shorter.maxother = 3, limit, limit
+    text = shorter.repr(value)
     return text if len(text) <= limit else f"{text[:limit - 3]}..."
 
 

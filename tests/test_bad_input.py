@@ -394,11 +394,13 @@ def test_long_offending_input_is_cut_in_the_message(tmp_path):
     from slam2d import config
 
     path = tmp_path / "bomb.yaml"
-    path.write_text("a: &a [x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a]\n"
-                    "c: &c [*b, *b, *b, *b, *b, *b, *b, *b]\nseed: &d [*c, *c, *c, *c, *c, *c, *c, *c]\n")
+    lines = ["a0: &a0 [x, x, x, x, x, x, x, x, x]"]
+    lines += [f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 6)]
+    path.write_text("\n".join(lines) + "\nseed: [*a5, *a5]\n")  # an alias bomb: 10^6 strings
     with pytest.raises(InputError) as err:
         config.load(path)
     assert len(str(err.value)) < 300 and "\n" not in str(err.value)
+    assert "key 'seed': Input should be a valid integer (got [[[[...], [...]" in str(err.value)  # not expanded
 
 
 def test_duplicate_yaml_key_is_an_error_naming_the_line(tmp_path):
