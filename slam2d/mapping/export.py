@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from slam2d.config import MappingConfig, read_yaml
+from slam2d.config import MappingConfig, read_yaml, short_repr
 from slam2d.errors import InputError
 from slam2d.mapping.occupancy import OccupancyGrid, logit
 
@@ -110,25 +110,19 @@ def _read_map_yaml(path: Path) -> dict:
     meta.setdefault("negate", 0)
     meta.setdefault("mode", "trinary")
     if meta["mode"] not in ("trinary", "scale"):
-        raise InputError(path, f"key 'mode': unsupported mode {_short(meta['mode'])} (trinary or scale)")
+        raise InputError(path, f"key 'mode': unsupported mode {short_repr(meta['mode'])} (trinary or scale)")
     if not isinstance(meta["image"], str) or not meta["image"]:
-        raise InputError(path, f"key 'image': expected a file name, got {_short(meta['image'])}")
+        raise InputError(path, f"key 'image': expected a file name, got {short_repr(meta['image'])}")
     if meta["negate"] not in (0, 1):
-        raise InputError(path, f"key 'negate': expected 0 or 1, got {_short(meta['negate'])}")
+        raise InputError(path, f"key 'negate': expected 0 or 1, got {short_repr(meta['negate'])}")
     _check_numbers(path, meta)
     return meta
-
-
-def _short(value, limit: int = 60) -> str:
-    """``repr(value)``, cut to ``limit`` characters."""
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _number(path: Path, key: str, value) -> float:
     """``value`` as a finite float; an InputError naming ``key`` otherwise."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise InputError(path, f"key '{key}': expected a finite number, got {_short(value)}")
+        raise InputError(path, f"key '{key}': expected a finite number, got {short_repr(value)}")
     return float(value)
 
 
@@ -138,7 +132,7 @@ def _check_numbers(path: Path, meta: dict) -> None:
         raise InputError(path, f"key 'resolution': must be > 0 m per pixel, got {meta['resolution']}")
     origin = meta["origin"]
     if not isinstance(origin, list) or len(origin) != 3:
-        raise InputError(path, f"key 'origin': expected [x, y, yaw], got {_short(origin)}")
+        raise InputError(path, f"key 'origin': expected [x, y, yaw], got {short_repr(origin)}")
     meta["origin"] = [_number(path, "origin", v) for v in origin]
     if meta["origin"][2] != 0.0:
         raise InputError(path, f"key 'origin': a rotated map (yaw {origin[2]}) is not supported")
