@@ -117,7 +117,7 @@ def segment(
     _setup_logging(quiet)
     interrupt_on_sigterm()
     try:
-        with results_folder(root, f"segment-{map_path.stem}-{method}") as (work, published):
+        with results_folder(root, f"segment-{map_path.stem}-{method}", "--out") as (work, published):
             metrics = segment_map(map_path, method, similarity, work, ground_truth=ground_truth)
     except InputError as err:
         _fail(err)
@@ -155,7 +155,7 @@ def plan(
     interrupt_on_sigterm()
     try:
         start_xy, goal_xy = _xy(start, "start"), _xy(goal, "goal")
-        with results_folder(root, f"plan-{map_path.stem}") as (work, published):
+        with results_folder(root, f"plan-{map_path.stem}", "--out") as (work, published):
             metrics = plan_on_map(map_path, start_xy, goal_xy, hierarchical, work, robot_radius, labels=labels)
             if not metrics.get("found", False):
                 raise _NoPath(metrics.get("reason", "unknown"))  # leaves no results folder

@@ -48,11 +48,12 @@ def run_experiment(cfg: ExperimentConfig, quiet: bool = False) -> Path:
 
 
 @contextmanager
-def results_folder(root: str | Path, name: str):
+def results_folder(root: str | Path, name: str, key: str = "output.root"):
     """Yield ``(work, published)``: a hidden temporary folder to fill (its log in
     ``run.log``) and a list that receives the final path once the block succeeds.
-    On failure the temporary folder is removed, so no half-written folder remains."""
-    root = output_root(root)
+    On failure the temporary folder is removed, so no half-written folder remains.
+    ``key`` names ``root`` in errors (the config key or the CLI option)."""
+    root = output_root(root, key)
     work = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=root))
     published: list[Path] = []
     try:

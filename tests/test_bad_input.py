@@ -436,3 +436,5 @@ def test_plan_without_path_writes_no_folder_and_segment_needs_free_space(tmp_pat
     (tmp_path / "map.pgm").write_bytes((tmp_path / "map.pgm").read_bytes().replace(b"\xfe", b"\x00"))  # all walls
     res = CliRunner().invoke(app, ["segment", "-q", str(yml), "--out", str(tmp_path / "seg")])
     assert res.exit_code == 2 and "no free cell" in res.output
+    res = CliRunner().invoke(app, ["segment", "-q", str(yml), "--out", str(yml)])
+    assert res.exit_code == 2 and f"--out: {yml} is a file, not a folder" in res.output
