@@ -96,6 +96,9 @@ class LoopClosureConfig(Section):
         0.03, ge=0, description="m of drift allowed per m of graph path between two keyframes: widens window_xy ..."
     )
     max_window_xy: float = Field(30.0, gt=0, description="m; ... and search_radius by as much, up to this window")
+    wide_every: int = Field(
+        4, ge=0, description="a wide search (all places needing twice window_xy) at every n-th loop search (0: never)"
+    )
     window_theta_deg: float = Field(30.0, gt=0, description="half-width of the rotational search window")
     resolution: float = Field(0.05, gt=0, description="m; finest grid of the correlative matcher")
     min_score: float = Field(

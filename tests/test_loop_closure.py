@@ -246,3 +246,27 @@ def test_pyramid_levels_bound_every_cell_they_cover():
         level, w = pyr.levels[k].reshape(ny, nx), 2**k
         for i, j in zip(rng.integers(0, ny, 300), rng.integers(0, nx, 300)):
             assert level[i, j] == base[i:i + w, j:j + w].max()
+
+
+def test_wide_search_closes_a_revisit_far_beyond_the_local_window(office, keyframes):
+    """Second-lap keyframes drifted 6.4 m / 4 deg from the first lap: no local candidate is in reach,
+    the wide search over every place in reach finds the true one (the office repeats its rooms)."""
+    gt, points = office
+    kf, travelled = keyframes
+    cfg = LoopClosureConfig(drift=0.15)  # a lap of ~56 m allows ~10 m
+    lc = LoopCloser(cfg)
+    for k, (i, t) in enumerate(zip(kf, travelled)):
+        lc.add_keyframe(k, points[i], t)
+    poses = drifted(gt[kf], travelled, 40.0, 55.0, [5.0, -4.0, np.deg2rad(4.0)])
+    found = []
+    for key in np.flatnonzero(travelled > 58.0)[:40:8]:
+        online = poses[: key + 1]
+        if not found:  # until a closure links the laps, the first lap is beyond every local window
+            assert [c for c in lc.candidates(key, online) if travelled[c] < 40.0] == []
+        closure = lc.wide_search(key, online)
+        if closure is not None:
+            found.append(closure)
+            dxy, dth = pose_error(geometry.between(gt[kf[closure.i]], gt[kf[closure.j]]), closure.delta)
+            assert dxy < 0.05 and dth < 1.0, (closure.i, closure.j, dxy, dth)
+    assert len(found) >= 3
+    assert lc.stats["accepted_wide"] == len(found)

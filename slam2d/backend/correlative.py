@@ -55,6 +55,7 @@ class MatchResult:
     runner_up: best grid score more than ``ambiguity_xy`` from the search's
       best translation, when at least ``ambiguity_ratio`` times its score
       (an alternative match: a periodic or featureless place); else 0.
+    rival: (3,) pose of that runner-up in the submap frame, or None.
     """
 
     pose: np.ndarray
@@ -63,6 +64,7 @@ class MatchResult:
     search_score: float
     evaluated: int
     runner_up: float = 0.0
+    rival: np.ndarray | None = None
 
 
 def voxel_filter(points, cell: float) -> np.ndarray:
@@ -423,6 +425,7 @@ def match(
     depth: int | None = None,
     ambiguity_xy: float = 0.0,
     ambiguity_ratio: float = 0.9,
+    prior_window=None,
 ) -> MatchResult:
     """Match scan points (N, 2) in the scan's base frame against ``grid``.
 
@@ -433,23 +436,26 @@ def match(
     below ``min_score``). depth: pooled levels (default: enough for the window,
     at most ``MAX_DEPTH``). ambiguity_xy: m; when > 0, also search for the
     runner-up outside this distance of the best (see ``MatchResult.runner_up``)
-    when the best's grid score reaches ``min_score``.
+    when the best's grid score reaches ``min_score``. prior_window: (3,) m, m,
+    rad bounding the covariance where the scan constrains nothing (default:
+    the search window).
     """
     initial = geometry.as_pose(initial).reshape(3)
     pts = voxel_filter(points, grid.resolution)
     if len(pts) == 0:
         raise ValueError("match needs at least one finite scan point")
-    found, step, search_score, evaluated, runner_up = _search(
+    found, step, search_score, evaluated, runner_up, rival = _search(
         grid, pts, initial, window_xy, window_theta, min_score, depth, ambiguity_xy, ambiguity_ratio
     )
     pose, score = _polish(grid, pts, found, step)
-    cov = _covariance(grid, pts, pose, np.array([window_xy, window_xy, window_theta]))
-    return MatchResult(pose, score, cov, search_score, evaluated, runner_up)
+    window = [window_xy, window_xy, window_theta] if prior_window is None else prior_window
+    cov = _covariance(grid, pts, pose, np.asarray(window, dtype=np.float64))
+    return MatchResult(pose, score, cov, search_score, evaluated, runner_up, rival)
 
 
 def _search(grid, pts, initial, window_xy, window_theta, min_score, depth, ambiguity_xy, ambiguity_ratio):
     """Branch and bound around ``initial``: best pose (3,), angular step (rad), its grid score,
-    evaluations, and the runner-up score (see ``match``)."""
+    evaluations, and the runner-up score and pose (see ``match``)."""
     res = grid.resolution
     window = int(np.ceil(window_xy / res - 1e-9))
     if depth is None:
@@ -460,15 +466,19 @@ def _search(grid, pts, initial, window_xy, window_theta, min_score, depth, ambig
     pyr = grid.pyramid(window, depth)
     flat = _discretise(pyr, pts, initial[:2], thetas)
     best, score, evaluated = _branch_and_bound(pyr, flat, min_score)
-    pose = np.array([*(initial[:2] + res * best[1:]), geometry.wrap_angle(thetas[best[0]])])
-    runner_up = 0.0
+
+    def pose_of(cand):
+        return np.array([*(initial[:2] + res * cand[1:]), geometry.wrap_angle(thetas[cand[0]])])
+
+    runner_up, rival = 0.0, None
     if ambiguity_xy > 0 and score >= min_score:  # below min_score the caller rejects the match anyway
         floor = ambiguity_ratio * score
         exclude = (int(best[1]), int(best[2]), int(np.ceil(ambiguity_xy / res - 1e-9)))
-        _, second, n = _branch_and_bound(pyr, flat, floor, exclude)
+        other, second, n = _branch_and_bound(pyr, flat, floor, exclude)
         evaluated += n
-        runner_up = second if second >= floor else 0.0
-    return pose, step, score, evaluated, runner_up
+        if second >= floor:
+            runner_up, rival = second, pose_of(other)
+    return pose_of(best), step, score, evaluated, runner_up, rival
 
 
 def _polish(grid: ProbabilityGrid, pts: np.ndarray, found: np.ndarray, step: float) -> tuple[np.ndarray, float]:

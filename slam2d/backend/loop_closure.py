@@ -10,9 +10,11 @@ periodic or featureless place aliases: the rival may be the true one).
 How far a revisit can be from where the graph puts it grows with the path
 between the two keyframes in the graph (along the trajectory, and across
 loops already closed): the search radius and window widen by ``drift`` per
-metre of that path, up to ``max_window_xy``. A window wider than
-``window_xy`` is searched on a proportionally coarser grid first, then
-refined on the fine one, so a wide search costs about as much as a local one.
+metre of that path, up to ``max_window_xy``. A window at least twice
+``window_xy`` is searched on a coarser grid with deeper branch and bound,
+then refined on the fine grid. A match whose runner-up lies within its own
+uncertainty (aliasing along a corridor, where the scan constrains nothing)
+is kept with that uncertainty; a rival elsewhere rejects it.
 Consistency with the graph (the residual check after the batch optimisation)
 is the pose graph's job.
 
@@ -23,7 +25,7 @@ from __future__ import annotations
 
 import logging
 from collections import Counter, OrderedDict
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -44,6 +46,10 @@ SEARCH_MARGIN = 0.05  # the search prunes below min_score minus this (its grid s
 SUBMAP_CACHE = 16  # submap grids kept for reuse while their keyframes' poses stay put
 SUBMAP_REUSE_XY_CELLS = 0.25  # a cached submap is rebuilt once a member moves more than this (cells)
 SUBMAP_REUSE_THETA = np.deg2rad(0.1)  # ... or turns more than this (rad)
+WIDE_COARSENING = 2  # a wide search runs on a grid this many times coarser than ``resolution``
+WIDE_TOP_BLOCKS = 8  # ... with enough pooled levels for about this many top blocks across the window
+WIDE_MAX_DEPTH = 7  # ... but no more levels than this
+CHI2_3DOF_99 = 11.344866730144373  # chi-square 99 % quantile, 3 degrees of freedom
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,14 +72,6 @@ class _Submap:
     members: tuple[int, ...]
     relative: np.ndarray  # (n, 3) member poses in the anchor's frame when built
     grid: ProbabilityGrid
-    points: np.ndarray  # (M, 2) member points in the anchor's frame
-    coarse: dict[int, ProbabilityGrid] = field(default_factory=dict)  # coarsening factor -> grid
-
-    def coarse_grid(self, factor: int) -> ProbabilityGrid:
-        """The submap on a grid ``factor`` times coarser (cached)."""
-        if factor not in self.coarse:
-            self.coarse[factor] = ProbabilityGrid(self.points, self.grid.resolution * factor)
-        return self.coarse[factor]
 
 
 class LoopCloser:
@@ -143,42 +141,89 @@ class LoopCloser:
         return np.minimum(cfg.window_xy + cfg.drift * np.asarray(path_length), max(cfg.max_window_xy, cfg.window_xy))
 
     def candidates(self, key: int, poses) -> list[int]:
-        """Earlier keyframes that may be the place ``key`` is at, at least ``min_travel`` away along the path.
+        """Earlier keyframes near ``key`` for a local search, at least ``min_travel`` away along the path.
 
         poses: (K, 3) current keyframe poses, indexed by key. A keyframe is a
         candidate within ``search_radius`` of ``key``, widened by as much as
-        its search window (``window``) is wider than ``window_xy``: the drift
-        the graph may hold between them. Ranked by distance over that radius,
-        at most ``max_candidates``; a candidate within ``submap_keyframes`` of
-        one already chosen is skipped, as its submap would be nearly the same.
+        its search window (``window``) is wider than ``window_xy``, if that
+        window is less than twice ``window_xy`` (wider ones are for
+        :meth:`wide_search`). Nearest first, at most ``max_candidates``; a
+        candidate within ``submap_keyframes`` of one already chosen is
+        skipped, as its submap would be nearly the same.
         """
         cfg = self.cfg
-        poses = geometry.as_pose(poses).reshape(-1, 3)
-        keys = np.asarray(self._keys, dtype=np.int64)
-        trav = np.asarray(self._travelled)
-        here = self.travelled(key)
-        eligible = (keys < len(poses)) & (np.abs(trav - here) >= cfg.min_travel)
-        if not eligible.any():
-            return []
-        positions = np.flatnonzero(eligible)
-        dist = np.hypot(*(poses[keys[positions], :2] - poses[key, :2]).T)
-        near = dist <= cfg.search_radius + max(cfg.max_window_xy - cfg.window_xy, 0.0)
-        if cfg.drift > 0 and near.any():
-            radius = cfg.search_radius + self.window(self.path_lengths(key)[positions]) - cfg.window_xy
-        else:
-            radius = np.full(len(positions), cfg.search_radius)
-        near &= dist <= radius
-        if not near.any():
-            return []
-        ranked = positions[near][np.argsort(dist[near] / radius[near], kind="stable")]
+        positions, dist, window = self._in_reach(key, poses)
+        local = window < 2 * cfg.window_xy
         chosen: list[int] = []
-        for pos in ranked:
+        for pos in positions[local][np.argsort(dist[local], kind="stable")]:
             if all(abs(pos - self._order[c]) > cfg.submap_keyframes for c in chosen):
-                chosen.append(int(keys[pos]))
+                chosen.append(self._keys[pos])
                 if len(chosen) == cfg.max_candidates:
                     break
         self.stats["candidates"] += len(chosen)
         return chosen
+
+    def _in_reach(self, key: int, poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions of the keyframes in reach of ``key`` (see :meth:`candidates`), their distance
+        from it (m) and their search windows (m)."""
+        cfg = self.cfg
+        poses = geometry.as_pose(poses).reshape(-1, 3)
+        keys = np.asarray(self._keys, dtype=np.int64)
+        trav = np.asarray(self._travelled)
+        eligible = (keys < len(poses)) & (np.abs(trav - self.travelled(key)) >= cfg.min_travel)
+        positions = np.flatnonzero(eligible)
+        dist = np.hypot(*(poses[keys[positions], :2] - poses[key, :2]).T)
+        window = np.full(len(positions), cfg.window_xy)
+        if cfg.drift > 0 and len(positions):
+            window = self.window(self.path_lengths(key)[positions])
+        near = dist <= cfg.search_radius + window - cfg.window_xy
+        return positions[near], dist[near], window[near]
+
+    def wide_search(self, key: int, poses) -> LoopClosure | None:
+        """Match ``key``'s scan against the map of every keyframe in reach that needs a wide window.
+
+        After long drift the estimate no longer says which of the places in
+        reach the robot is at, so the scan is matched against all of them at
+        once: their points at their current poses on a grid ``WIDE_COARSENING``
+        times coarser than ``resolution``, within the widest of their windows
+        around ``key``'s pose, with the rival check. The pose found is then
+        verified like a local candidate against the submap of the nearest of
+        those keyframes, in a window of two coarse cells.
+        """
+        cfg = self.cfg
+        poses = geometry.as_pose(poses).reshape(-1, 3)
+        positions, _, window = self._in_reach(key, poses)
+        wide = positions[window >= 2 * cfg.window_xy]
+        points = self._points[int(key)]
+        if len(wide) == 0 or len(points) < MIN_POINTS:
+            return None
+        self.stats["wide searches"] += 1
+        members = [self._keys[p] for p in wide]
+        region = np.vstack([geometry.transform_points(poses[k], self._points[k]) for k in members])
+        coarse = ProbabilityGrid(region, WIDE_COARSENING * cfg.resolution)
+        window_xy, window_theta = float(window.max()), np.deg2rad(cfg.window_theta_deg)
+        cells = window_xy / coarse.resolution
+        depth = int(np.clip(np.ceil(np.log2((2 * cells + 1) / WIDE_TOP_BLOCKS)), 1, WIDE_MAX_DEPTH))
+        prune = max(0.0, cfg.min_score - SEARCH_MARGIN)
+        found = match(
+            coarse, points, poses[key], window_xy, window_theta, min_score=prune, depth=depth,
+            ambiguity_xy=max(cfg.ambiguity_distance, 2 * coarse.resolution), ambiguity_ratio=cfg.ambiguity_ratio,
+        )  # fmt: skip
+        if found.search_score < prune:
+            self.stats["rejected_score"] += 1
+            log.debug("wide search -> %d rejected: coarse score %.3f over %d keyframes within %.1f m",
+                      key, found.search_score, len(members), window_xy)  # fmt: skip
+            return None
+        nearest = members[int(np.argmin(np.hypot(*(poses[members, :2] - found.pose[:2]).T)))]
+        anchor = self._anchor(nearest)
+        submap = self._submap(key, anchor, poses)
+        if submap is None:
+            return None
+        step = angular_step(voxel_filter(points, coarse.resolution), coarse.resolution)
+        fine = match(submap.grid, points, geometry.between(poses[anchor], found.pose), 2 * coarse.resolution, step,
+                     min_score=prune, prior_window=[window_xy, window_xy, window_theta])  # fmt: skip
+        rival = None if found.rival is None else geometry.between(poses[anchor], found.rival)
+        return self._accept(anchor, key, poses, replace(fine, runner_up=found.runner_up, rival=rival), window_xy)
 
     def verify(self, key: int, cand: int, poses) -> LoopClosure | None:
         """Match keyframe ``key``'s scan against the submap around ``cand``; a LoopClosure if the score passes.
@@ -206,21 +251,38 @@ class LoopCloser:
         window_xy = cfg.window_xy
         if cfg.drift > 0:
             window_xy = float(self.window(self.path_lengths(key)[self._position(anchor)]))
-        result = self._match(submap, points, guess, window_xy)
+        window_theta = np.deg2rad(cfg.window_theta_deg)
+        result = match(
+            submap.grid, points, guess, window_xy, window_theta, min_score=max(0.0, cfg.min_score - SEARCH_MARGIN),
+            ambiguity_xy=cfg.ambiguity_distance, ambiguity_ratio=cfg.ambiguity_ratio,
+        )  # fmt: skip
+        return self._accept(anchor, key, poses, result, window_xy)
+
+    def _accept(self, anchor: int, key: int, poses: np.ndarray, result, window_xy: float) -> LoopClosure | None:
+        """The LoopClosure of a match of ``key`` in ``anchor``'s submap if it passes the score and
+        rival checks, else None; counted in ``stats``."""
+        cfg = self.cfg
         if result.score < cfg.min_score:
             self.stats["rejected_score"] += 1
             log.debug("loop %d -> %d rejected: score %.3f < %.3f", anchor, key, result.score, cfg.min_score)
             return None
-        if result.runner_up > 0:
+        aliased = result.runner_up > 0
+        if aliased and not self._rival_within_uncertainty(result):
             self.stats["rejected_ambiguous"] += 1
             log.debug("loop %d -> %d rejected: rival match %.3f vs %.3f", anchor, key, result.runner_up,
                       result.search_score)  # fmt: skip
             return None
         self.stats["accepted"] += 1
-        if window_xy > cfg.window_xy:
+        if window_xy >= 2 * cfg.window_xy:
             self.stats["accepted_wide"] += 1
-        self._loop_edges.append((self._position(anchor), self._position(key)))
-        self._path = None
+        elif window_xy > cfg.window_xy:
+            self.stats["accepted_grown_window"] += 1
+        if aliased:
+            self.stats["accepted_along_degenerate_direction"] += 1
+        else:  # pins the pair: the drift between them is gone
+            self._loop_edges.append((self._position(anchor), self._position(key)))
+            self._path = None
+        guess = geometry.between(poses[anchor], poses[key])
         moved = geometry.between(guess, result.pose)
         log.debug(
             "loop %d -> %d accepted: score %.3f, correction %.3f m %.2f deg (window %.1f m)",
@@ -229,33 +291,14 @@ class LoopCloser:
         info = np.linalg.inv(result.covariance)
         return LoopClosure(int(anchor), int(key), result.pose, 0.5 * (info + info.T), result.score)
 
-    def _match(self, submap: _Submap, points, guess, window_xy: float):
-        """Branch and bound within ``window_xy`` (m) and ``window_theta_deg`` of ``guess``, with the rival check.
-
-        A window wider than ``window_xy`` of the config is searched on a grid
-        as many times coarser (the same number of cells), then the coarse pose
-        is refined on the submap's own grid within two coarse cells.
-        """
-        cfg = self.cfg
-        window_theta = np.deg2rad(cfg.window_theta_deg)
-        prune = max(0.0, cfg.min_score - SEARCH_MARGIN)
-        factor = int(np.ceil(window_xy / cfg.window_xy - 1e-9))
-        if factor <= 1:
-            return match(
-                submap.grid, points, guess, window_xy, window_theta, min_score=prune,
-                ambiguity_xy=cfg.ambiguity_distance, ambiguity_ratio=cfg.ambiguity_ratio,
-            )  # fmt: skip
-        coarse = submap.coarse_grid(factor)
-        found = match(
-            coarse, points, guess, window_xy, window_theta, min_score=prune,
-            ambiguity_xy=max(cfg.ambiguity_distance, 2 * coarse.resolution), ambiguity_ratio=cfg.ambiguity_ratio,
-        )  # fmt: skip
-        if found.search_score < prune:
-            return replace(found, score=found.search_score)
-        if found.runner_up > 0:
-            return found
-        step = angular_step(voxel_filter(points, coarse.resolution), coarse.resolution)
-        return match(submap.grid, points, found.pose, 2 * coarse.resolution, step, min_score=prune)
+    @staticmethod
+    def _rival_within_uncertainty(result) -> bool:
+        """Whether the runner-up pose lies within the match's own uncertainty (chi-square 99 %, 3 dof):
+        aliasing only along a direction the scan does not constrain (a corridor), which the
+        match's covariance already leaves free; a rival elsewhere (a repeated room) is not."""
+        d = result.rival - result.pose
+        d[2] = geometry.wrap_angle(d[2])
+        return bool(d @ np.linalg.solve(result.covariance, d) <= CHI2_3DOF_99)
 
     def _anchor(self, cand: int) -> int:
         """The submap anchor for ``cand``: the nearest keyframe whose position is a multiple of ``submap_keyframes``."""
@@ -284,7 +327,7 @@ class LoopCloser:
         pts = np.vstack([geometry.transform_points(p, self._points[k]) for k, p in zip(members, relative)])
         if len(pts) < MIN_POINTS:
             return None
-        submap = _Submap(members, relative, ProbabilityGrid(pts, self.cfg.resolution), pts)
+        submap = _Submap(members, relative, ProbabilityGrid(pts, self.cfg.resolution))
         self._submaps[anchor] = submap
         if len(self._submaps) > SUBMAP_CACHE:
             self._submaps.popitem(last=False)

@@ -38,6 +38,7 @@ class GraphSlamBackend:
         self._delta = np.zeros(3)  # motion since the last keyframe
         self._cov = np.zeros((3, 3))
         self._travelled = 0.0
+        self._searches = 0  # loop searches so far
 
     def add(self, scan: Scan, result: FrontendResult) -> None:
         """Take one scan and its frontend result (``result.delta`` unused for the first)."""
@@ -83,10 +84,16 @@ class GraphSlamBackend:
                 self.graph.update()
 
     def _close_loops(self, key: int) -> int:
-        """Verify loop candidates for ``key``; add the accepted ones. Returns how many."""
-        added, estimate = 0, self.graph.estimate()
-        for cand in self.loops.candidates(key, estimate):
-            closure = self.loops.verify(key, cand, estimate)
+        """Verify loop candidates for ``key`` (local ones, and at every ``wide_every``-th search
+        the wide search); add the accepted ones. Returns how many."""
+        estimate = self.graph.estimate()
+        closures = [self.loops.verify(key, cand, estimate) for cand in self.loops.candidates(key, estimate)]
+        self._searches += 1
+        every = self.cfg.loop_closure.wide_every
+        if every and self._searches % every == 0:
+            closures.append(self.loops.wide_search(key, estimate))
+        added = 0
+        for closure in closures:
             if closure is not None:
                 self.graph.add_loop(closure.i, closure.j, closure.delta, closure.information)
                 self.stats["loop closures added"] += 1
