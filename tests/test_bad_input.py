@@ -438,3 +438,19 @@ def test_plan_without_path_writes_no_folder_and_segment_needs_free_space(tmp_pat
     assert res.exit_code == 2 and "no free cell" in res.output
     res = CliRunner().invoke(app, ["segment", "-q", str(yml), "--out", str(yml)])
     assert res.exit_code == 2 and f"--out: {yml} is a file, not a folder" in res.output
+
+
+def test_16_bit_floor_plans_and_worlds_are_scaled_not_clipped(tmp_path):
+    from PIL import Image
+
+    from slam2d.planning.grid import load_floor_plan as planning_floor_plan
+    from slam2d.segmentation.evaluate import load_floor_plan as segmentation_floor_plan
+    from slam2d.sim.world import World
+
+    grey = np.full((6, 8), 65535, np.uint16)  # white: free
+    grey[2:4, 3:5] = 30000  # mid grey: not free, occupied in a world
+    Image.fromarray(grey).save(tmp_path / "plan16.png")
+    free, _ = segmentation_floor_plan(tmp_path / "plan16.png")
+    assert free.sum() == 44
+    assert planning_floor_plan(tmp_path / "plan16.png").free.sum() == 44
+    assert World.from_png(tmp_path / "plan16.png", 0.1).grid[0].sum() == 4

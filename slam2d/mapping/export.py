@@ -9,6 +9,7 @@ import numpy as np
 
 from slam2d.config import MappingConfig, read_yaml, short_repr
 from slam2d.errors import InputError
+from slam2d.mapping.image import read_grey
 from slam2d.mapping.occupancy import OccupancyGrid, logit
 
 __all__ = ["save_map_server", "load_map_server", "save_map_png", "downsample", "FREE", "OCCUPIED", "UNKNOWN"]
@@ -144,26 +145,11 @@ def _check_numbers(path: Path, meta: dict) -> None:
 
 def _read_pixels(yaml_path: Path, meta: dict) -> np.ndarray:
     """8-bit grey value (uint8) per pixel, image rows (row 0 = top)."""
-    from PIL import Image, UnidentifiedImageError
-
     image = Path(meta["image"])
     image = image if image.is_absolute() else yaml_path.parent / image
     if not image.is_file():
         raise InputError(yaml_path, f"key 'image': file not found: {image}")
-    try:
-        with Image.open(image) as im:
-            return _grey8(im)
-    except (UnidentifiedImageError, OSError, ValueError) as err:
-        raise InputError(image, f"not a readable image ({str(err)[:120]})") from None
-
-
-def _grey8(im) -> np.ndarray:
-    """8-bit grey values of a PIL image; 16- and 32-bit grey images are scaled, not clipped."""
-    if im.mode in ("I;16", "I;16B", "I;16L", "I"):
-        v = np.asarray(im).astype(np.int64)
-        top = 65535 if im.mode != "I" or v.max(initial=0) <= 65535 else max(int(v.max()), 1)
-        return np.round(np.clip(v, 0, top) * (255.0 / top)).astype(np.uint8)
-    return np.asarray(im.convert("L"), dtype=np.uint8)
+    return read_grey(image)
 
 
 def save_map_png(

@@ -170,16 +170,12 @@ def load_floor_plan(
     path, resolution: float = 0.05, origin=(0.0, 0.0), free_min: int = FLOOR_PLAN_FREE_MIN
 ) -> PlanningGrid:
     """Grey floor plan (free white >= ``free_min``); image row 0 is the top of the map."""
-    from PIL import Image, UnidentifiedImageError
+    from slam2d.mapping.image import read_grey
 
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "floor plan not found")
-    try:
-        with Image.open(path) as im:
-            grey = np.asarray(im.convert("L"))
-    except (UnidentifiedImageError, OSError) as err:
-        raise InputError(path, f"not a readable image ({err})") from None
+    grey = read_grey(path)
     return PlanningGrid(np.flipud(grey >= free_min), resolution, origin, str(path))
 
 

@@ -44,17 +44,13 @@ RESOLUTION = 0.05
 
 
 def _read_gray(path) -> np.ndarray:
-    """Image file as a (H, W) uint8 grayscale array (PIL 'L' conversion)."""
-    from PIL import Image
+    """Image file as a (H, W) uint8 grayscale array (16-bit images scaled, not clipped)."""
+    from slam2d.mapping.image import read_grey
 
     path = Path(path)
-    try:
-        with Image.open(path) as im:
-            return np.asarray(im.convert("L"), dtype=np.uint8)
-    except FileNotFoundError:
-        raise InputError(path, "file not found") from None
-    except OSError as exc:
-        raise InputError(path, f"not a readable image ({exc})") from None
+    if not path.is_file():
+        raise InputError(path, "file not found")
+    return read_grey(path)
 
 
 def load_floor_plan(path) -> tuple[np.ndarray, float]:

@@ -155,14 +155,9 @@ class World:
             raise InputError(path, "world PNG not found")
         if not resolution > 0:
             raise InputError(path, f"resolution must be > 0 m per pixel, got {resolution}")
-        from PIL import Image, UnidentifiedImageError
+        from slam2d.mapping.image import read_grey
 
-        try:
-            with Image.open(path) as img:
-                gray = np.asarray(img.convert("L"))
-        except (OSError, UnidentifiedImageError) as err:
-            raise InputError(path, f"not a readable image ({err})") from None
-        occ = gray[::-1] < 128
+        occ = read_grey(path)[::-1] < 128
         h, w = occ.shape
         return cls(
             _grid_boundaries(occ, resolution),
