@@ -110,7 +110,7 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
     metrics["timings_s"] = {"slam": t_slam - t0, "evaluation": t_eval - t_slam, "outputs": t_end - t_eval}
     metrics["runtime_s"] = t_end - t0
     metrics["peak_rss_mb"] = _peak_rss_mb()
-    (out / "metrics.json").write_text(json.dumps(_jsonable(metrics), indent=2, allow_nan=False))
+    (out / "metrics.json").write_text(json_text(metrics))
     _log_summary(metrics)
     return metrics
 
@@ -219,6 +219,11 @@ def _log_summary(metrics: dict[str, Any]) -> None:
                 m["rot_abs_std"],
                 m["matched"],
             )
+
+
+def json_text(obj) -> str:
+    """``obj`` as indented JSON: numpy values as numbers, NaN and infinities as null (JSON has neither)."""
+    return json.dumps(_jsonable(obj), indent=2, allow_nan=False)
 
 
 def _jsonable(obj):

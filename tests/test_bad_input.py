@@ -416,11 +416,10 @@ def test_duplicate_yaml_key_is_an_error_naming_the_line(tmp_path):
 
 
 def test_metrics_json_has_null_not_nan(tmp_path):
-    from slam2d.experiment import _jsonable
+    from slam2d.experiment import json_text
 
-    text = json.dumps(_jsonable({"a": float("nan"), "b": np.array([1.0, np.inf]), "c": np.float64(2.0)}),
-                      allow_nan=False)
-    assert json.loads(text) == {"a": None, "b": [1.0, None], "c": 2.0}
+    text = json_text({"a": float("nan"), "b": np.array([1.0, np.inf]), "c": np.float64(2.0), "d": (np.nan,)})
+    assert json.loads(text) == {"a": None, "b": [1.0, None], "c": 2.0, "d": [None]}
 
 
 def test_plan_without_path_writes_no_folder_and_segment_needs_free_space(tmp_path):

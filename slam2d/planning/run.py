@@ -9,13 +9,13 @@ and ``metrics.json``; it returns the metrics as a dict.
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
 import numpy as np
 
 from slam2d.errors import InputError
+from slam2d.experiment import json_text
 from slam2d.planning.astar import AStar, PlanResult, path_length
 from slam2d.planning.grid import PlanningGrid, load_grid
 from slam2d.planning.smoothing import shortcut
@@ -164,7 +164,7 @@ def plan_on_map(
     if timed is not None:
         names.update(velocity="velocity.png", trajectory="trajectory.csv")
     metrics["files"] = {k: f for k, f in names.items()}
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    (out / "metrics.json").write_text(json_text(metrics))
     return metrics
 
 

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d.errors import InputError
+from slam2d.experiment import json_text
 
 __all__ = [
     "segment_map", "METHODS", "find_ground_truth", "load_map", "save_labels_png", "save_rooms_png", "room_colours",
@@ -133,7 +134,7 @@ def segment_map(map_path, method="spectral", similarity="visibility", out_dir=No
     metrics = dict(map=str(map_path), method=method, **run, rooms=graph.number_of_nodes(),
                    portals=graph.number_of_edges(), params=_jsonable(params))  # fmt: skip
     metrics.update(_score(image_labels, ground_truth, map_path))
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    (out / "metrics.json").write_text(json_text(metrics))
     return dict(metrics, out_dir=str(out))
 
 
