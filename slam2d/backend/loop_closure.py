@@ -46,6 +46,7 @@ SEARCH_MARGIN = 0.05  # the search prunes below min_score minus this (its grid s
 SUBMAP_CACHE = 16  # submap grids kept for reuse while their keyframes' poses stay put
 SUBMAP_REUSE_XY_CELLS = 0.25  # a cached submap is rebuilt once a member moves more than this (cells)
 SUBMAP_REUSE_THETA = np.deg2rad(0.1)  # ... or turns more than this (rad)
+WINDOW_STEP = 0.5  # m; grown windows are rounded up to this step (each window size builds its own levels)
 WIDE_COARSENING = 2  # a wide search runs on a grid this many times coarser than ``resolution``
 WIDE_TOP_BLOCKS = 8  # ... with enough pooled levels for about this many top blocks across the window
 WIDE_MAX_DEPTH = 7  # ... but no more levels than this
@@ -136,24 +137,26 @@ class LoopCloser:
 
     def window(self, path_length) -> np.ndarray:
         """Translational search half-width (m) for keyframes ``path_length`` (m) apart in the graph:
-        ``window_xy`` plus ``drift`` per metre of path, at most ``max_window_xy``."""
+        ``window_xy`` plus ``drift`` per metre of path (rounded up to ``WINDOW_STEP``), at most
+        ``max_window_xy``."""
         cfg = self.cfg
-        return np.minimum(cfg.window_xy + cfg.drift * np.asarray(path_length), max(cfg.max_window_xy, cfg.window_xy))
+        grown = np.ceil(cfg.drift * np.asarray(path_length) / WINDOW_STEP) * WINDOW_STEP  # few distinct windows
+        return np.minimum(cfg.window_xy + grown, max(cfg.max_window_xy, cfg.window_xy))
 
     def candidates(self, key: int, poses) -> list[int]:
         """Earlier keyframes near ``key`` for a local search, at least ``min_travel`` away along the path.
 
         poses: (K, 3) current keyframe poses, indexed by key. A keyframe is a
         candidate within ``search_radius`` of ``key``, widened by as much as
-        its search window (``window``) is wider than ``window_xy``, if that
-        window is less than twice ``window_xy`` (wider ones are for
-        :meth:`wide_search`). Nearest first, at most ``max_candidates``; a
+        its search window (``window``, at most twice ``window_xy`` here;
+        wider is for :meth:`wide_search`) is wider than ``window_xy``.
+        Nearest first, at most ``max_candidates``; a
         candidate within ``submap_keyframes`` of one already chosen is
         skipped, as its submap would be nearly the same.
         """
         cfg = self.cfg
         positions, dist, window = self._in_reach(key, poses)
-        local = window < 2 * cfg.window_xy
+        local = dist <= cfg.search_radius + np.minimum(window, self._local_window_cap) - cfg.window_xy
         chosen: list[int] = []
         for pos in positions[local][np.argsort(dist[local], kind="stable")]:
             if all(abs(pos - self._order[c]) > cfg.submap_keyframes for c in chosen):
@@ -162,6 +165,11 @@ class LoopCloser:
                     break
         self.stats["candidates"] += len(chosen)
         return chosen
+
+    @property
+    def _local_window_cap(self) -> float:
+        """Widest window (m) of a local search: twice ``window_xy``; wider is :meth:`wide_search`'s."""
+        return 2 * self.cfg.window_xy
 
     def _in_reach(self, key: int, poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Positions of the keyframes in reach of ``key`` (see :meth:`candidates`), their distance
@@ -193,7 +201,7 @@ class LoopCloser:
         cfg = self.cfg
         poses = geometry.as_pose(poses).reshape(-1, 3)
         positions, _, window = self._in_reach(key, poses)
-        wide = positions[window >= 2 * cfg.window_xy]
+        wide = positions[window > self._local_window_cap]
         points = self._points[int(key)]
         if len(wide) == 0 or len(points) < MIN_POINTS:
             return None
@@ -223,7 +231,7 @@ class LoopCloser:
         fine = match(submap.grid, points, geometry.between(poses[anchor], found.pose), 2 * coarse.resolution, step,
                      min_score=prune, prior_window=[window_xy, window_xy, window_theta])  # fmt: skip
         rival = None if found.rival is None else geometry.between(poses[anchor], found.rival)
-        return self._accept(anchor, key, poses, replace(fine, runner_up=found.runner_up, rival=rival), window_xy)
+        return self._accept(anchor, key, poses, replace(fine, runner_up=found.runner_up, rival=rival), window_xy, True)
 
     def verify(self, key: int, cand: int, poses) -> LoopClosure | None:
         """Match keyframe ``key``'s scan against the submap around ``cand``; a LoopClosure if the score passes.
@@ -251,16 +259,17 @@ class LoopCloser:
         window_xy = cfg.window_xy
         if cfg.drift > 0:
             window_xy = float(self.window(self.path_lengths(key)[self._position(anchor)]))
+            window_xy = min(window_xy, self._local_window_cap)
         window_theta = np.deg2rad(cfg.window_theta_deg)
         result = match(
             submap.grid, points, guess, window_xy, window_theta, min_score=max(0.0, cfg.min_score - SEARCH_MARGIN),
             ambiguity_xy=cfg.ambiguity_distance, ambiguity_ratio=cfg.ambiguity_ratio,
         )  # fmt: skip
-        return self._accept(anchor, key, poses, result, window_xy)
+        return self._accept(anchor, key, poses, result, window_xy, False)
 
-    def _accept(self, anchor: int, key: int, poses: np.ndarray, result, window_xy: float) -> LoopClosure | None:
-        """The LoopClosure of a match of ``key`` in ``anchor``'s submap if it passes the score and
-        rival checks, else None; counted in ``stats``."""
+    def _accept(self, anchor: int, key: int, poses: np.ndarray, result, window_xy: float, wide: bool):
+        """The LoopClosure of a match of ``key`` in ``anchor``'s submap (``wide``: found by the wide
+        search) if it passes the score and rival checks, else None; counted in ``stats``."""
         cfg = self.cfg
         if result.score < cfg.min_score:
             self.stats["rejected_score"] += 1
@@ -273,7 +282,7 @@ class LoopCloser:
                       result.search_score)  # fmt: skip
             return None
         self.stats["accepted"] += 1
-        if window_xy >= 2 * cfg.window_xy:
+        if wide:
             self.stats["accepted_wide"] += 1
         elif window_xy > cfg.window_xy:
             self.stats["accepted_grown_window"] += 1

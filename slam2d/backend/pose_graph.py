@@ -185,12 +185,17 @@ class PoseGraph:
         except RuntimeError as err:
             if self.factorization == "QR" or "Indeterminate" not in str(err):
                 raise
-            log.warning("iSAM2 Cholesky update failed (ill-conditioned system); restarting with QR")
             values = gtsam.Values(self._new_values)
             values.insert_or_assign(self._isam.getLinearizationPoint())
-            self.factorization = "QR"
             self._reset_isam()
-            self._isam.update(self._batch_graph()[0], values)
+            try:  # a fresh start from the last linearisation point usually factors again
+                self._isam.update(self._batch_graph()[0], values)
+                log.info("iSAM2 Cholesky update failed (ill-conditioned system); restarted")
+            except RuntimeError:
+                log.warning("iSAM2 Cholesky update failed twice (ill-conditioned system); continuing with QR")
+                self.factorization = "QR"
+                self._reset_isam()
+                self._isam.update(self._batch_graph()[0], values)
         self._new_graph, self._new_values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         self._n_in_isam = len(self._initial)
         self._isam_poses = None
