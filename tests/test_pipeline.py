@@ -83,6 +83,7 @@ class WithEmptyScans(ScanSource):
 
 def test_reader_counts_come_back_from_the_worker():
     source = WithEmptyScans()
+    source.max_skipped = 0.5  # three of ten are skipped on purpose
     result = run("frontend.name=odometry", "backend.name=none", "parallel=true", source=source)
     assert len(result.poses) == 7
     assert result.skipped["empty scans (no valid beam)"] == 3
