@@ -10,9 +10,10 @@ periodic or featureless place aliases: the rival may be the true one).
 How far a revisit can be from where the graph puts it grows with the path
 between the two keyframes in the graph (along the trajectory, and across
 loops already closed): the search radius and window widen by ``drift`` per
-metre of that path, up to ``max_window_xy``. A window at least twice
-``window_xy`` is searched on a coarser grid with deeper branch and bound,
-then refined on the fine grid. A match whose runner-up lies within its own
+metre of that path, up to ``max_window_xy``. Local searches use windows of
+up to twice ``window_xy``; :meth:`LoopCloser.wide_search` matches the scan
+against all places needing more at once, on a coarser grid with deeper
+branch and bound, then on the fine grid. A match whose runner-up lies within its own
 uncertainty (aliasing along a corridor, where the scan constrains nothing)
 is kept with that uncertainty; a rival elsewhere rejects it.
 Consistency with the graph (the residual check after the batch optimisation)
@@ -34,6 +35,7 @@ from scipy.spatial import cKDTree
 
 from slam2d import geometry
 from slam2d.backend.correlative import ProbabilityGrid, angular_step, match, voxel_filter
+from slam2d.backend.pose_graph import CHI2_3DOF_99
 from slam2d.config import LoopClosureConfig
 
 __all__ = ["LoopClosure", "LoopCloser"]
@@ -50,7 +52,6 @@ WINDOW_STEP = 0.5  # m; grown windows are rounded up to this step (each window s
 WIDE_COARSENING = 2  # a wide search runs on a grid this many times coarser than ``resolution``
 WIDE_TOP_BLOCKS = 8  # ... with enough pooled levels for about this many top blocks across the window
 WIDE_MAX_DEPTH = 7  # ... but no more levels than this
-CHI2_3DOF_99 = 11.344866730144373  # chi-square 99 % quantile, 3 degrees of freedom
 
 
 @dataclass(frozen=True, eq=False)
