@@ -6,6 +6,7 @@ Heavy imports happen inside the commands so that ``slam2d --help`` is instant.
 from __future__ import annotations
 
 import logging
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Optional
 
@@ -42,21 +43,35 @@ def _stopped(what: str) -> None:
     raise typer.Exit(130)
 
 
+@contextmanager
+def _stoppable(what: str):
+    """SIGINT or SIGTERM in the block: "stopped: WHAT" and exit 130, whatever error the signal became."""
+    from slam2d.experiment import stop_on_signals, stopped
+
+    try:
+        with stop_on_signals():
+            yield
+    except (typer.Exit, SystemExit):
+        raise
+    except BaseException:
+        if not stopped():
+            raise
+        _stopped(what)
+
+
 @app.command()
 def run(config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, quiet: bool = QUIET_OPT) -> None:
     """Run one experiment; print the results folder."""
     from slam2d import config as config_mod
-    from slam2d.experiment import interrupt_on_sigterm, run_experiment
+    from slam2d.experiment import run_experiment
 
     _setup_logging(quiet)
-    interrupt_on_sigterm()
-    try:
-        cfg = config_mod.load(config, set_)
-        folder = run_experiment(cfg, quiet=quiet)
-    except InputError as err:
-        _fail(err)
-    except KeyboardInterrupt:
-        _stopped("no results folder written")
+    with _stoppable("no results folder written"):
+        try:
+            cfg = config_mod.load(config, set_)
+            folder = run_experiment(cfg, quiet=quiet)
+        except InputError as err:
+            _fail(err)
     typer.echo(f"results: {folder}")
 
 
@@ -69,17 +84,17 @@ def ablate(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Run every variant of a sweep in parallel; write one table (Markdown + CSV)."""
-    from slam2d.experiment import SweepStopped, interrupt_on_sigterm, run_sweep
+    from slam2d.experiment import SweepStopped, run_sweep
 
     _setup_logging(quiet)
-    interrupt_on_sigterm()
-    try:
-        folder, rows = run_sweep(sweep, workers=workers, executor=executor, quiet=quiet, resume=resume)
-    except InputError as err:
-        _fail(err)
-    except SweepStopped as stop:
-        _stopped(f"{stop.finished} of {stop.total} variants finished in {stop.folder}; "
-                 f"resume with: slam2d ablate {sweep} --resume {stop.folder}")
+    with _stoppable("no sweep folder written"):
+        try:
+            folder, rows = run_sweep(sweep, workers=workers, executor=executor, quiet=quiet, resume=resume)
+        except InputError as err:
+            _fail(err)
+        except SweepStopped as stop:
+            _stopped(f"{stop.finished} of {stop.total} variants finished in {stop.folder}; "
+                     f"resume with: slam2d ablate {sweep} --resume {stop.folder}")
     if not quiet:
         typer.echo((folder / "table.md").read_text())
     failed = [r["variant"] for r in rows if r["error"]]
@@ -111,18 +126,16 @@ def segment(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Split a map into rooms: colour image, topological graph, metrics."""
-    from slam2d.experiment import interrupt_on_sigterm, results_folder
+    from slam2d.experiment import results_folder
     from slam2d.segmentation.run import segment_map
 
     _setup_logging(quiet)
-    interrupt_on_sigterm()
-    try:
-        with results_folder(root, f"segment-{map_path.stem}-{method}", "--out") as (work, published):
-            metrics = segment_map(map_path, method, similarity, work, ground_truth=ground_truth)
-    except InputError as err:
-        _fail(err)
-    except KeyboardInterrupt:
-        _stopped("no results folder written")
+    with _stoppable("no results folder written"):
+        try:
+            with results_folder(root, f"segment-{map_path.stem}-{method}", "--out") as (work, published):
+                metrics = segment_map(map_path, method, similarity, work, ground_truth=ground_truth)
+        except InputError as err:
+            _fail(err)
     summary = {k: metrics[k] for k in ("rooms", "k", "recall", "precision", "seconds") if k in metrics}
     typer.echo(" ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in summary.items()))
     typer.echo(f"results: {published[0]}")
@@ -148,24 +161,22 @@ def plan(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Plan a path (A* or hierarchical), smooth it, time it with toppra; write figures."""
-    from slam2d.experiment import interrupt_on_sigterm, results_folder
+    from slam2d.experiment import results_folder
     from slam2d.planning.run import plan_on_map
 
     _setup_logging(quiet)
-    interrupt_on_sigterm()
-    try:
-        start_xy, goal_xy = _xy(start, "start"), _xy(goal, "goal")
-        with results_folder(root, f"plan-{map_path.stem}", "--out") as (work, published):
-            metrics = plan_on_map(map_path, start_xy, goal_xy, hierarchical, work, robot_radius, labels=labels)
-            if not metrics.get("found", False):
-                raise _NoPath(metrics.get("reason", "unknown"))  # leaves no results folder
-    except InputError as err:
-        _fail(err)
-    except KeyboardInterrupt:
-        _stopped("no results folder written")
-    except _NoPath as err:
-        typer.secho(f"no path: {err}", fg="red", err=True)
-        raise typer.Exit(1) from None
+    with _stoppable("no results folder written"):
+        try:
+            start_xy, goal_xy = _xy(start, "start"), _xy(goal, "goal")
+            with results_folder(root, f"plan-{map_path.stem}", "--out") as (work, published):
+                metrics = plan_on_map(map_path, start_xy, goal_xy, hierarchical, work, robot_radius, labels=labels)
+                if not metrics.get("found", False):
+                    raise _NoPath(metrics.get("reason", "unknown"))  # leaves no results folder
+        except InputError as err:
+            _fail(err)
+        except _NoPath as err:
+            typer.secho(f"no path: {err}", fg="red", err=True)
+            raise typer.Exit(1) from None
     keys = ("length_m", "duration_s", "nodes_expanded", "plan_ms")
     typer.echo(" ".join(f"{k}={metrics[k]:.4g}" for k in keys if isinstance(metrics.get(k), (int, float))))
     typer.echo(f"results: {published[0]}")

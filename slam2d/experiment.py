@@ -59,6 +59,7 @@ def results_folder(root: str | Path, name: str, key: str = "output.root"):
     try:
         with _log_to(work / "run.log"):
             yield work, published
+        check_stop()  # a signal whose exception was swallowed still leaves no folder
         published.append(_publish(work, root, name))
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
@@ -89,7 +90,7 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
     relations = _load_relations(cfg)
     pipeline = SlamPipeline(cfg)
     with _progress(source, quiet) as advance:
-        result = pipeline.run(source, on_scan=advance)
+        result = pipeline.run(source, on_scan=lambda: (check_stop(), advance and advance()))
     t_slam = time.perf_counter()
     log.info("%d scans processed in %.1f s", len(result.scans), t_slam - t0)
     for key, count in result.stats.items():
@@ -381,6 +382,8 @@ def _run_variant(cfg: ExperimentConfig) -> tuple[str, dict[str, Any] | None, str
         folder = run_experiment(cfg, quiet=True)
         return str(folder), json.loads((folder / "metrics.json").read_text()), None
     except Exception as err:  # reported in the table, the sweep goes on
+        if _STOPPED:  # a signal can surface as another error (an interrupted import raises ImportError)
+            raise KeyboardInterrupt from err
         return "", None, f"{type(err).__name__}: {err}"
     finally:
         _RUNNING_VARIANT = False
@@ -403,7 +406,7 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
 
     ``resume``: the folder of a stopped sweep of the same file; only variants
     without a finished results folder there are run. A SIGINT (or SIGTERM,
-    see :func:`interrupt_on_sigterm`) stops the running variants, writes the
+    see :func:`stop_on_signals`) stops the running variants, writes the
     table of the finished ones and raises :class:`SweepStopped`.
     """
     if executor not in EXECUTORS:
@@ -418,7 +421,9 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
     try:
         for i, outcome in _execute([cfgs[i] for i in todo], workers or sweep_workers, executor, quiet):
             outcomes[todo[i]] = outcome
-    except KeyboardInterrupt:
+    except BaseException as err:
+        if not (isinstance(err, KeyboardInterrupt) or _STOPPED):
+            raise
         _write_sweep_table(root, variants, outcomes)
         raise SweepStopped(root, sum(o is not None and not o[2] for o in outcomes), len(variants)) from None
     return root, _write_sweep_table(root, variants, outcomes)
@@ -558,17 +563,38 @@ def _handler(stop):
     return handler
 
 
-def interrupt_on_sigterm() -> None:
-    """Make SIGTERM raise KeyboardInterrupt in this process, as SIGINT does, so half-written folders are removed."""
+_STOPPED = False  # whether SIGINT or SIGTERM has arrived in this process (in a sweep worker: no new variant)
+_RUNNING_VARIANT = False  # in a sweep worker: whether a variant is running
+
+
+@contextmanager
+def stop_on_signals():
+    """In the block SIGINT and SIGTERM raise KeyboardInterrupt (half-written folders are removed) and are
+    remembered: :func:`stopped` tells an error the signal caused (an interrupted import raises ImportError)."""
 
     def stop():
+        global _STOPPED
+        _STOPPED = True
         raise KeyboardInterrupt
 
-    signal.signal(signal.SIGTERM, _handler(stop))
+    handler = _handler(stop)
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
 
 
-_RUNNING_VARIANT = False  # in a sweep worker: whether a variant is running ...
-_STOPPED = False  # ... and whether a signal has stopped the worker (variants still queued are not run)
+def stopped() -> bool:
+    """Whether SIGINT or SIGTERM has arrived since :func:`stop_on_signals`."""
+    return _STOPPED
+
+
+def check_stop() -> None:
+    """KeyboardInterrupt if a signal has arrived: its own exception may have been swallowed (in a ``__del__``)."""
+    if _STOPPED:
+        raise KeyboardInterrupt
 
 
 def _init_sweep_worker() -> None:

@@ -453,3 +453,20 @@ def test_16_bit_floor_plans_and_worlds_are_scaled_not_clipped(tmp_path):
     assert free.sum() == 44
     assert planning_floor_plan(tmp_path / "plan16.png").free.sum() == 44
     assert World.from_png(tmp_path / "plan16.png", 0.1).grid[0].sum() == 4
+
+
+def test_an_error_a_signal_caused_is_reported_as_stopped(tmp_path, monkeypatch):
+    import typer
+
+    from slam2d import cli
+    from slam2d.experiment import results_folder
+
+    monkeypatch.setattr(experiment, "_STOPPED", True)  # a signal arrived; its exception became another one
+    with pytest.raises(typer.Exit) as stop:
+        with cli._stoppable("no results folder written"):
+            raise ImportError("initialization failed")  # pybind11 modules say so when an import is interrupted
+    assert stop.value.exit_code == 130
+    with pytest.raises(KeyboardInterrupt):
+        with results_folder(tmp_path, "swallowed"):
+            pass  # the signal's own exception was swallowed (in a __del__): the folder is still not published
+    assert list(tmp_path.iterdir()) == []
