@@ -1,0 +1,28 @@
+"""Acting on a map: a global path (``slam2d.planning``) followed by a local planner.
+
+``dwa`` (dynamic window, the default) and ``fsm`` (the 2016 thesis's avoidance
+state machine) turn a laser scan, a pose and the remaining path into a velocity
+command; ``navigator`` plans, replans, recovers and reports "unreachable";
+``run_navigation`` drives a :class:`slam2d.sim.Robot` to a goal.
+"""
+
+from slam2d.navigation.common import Command, LocalPlanner
+from slam2d.navigation.dwa import DwaConfig, DynamicWindow
+from slam2d.navigation.fsm import AvoidanceStateMachine, FsmConfig
+from slam2d.navigation.maps import free_mask, world_grid
+from slam2d.navigation.navigator import NavigationResult, Navigator, NavigatorConfig, run_navigation
+
+__all__ = [
+    "Command",
+    "LocalPlanner",
+    "DwaConfig",
+    "DynamicWindow",
+    "FsmConfig",
+    "AvoidanceStateMachine",
+    "world_grid",
+    "free_mask",
+    "Navigator",
+    "NavigatorConfig",
+    "NavigationResult",
+    "run_navigation",
+]

@@ -1,0 +1,176 @@
+"""Dynamic window approach (Fox, Burgard & Thrun 1997) following a global path.
+
+Every call samples (v, w) in the dynamic window (velocities reachable within
+one control period under the acceleration limits), simulates each as a
+constant-velocity arc over a horizon, and measures the arcs against the laser's
+hit points in the robot frame, so obstacles the map lacks count as much as walls.
+An arc is admissible when the robot, after one period at (v, w) and braking at
+full deceleration, stops before its disc (radius + margin) would touch a point.
+Admissible arcs are scored by
+
+- heading: the heading towards the carrot (a point ``lookahead`` metres along
+  the path) where the arc comes closest to it,
+- progress: how much closer to the carrot the arc comes,
+- path: how far beyond ``path_band`` from the path that closest point lies,
+- clearance: the closest approach to any point along the arc (capped),
+- velocity: closeness to the target speed (full speed, or the speed that stops
+  at the goal),
+
+and the best is returned. Arcs × trajectory samples × points are one numpy
+array: no Python loop over samples or beams.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydantic import Field
+
+from slam2d.config import Section
+from slam2d.navigation.common import Command, approach_speed, in_robot_frame, path_ahead, point_along
+from slam2d.sim.robot import RobotConfig
+
+__all__ = ["DwaConfig", "DynamicWindow", "arcs", "thin_points"]
+
+VOXEL = 0.04  # m, laser points are thinned to one per square of this side (float32 distances)
+
+
+class DwaConfig(Section):
+    """Dynamic-window sampling, horizon, safety margin and score weights."""
+
+    period: float = Field(0.1, gt=0, description="s, control period: the window's width and the command's duration")
+    horizon: float = Field(1.5, gt=0, description="s, how far ahead each arc is simulated")
+    steps: int = Field(15, ge=2, description="trajectory samples per arc")
+    v_samples: int = Field(9, ge=2)
+    w_samples: int = Field(21, ge=3)
+    margin: float = Field(0.05, ge=0, description="m, kept between the robot's disc and any laser point")
+    lookahead: float = Field(0.8, gt=0, description="m along the path to the carrot")
+    decel: float = Field(0.5, gt=0, le=1, description="fraction of max_accel planned for stopping at the goal")
+    clearance_cap: float = Field(0.6, gt=0, description="m, clearance beyond which an arc scores no better")
+    heading_weight: float = Field(1.0, ge=0)
+    progress_weight: float = Field(1.5, ge=0)
+    path_weight: float = Field(1.0, ge=0)
+    clearance_weight: float = Field(0.4, ge=0)
+    velocity_weight: float = Field(0.6, ge=0)
+    path_band: float = Field(0.1, ge=0, description="m from the path within which straying costs nothing")
+
+
+def arcs(v, w, times) -> np.ndarray:
+    """Poses (S, K, 3) in the start frame after ``times`` (K,) s at constant ``v`` (S,) m/s, ``w`` (S,) rad/s."""
+    v, w, t = np.asarray(v)[:, None], np.asarray(w)[:, None], np.asarray(times)[None, :]
+    turn = w * t
+    chord = v * t * np.sinc(turn / (2 * np.pi))  # arc length x sin(turn / 2) / (turn / 2)
+    return np.stack([chord * np.cos(turn / 2), chord * np.sin(turn / 2), turn], axis=-1)
+
+
+def thin_points(points: np.ndarray, size: float) -> np.ndarray:
+    """One point (the first) of ``points`` (M, 2) per ``size``-metre square: a dense scan's near
+    walls cost less, and no point moves."""
+    if len(points) == 0:
+        return points
+    _, first = np.unique(np.floor(points / size).astype(np.int64), axis=0, return_index=True)
+    return points[np.sort(first)]
+
+
+class DynamicWindow:
+    """DWA local planner for a robot with :class:`RobotConfig` limits (see the module docstring)."""
+
+    def __init__(self, robot: RobotConfig | None = None, config: DwaConfig | None = None):
+        self.robot, self.cfg = robot or RobotConfig(), config or DwaConfig()
+        self.times = np.linspace(self.cfg.horizon / self.cfg.steps, self.cfg.horizon, self.cfg.steps)
+
+    def reset(self) -> None:
+        """DWA keeps no manoeuvre between calls."""
+
+    def window(self, velocity) -> tuple[np.ndarray, np.ndarray]:
+        """Sampled (v, w) pairs (S,) each: the grid over the dynamic window (forward speeds only)."""
+        r, dt = self.robot, self.cfg.period
+        v0, w0 = float(velocity[0]), float(velocity[1])
+        v_lo, v_hi = max(0.0, v0 - r.max_accel * dt), min(r.max_speed, max(0.0, v0 + r.max_accel * dt))
+        w_lo, w_hi = max(-r.max_turn_rate, w0 - r.max_turn_accel * dt), min(r.max_turn_rate, w0 + r.max_turn_accel * dt)
+        vs = np.unique(np.concatenate([np.linspace(v_lo, v_hi, self.cfg.v_samples), [v_lo]]))
+        ws = np.unique(np.concatenate([np.linspace(w_lo, w_hi, self.cfg.w_samples), np.clip([0.0], w_lo, w_hi)]))
+        vv, ww = np.meshgrid(vs, ws, indexing="ij")
+        return vv.ravel(), ww.ravel()
+
+    def command(self, pose, velocity, points, path) -> Command:
+        """Best admissible (v, w) towards the path; ``blocked`` when no forward arc is admissible."""
+        pose = np.asarray(pose, dtype=np.float64)
+        path = path_ahead(path, pose)
+        v, w = self.window(velocity)
+        v, w = self._with_pursuit(v, w, pose, velocity, path)
+        traj = arcs(v, w, self.times)
+        dist = self._distances(traj, np.asarray(points, dtype=np.float64).reshape(-1, 2), v.max())
+        ok, clearance = self._admissible(v, dist)
+        score = self._scores(v, traj, clearance, pose, path)
+        score[~ok] = -np.inf
+        forward = ok & (v > 1e-3)
+        if not ok.any():
+            return Command(0.0, 0.0, True, "no admissible arc")
+        best = int(np.argmax(score))
+        return Command(float(v[best]), float(w[best]), not forward.any(), "dwa")
+
+    def _with_pursuit(self, v, w, pose, velocity, path):
+        """Adds the pure-pursuit command towards the carrot (clipped to the window) to the samples."""
+        carrot = in_robot_frame(pose, point_along(path, self.cfg.lookahead))
+        d = float(np.hypot(*carrot))
+        alpha = float(np.arctan2(carrot[1], carrot[0]))
+        vp = self._target_speed(path) * max(0.0, np.cos(alpha))
+        wp = 2.0 * vp * np.sin(alpha) / max(d, 1e-6) if vp > 0 else 2.0 * alpha
+        vp, wp = np.clip(vp, v.min(), v.max()), np.clip(wp, w.min(), w.max())
+        return np.append(v, vp), np.append(w, wp)
+
+    def _target_speed(self, path) -> float:
+        """Full speed, or the speed (m/s) that stops at the goal (the path's end)."""
+        left = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+        return min(self.robot.max_speed, approach_speed(left, self.cfg.decel * self.robot.max_accel))
+
+    def _distances(self, traj: np.ndarray, points: np.ndarray, v_max: float) -> np.ndarray:
+        """Distance (S, K + 1) m from the robot's centre on each arc sample (now first) to the nearest point."""
+        reach = v_max * self.cfg.horizon + self.robot.radius + self.cfg.margin + 0.1
+        near = points[np.einsum("ij,ij->i", points, points) < reach**2]
+        s, k = traj.shape[:2]
+        if len(near) == 0:
+            return np.full((s, k + 1), np.inf)
+        near = thin_points(near, VOXEL).astype(np.float32)
+        now = np.full(s, np.sqrt(np.einsum("ij,ij->i", near, near).min()))  # the same points as along the arcs
+        flat = traj[:, :, :2].reshape(-1, 2).astype(np.float32)
+        d2 = flat @ (-2.0 * near.T)  # |a - b|^2 = |a|^2 + |b|^2 - 2 a.b, one matrix product
+        d2 += np.einsum("ij,ij->i", near, near)[None, :]
+        along = d2.min(axis=1) + np.einsum("ij,ij->i", flat, flat)
+        along = np.sqrt(np.maximum(along, 0.0)).astype(np.float64).reshape(s, k)
+        return np.column_stack([now, along])
+
+    def _admissible(self, v: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Whether each arc stops before its disc touches a point, and its clearance (S,) m.
+
+        Where the robot is already within the margin, an arc is safe while it gets no closer.
+        """
+        r, now = self.robot.radius, dist[:, 0]
+        limit = np.minimum(r + self.cfg.margin, now - 0.001)
+        hit = dist[:, 1:] < limit[:, None]
+        first = np.where(hit.any(axis=1), hit.argmax(axis=1), len(self.times))
+        free_time = np.concatenate([[0.0], self.times])[first]  # last sample before the hit
+        stop = v * self.cfg.period + v**2 / (2 * self.robot.max_accel)
+        ok = (stop <= v * free_time) | (v <= 1e-9)
+        return ok, dist.min(axis=1) - r
+
+    def _scores(self, v, traj, clearance, pose, path) -> np.ndarray:
+        """Weighted score (S,) of every arc (higher is better)."""
+        c, vmax = self.cfg, self.robot.max_speed
+        local = in_robot_frame(pose, path)
+        carrot = in_robot_frame(pose, point_along(path, c.lookahead))
+        gap = np.hypot(traj[..., 0] - carrot[0], traj[..., 1] - carrot[1])  # (S, K)
+        near = traj[np.arange(len(traj)), gap.argmin(axis=1)]  # each arc's pose closest to the carrot
+        to_carrot = carrot - near[:, :2]
+        bearing = np.arctan2(to_carrot[:, 1], to_carrot[:, 0]) - near[:, 2]
+        heading = 1.0 - np.abs(np.angle(np.exp(1j * bearing))) / np.pi
+        heading = np.where(gap.min(axis=1) < 0.05, 1.0, heading)  # at the carrot, any heading
+        progress = (np.hypot(*carrot) - gap.min(axis=1)) / (vmax * c.horizon)
+        window = local[np.einsum("ij,ij->i", local, local) < (c.lookahead + vmax * c.horizon) ** 2]
+        window = window if len(window) else local[-1:]
+        off = np.sqrt(((near[:, None, :2] - window[None]) ** 2).sum(-1).min(axis=1))
+        velocity = 1.0 - np.abs(v - self._target_speed(path)) / vmax
+        stray = np.maximum(off - c.path_band, 0.0) / 0.5
+        return (c.heading_weight * heading + c.progress_weight * progress - c.path_weight * stray
+                + c.clearance_weight * np.clip(clearance, 0, c.clearance_cap) / c.clearance_cap
+                + c.velocity_weight * velocity)  # fmt: skip

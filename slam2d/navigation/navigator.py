@@ -1,0 +1,420 @@
+"""Goal -> velocity commands: global A* on the inflated map, a local planner, replanning,
+recovery, and "unreachable" as a result; ``run_navigation`` drives a simulated robot.
+
+The map is an argument of every :meth:`Navigator.step` (a known grid now, the live
+SLAM grid later). The global path is grid A* (``slam2d.planning.astar``) on the map
+inflated by the robot radius plus a margin, with a soft cost near the inflated
+walls so that the path keeps to the middle of passages. The navigator replans
+when the map changes under the path, and recovers when the local planner reports
+itself blocked for ``blocked_time`` or the remaining path has not shortened by
+``progress`` within ``stuck_time``: first a replan with the laser's points put
+into the map, then backing off, a replan and a turn towards the new path. After
+``max_recoveries`` recoveries without a metre of progress, or when no path
+exists on the map, the goal is unreachable; ``max_time`` bounds every run.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+from scipy import ndimage
+
+from slam2d import geometry
+from slam2d.config import Section
+from slam2d.navigation.common import Command, approach_speed, in_robot_frame, point_along
+from slam2d.navigation.dwa import DwaConfig, DynamicWindow
+from slam2d.navigation.fsm import AvoidanceStateMachine, FsmConfig
+from slam2d.navigation.maps import free_mask, mark_points
+from slam2d.planning.astar import AStar
+from slam2d.planning.grid import PlanningGrid, inflate, wall_cost
+from slam2d.sim.robot import RobotConfig
+
+__all__ = ["NavigatorConfig", "Navigator", "NavigationResult", "run_navigation", "ACTIVE", "REACHED", "UNREACHABLE"]
+
+ACTIVE, REACHED, UNREACHABLE, TIMEOUT = "active", "reached", "unreachable", "timeout"
+_SNAP = 0.5  # m, farthest a start cell inside the inflation is moved to a free one
+_AHEAD = 40  # path points searched ahead of the last nearest one
+
+
+class NavigatorConfig(Section):
+    """Global planning, goal tolerances, recovery and the time budget of a navigation run."""
+
+    planner: Literal["dwa", "fsm"] = "dwa"
+    period: float = Field(0.1, gt=0, description="s, control period")
+    inflation_margin: float = Field(0.05, ge=0, description="m, map inflated by robot radius + this")
+    wall_distance: float = Field(0.3, gt=0, description="m beyond the inflation over which a soft cost falls to 0")
+    wall_weight: float = Field(1.0, ge=0, description="extra step cost at the inflated wall (1 = double)")
+    unknown_free: bool = Field(False, description="occupancy maps: unknown cells are free for planning")
+    goal_tolerance: float = Field(0.03, gt=0, description="m")
+    yaw_tolerance: float = Field(0.035, gt=0, description="rad, when the goal has a heading")
+    final_approach: float = Field(0.2, ge=0, description="m from the goal where a point controller takes over")
+    stuck_time: float = Field(6.0, gt=0, description="s without `progress` m of progress -> recovery")
+    progress: float = Field(0.2, gt=0, description="m")
+    blocked_time: float = Field(1.5, gt=0, description="s the local planner reports blocked -> recovery")
+    max_recoveries: int = Field(4, ge=0, description="recoveries in a row without 1 m of progress")
+    mark_range: float = Field(2.5, gt=0, description="m, laser points put into the map when replanning after a block")
+    backoff: float = Field(0.3, ge=0, description="m backed off in a recovery (if the rear is clear)")
+    off_path: float = Field(1.0, gt=0, description="m from the path that triggers a replan")
+    max_time: float = Field(300.0, gt=0, description="s of simulated time, the budget of a run")
+    dwa: DwaConfig = DwaConfig()
+    fsm: FsmConfig = FsmConfig()
+
+
+def make_local_planner(name: str, robot: RobotConfig, cfg: NavigatorConfig):
+    """The local planner ``dwa`` or ``fsm`` with the control period of ``cfg``."""
+    if name == "dwa":
+        return DynamicWindow(robot, cfg.dwa.model_copy(update={"period": cfg.period}))
+    if name == "fsm":
+        return AvoidanceStateMachine(robot, cfg.fsm.model_copy(update={"period": cfg.period}))
+    raise ValueError(f"local planner must be 'dwa' or 'fsm', got {name!r}")
+
+
+class Navigator:
+    """Drives towards ``goal`` (x, y[, theta]) with :meth:`step`; ``status`` is ``active``,
+    ``reached`` or ``unreachable`` (``reason`` says why)."""
+
+    def __init__(self, goal, robot: RobotConfig | None = None, config: NavigatorConfig | None = None):
+        self.robot, self.cfg = robot or RobotConfig(), config or NavigatorConfig()
+        self.goal = np.asarray(goal, dtype=np.float64).reshape(-1)
+        if self.goal.shape not in ((2,), (3,)) or not np.isfinite(self.goal).all():
+            raise ValueError(f"goal must be finite (x, y) or (x, y, theta), got {goal}")
+        self.local = make_local_planner(self.cfg.planner, self.robot, self.cfg)
+        self.status, self.reason = ACTIVE, ""
+        self.path: np.ndarray | None = None
+        self.paths: list[np.ndarray] = []
+        self.replans = self.recoveries = 0
+        self.planner_seconds: list[float] = []
+        self._map_src = self._raw = self._grid = None
+        self._index, self._level, self._arrived, self._last_distance = 0, 0, False, np.inf
+        self._best = (np.inf, 0.0)  # (remaining path m, time)
+        self._level_mark = np.inf  # remaining path m at the first recovery of a run of them
+        self._blocked_since = None
+        self._manoeuvre: list[list] = []
+
+    # map and plan --------------------------------------------------------
+
+    def update_map(self, map_grid) -> bool:
+        """Take the current map; True when it differs from the last one (re-inflated then)."""
+        if map_grid is self._map_src and self._grid is not None:
+            return False
+        free, res, origin = free_mask(map_grid, self.cfg.unknown_free)
+        self._map_src = map_grid
+        if self._raw is not None and self._raw.free.shape == free.shape and np.array_equal(self._raw.free, free):
+            return False
+        self._raw = PlanningGrid(free, res, origin)
+        self._grid = self._inflate(self._raw)
+        return True
+
+    def _inflate(self, raw: PlanningGrid) -> PlanningGrid:
+        radius = (self.robot.radius + self.cfg.inflation_margin) / raw.resolution
+        return PlanningGrid(inflate(raw.free, radius), raw.resolution, raw.origin)
+
+    def plan(self, pose, points_world=None) -> str:
+        """Plans from ``pose`` (3,) to the goal, with ``points_world`` (P, 2) blocked if given;
+        '' on success, else why not. A failed plan with points falls back to the map alone."""
+        grid = self._grid
+        if points_world is not None and len(points_world):
+            marked = self._inflate(mark_points(self._raw, points_world))
+            if not self._plan_on(marked, pose):
+                return ""
+        return self._plan_on(grid, pose)
+
+    def _plan_on(self, grid: PlanningGrid, pose) -> str:
+        goal = grid.world_to_cell(self.goal[:2])
+        if not grid.is_free(goal):
+            return f"goal ({self.goal[0]:.2f}, {self.goal[1]:.2f}) is blocked or within the robot radius of an obstacle"
+        start = self._start_cell(grid, pose)
+        if start is None:
+            return f"no free cell within {_SNAP} m of the robot at ({pose[0]:.2f}, {pose[1]:.2f})"
+        cost = wall_cost(grid, self.cfg.wall_distance, self.cfg.wall_weight) if self.cfg.wall_weight > 0 else None
+        result = AStar(grid, 8, cost).plan(start, goal)
+        if not result.found:
+            return f"no path: {result.reason}"
+        path = np.vstack([pose[:2], grid.cell_to_world(result.path)[1:-1], self.goal[:2]])
+        self.path, self._index = path, 0
+        self.paths.append(path)
+        self.local.reset()
+        self._best = (np.inf, self._best[1])
+        return ""
+
+    def _start_cell(self, grid: PlanningGrid, pose):
+        """The robot's cell, or the nearest free cell within ``_SNAP`` m of it; None if none."""
+        cell = grid.world_to_cell(pose[:2])
+        if grid.is_free(cell):
+            return cell
+        dist, (rows, cols) = ndimage.distance_transform_edt(~grid.free, return_indices=True)
+        if not grid.in_bounds(cell):
+            return None
+        r, c = int(cell[0]), int(cell[1])
+        if dist[r, c] * grid.resolution > _SNAP:
+            return None
+        return np.array([rows[r, c], cols[r, c]])
+
+    def optimal_length(self, start) -> float:
+        """Length (m) of the shortest grid path from ``start`` (x, y) to the goal on the inflated map."""
+        result = AStar(self._grid).plan_world(np.asarray(start)[:2], self.goal[:2])
+        return result.length_m if result.found else np.inf
+
+    def _path_blocked(self) -> bool:
+        """Whether the path ahead crosses a blocked cell of the inflated map."""
+        ahead = self.path[self._index + 1 : -1]
+        return len(ahead) > 0 and not self._grid.is_free(self._grid.world_to_cell(ahead)).all()
+
+    # the control step -----------------------------------------------------
+
+    def step(self, pose, velocity, points, map_grid, now: float) -> Command:
+        """Command (v, w) for the robot at ``pose`` (3,) moving at ``velocity`` (v, w), seeing laser
+        ``points`` (M, 2) in its frame, on ``map_grid`` at time ``now`` (s)."""
+        pose, velocity = np.asarray(pose, dtype=np.float64), np.asarray(velocity, dtype=np.float64)
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        if self.status != ACTIVE:
+            return Command(0.0, 0.0, state=self.status)
+        if now > self.cfg.max_time:
+            return self._finish(TIMEOUT, f"time budget of {self.cfg.max_time:g} s used up")
+        changed = self.update_map(map_grid)
+        if self.path is None or (changed and self._path_blocked()):
+            if self.path is not None:
+                self.replans += 1
+            if why := self.plan(pose):
+                return self._finish(UNREACHABLE, why)
+        if self._at_goal(pose, velocity):
+            return self._goal_command(pose, velocity)
+        if self._manoeuvre:
+            return self._manoeuvre_command(pose, points, now)
+        if (cmd := self._final_command(pose, points)) is not None:
+            return cmd
+        self._track(pose)
+        if np.hypot(*(pose[:2] - self.path[self._index])) > self.cfg.off_path:
+            self.replans += 1
+            if why := self.plan(pose):
+                return self._finish(UNREACHABLE, why)
+        if self._no_progress(pose, now):
+            return self._recover(pose, points, now)
+        t0 = _time.perf_counter()
+        cmd = self.local.command(pose, velocity, points, self.path[self._index :])
+        self.planner_seconds.append(_time.perf_counter() - t0)
+        if cmd.blocked:
+            self._blocked_since = now if self._blocked_since is None else self._blocked_since
+            if now - self._blocked_since >= self.cfg.blocked_time:
+                return self._recover(pose, points, now)
+        else:
+            self._blocked_since = None
+        return cmd
+
+    def _finish(self, status: str, reason: str) -> Command:
+        self.status, self.reason = status, reason
+        return Command(0.0, 0.0, status != REACHED, status)
+
+    def _track(self, pose) -> None:
+        """Moves the nearest path index forward (never back) to the point nearest the robot."""
+        window = self.path[self._index : self._index + _AHEAD]
+        self._index += int(np.argmin(np.hypot(*(window - pose[:2]).T)))
+
+    def _remaining(self, pose) -> float:
+        """Path length (m) left from the robot, via the nearest path point."""
+        rest = self.path[self._index :]
+        along = float(np.linalg.norm(np.diff(rest, axis=0), axis=1).sum()) if len(rest) > 1 else 0.0
+        return along + float(np.hypot(*(pose[:2] - rest[0])))
+
+    def _no_progress(self, pose, now: float) -> bool:
+        """True when the remaining path has not shortened by ``progress`` within ``stuck_time``."""
+        left = self._remaining(pose)
+        if left < self._level_mark - 1.0:
+            self._level, self._level_mark = 0, np.inf
+        if left < self._best[0] - self.cfg.progress or self._best[0] == np.inf:
+            self._best = (left, now)
+            return False
+        return now - self._best[1] > self.cfg.stuck_time
+
+    # goal -------------------------------------------------------------------
+
+    def _at_goal(self, pose, velocity) -> bool:
+        """Arrived within half the tolerance, or within it once no longer getting closer."""
+        d = float(np.hypot(*(pose[:2] - self.goal[:2])))
+        tol, last = self.cfg.goal_tolerance, self._last_distance
+        self._last_distance = d
+        if d <= tol / 2 or (d <= tol and d >= last - 1e-4):
+            self._arrived = True
+        elif d > 2 * tol + 0.02:
+            self._arrived = False
+        return self._arrived
+
+    def _goal_command(self, pose, velocity) -> Command:
+        """Stop, turn to within half the yaw tolerance of the goal heading if there is one, report reached."""
+        if len(self.goal) == 3:
+            err = float(geometry.wrap_angle(self.goal[2] - pose[2]))
+            if abs(err) > self.cfg.yaw_tolerance / 2:
+                brake = np.sqrt(self.robot.max_turn_accel * abs(err))  # stops within err at half the accel
+                w = min(self.robot.max_turn_rate, brake, max(2.0 * abs(err), 0.1))
+                return Command(0.0, float(np.sign(err) * w), False, "align")
+        if np.abs(velocity).max() < 1e-3:
+            return self._finish(REACHED, "goal reached")
+        return Command(0.0, 0.0, False, "stop")
+
+    def _final_command(self, pose, points) -> Command | None:
+        """Within ``final_approach`` of the goal and with nothing in the way, drive straight at it:
+        turn on the spot while it is more than 0.3 rad off, then close in at the speed that stops there."""
+        d = float(np.hypot(*(pose[:2] - self.goal[:2])))
+        if d > self.cfg.final_approach:
+            return None
+        reach = self.robot.radius + self.cfg.dwa.margin + d
+        if len(points) and (np.hypot(*points.T) < reach).any():
+            return None
+        goal = in_robot_frame(pose, self.goal[:2])
+        bearing = float(np.arctan2(goal[1], goal[0]))
+        w = float(np.clip(2.0 * bearing, -1.0, 1.0))
+        if abs(bearing) > 0.3:
+            return Command(0.0, w, False, "final turn")
+        v = min(approach_speed(d, 0.5 * self.robot.max_accel), 2.0 * d) * np.cos(bearing)
+        return Command(float(v), w, False, "final approach")
+
+    # recovery ---------------------------------------------------------------
+
+    def _recover(self, pose, points, now: float) -> Command:
+        """Next recovery: replan with the laser's points; later also back off and turn to the path."""
+        self._level += 1
+        self.recoveries += 1
+        self._blocked_since = None
+        self._level_mark = min(self._level_mark, self._remaining(pose))
+        if self._level > self.cfg.max_recoveries:
+            why = f"recovery exhausted ({self.cfg.max_recoveries} attempts without progress)"
+            return self._finish(UNREACHABLE, why)
+        if self._level >= 2 and self._rear_clear(points):
+            self._manoeuvre.append(["back", pose[:2].copy(), now])
+        self._manoeuvre.append(["replan", None, now])
+        self._manoeuvre.append(["turn", None, now])
+        self._best = (np.inf, now)
+        return Command(0.0, 0.0, False, "recover")
+
+    def _rear_clear(self, points) -> bool:
+        """No laser point in the strip the robot sweeps backing off ``backoff`` m."""
+        r = self.robot.radius + self.cfg.dwa.margin
+        behind = (points[:, 0] < 0) & (points[:, 0] > -(self.cfg.backoff + r)) & (np.abs(points[:, 1]) < r)
+        return self.cfg.backoff > 0 and not behind.any()
+
+    def _manoeuvre_command(self, pose, points, now: float) -> Command:
+        kind, data, since = self._manoeuvre[0]
+        if kind == "back":
+            if np.hypot(*(pose[:2] - data)) < self.cfg.backoff and now - since < 4.0 and self._rear_clear(points):
+                return Command(-0.2, 0.0, False, "back off")
+        elif kind == "replan":
+            self.replans += 1
+            marked = geometry.transform_points(pose, points[np.hypot(*points.T) < self.cfg.mark_range])
+            if why := self.plan(pose, marked):
+                return self._finish(UNREACHABLE, why)
+        elif kind == "turn":
+            carrot = in_robot_frame(pose, point_along(self.path[self._index :], self.cfg.dwa.lookahead))
+            err = float(np.arctan2(carrot[1], carrot[0]))
+            if abs(err) > 0.3 and now - since < 4.0:
+                return Command(0.0, float(np.clip(2.0 * err, -1.5, 1.5)), False, "turn to path")
+        self._manoeuvre.pop(0)
+        if self._manoeuvre:
+            self._manoeuvre[0][2] = now
+        return Command(0.0, 0.0, False, kind)
+
+
+# --------------------------------------------------------------------------- the simulated run
+
+
+@dataclass(eq=False)
+class NavigationResult:
+    """One navigation run: ``success``, ``reason``, ``time`` (s), ``path_length`` travelled and
+    ``optimal_length`` of the grid path (m), ``collisions`` (contact events), ``min_clearance`` (m
+    between the robot's disc and walls or obstacles), ``replans``, ``recoveries``, ``goal_error``
+    (m) and ``heading_error`` (rad) at the end, the true ``trajectory`` (N, 3), ``commands``
+    (N - 1, 2), ``stamps`` (N,) s, the planned ``paths`` and the local planner's mean ``planner_hz``."""
+
+    success: bool
+    reason: str
+    time: float
+    path_length: float
+    optimal_length: float
+    collisions: int
+    min_clearance: float
+    replans: int
+    recoveries: int
+    goal_error: float
+    heading_error: float
+    trajectory: np.ndarray
+    commands: np.ndarray
+    stamps: np.ndarray
+    paths: list = field(default_factory=list)
+    planner_hz: float = float("nan")
+    steps: int = 0
+
+    @property
+    def length_ratio(self) -> float:
+        """Travelled path length over the optimal grid path length."""
+        return self.path_length / self.optimal_length if self.optimal_length > 0 else float("nan")
+
+    def metrics(self) -> dict:
+        """The scalar fields (for metrics.json)."""
+        keys = ("success", "reason", "time", "path_length", "optimal_length", "collisions", "min_clearance",
+                "replans", "recoveries", "goal_error", "heading_error", "planner_hz", "steps")  # fmt: skip
+        return {k: getattr(self, k) for k in keys} | {"length_ratio": self.length_ratio}
+
+
+def clearance(world, robot) -> float:
+    """Distance (m) between the robot's disc and the nearest wall, world bound or moving obstacle."""
+    x, y = robot.pose[:2]
+    (x0, y0), (x1, y1) = world.bounds
+    d = min(float(world.distance(robot.pose[:2])[0]), x - x0, x1 - x, y - y0, y1 - y)
+    centres, radii = robot.obstacle_circles()
+    if len(radii):
+        d = min(d, float((np.hypot(centres[:, 0] - x, centres[:, 1] - y) - radii).min()))
+    return d - robot.cfg.radius
+
+
+def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: NavigatorConfig | None = None,
+                   *, pose_source=None, max_steps: int | None = None) -> NavigationResult:  # fmt: skip
+    """Drives ``robot`` (a :class:`slam2d.sim.Robot` in ``world``) to ``goal`` (x, y[, theta]).
+
+    ``map_grid`` is a planning or occupancy grid, or a callable ``(StepResult) -> grid``
+    asked at every step (a live map). ``pose_source(StepResult) -> pose`` is the pose the
+    navigator uses (default: the true pose). Stops when the goal is reached or
+    unreachable, after ``config.max_time`` s of simulated time, or after ``max_steps``.
+    """
+    cfg = (config or NavigatorConfig()).model_copy(update={"planner": planner})
+    nav = Navigator(goal, robot.cfg, cfg)
+    step = robot.step(0.0, 0.0, 0.0)
+    start_pose = step.pose.copy()
+    poses, commands, stamps = [step.pose], [], [step.scan.stamp]
+    collisions, in_contact, min_clear = 0, False, clearance(world, robot)
+    limit = max_steps if max_steps is not None else int(np.ceil(cfg.max_time / cfg.period)) + 1
+    for _ in range(limit):
+        grid = map_grid(step) if callable(map_grid) else map_grid
+        pose = step.pose if pose_source is None else pose_source(step)
+        cmd = nav.step(pose, step.velocity, step.scan.points_in_base(), grid, step.scan.stamp)
+        if nav.status != ACTIVE:
+            break
+        step = robot.step(cmd.v, cmd.w, cfg.period)
+        poses.append(step.pose)
+        commands.append((cmd.v, cmd.w))
+        stamps.append(step.scan.stamp)
+        collisions += int(step.collision and not in_contact)
+        in_contact = step.collision
+        min_clear = min(min_clear, clearance(world, robot))
+    else:
+        nav._finish(TIMEOUT, f"step budget of {limit} steps used up")
+    return _result(nav, start_pose, np.array(poses), np.array(commands).reshape(-1, 2), np.array(stamps),
+                   collisions, min_clear)  # fmt: skip
+
+
+def _result(nav: Navigator, start, traj, commands, stamps, collisions, min_clear) -> NavigationResult:
+    end, goal = traj[-1], nav.goal
+    heading = float(abs(geometry.wrap_angle(goal[2] - end[2]))) if len(goal) == 3 else 0.0
+    hz = 1.0 / float(np.mean(nav.planner_seconds)) if nav.planner_seconds else float("nan")
+    optimal = nav.optimal_length(start) if nav._grid is not None else float("inf")
+    return NavigationResult(
+        success=nav.status == REACHED, reason=nav.reason, time=float(stamps[-1] - stamps[0]),
+        path_length=float(np.linalg.norm(np.diff(traj[:, :2], axis=0), axis=1).sum()),
+        optimal_length=optimal, collisions=collisions, min_clearance=float(min_clear),
+        replans=nav.replans, recoveries=nav.recoveries,
+        goal_error=float(np.hypot(*(end[:2] - goal[:2]))), heading_error=heading,
+        trajectory=traj, commands=commands, stamps=stamps, paths=nav.paths, planner_hz=hz,
+        steps=len(commands),
+    )  # fmt: skip

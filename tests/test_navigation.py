@@ -1,0 +1,204 @@
+"""Navigation: DWA before an unmapped obstacle, the avoidance state machine's sectors,
+unreachable goals, the office on its known map, a 0.8 m doorway, replanning on a new map."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slam2d.navigation import (
+    AvoidanceStateMachine,
+    DynamicWindow,
+    FsmConfig,
+    Navigator,
+    NavigatorConfig,
+    run_navigation,
+    world_grid,
+)
+from slam2d.navigation.fsm import ACTIONS, sector_bits, state_code
+from slam2d.sim import Robot, RobotConfig, World
+from slam2d.types import Scan
+
+
+def box(x0, y0, x1, y1):
+    return [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+
+
+class PopUpDisc:
+    """A disc that appears at ``spot`` once the robot comes within ``when`` metres of it."""
+
+    def __init__(self, spot, radius: float, when: float):
+        self.spot, self.radius, self.when = np.asarray(spot, dtype=float), radius, when
+        self.centre = np.array([1e3, 1e3])  # far out of the laser's range
+
+    def advance(self, dt, rng, blocker) -> None:
+        if np.hypot(*(blocker[0][0] - self.spot)) < self.when:
+            self.centre = self.spot.copy()
+
+
+@pytest.fixture(scope="module")
+def hall():
+    """An empty 10 m x 4 m room and its map."""
+    world = World.from_polygons([box(0, 0, 10, 4)], name="hall")
+    return world, world_grid(world)
+
+
+# --- DWA ----------------------------------------------------------------------------------------
+
+
+def test_dwa_stops_before_a_disc_that_appears_across_a_corridor():
+    """A 1 m corridor; a disc the map lacks pops up 1.5 m ahead of the robot at full speed and
+    leaves no room to pass: the robot stops short of it, says it is blocked, never touches it."""
+    world = World.from_polygons([box(0, 0, 12, 1.0)], name="corridor")
+    disc = PopUpDisc([7.0, 0.5], 0.3, 1.5)
+    robot = Robot(world, [0.6, 0.5, 0.0], obstacles=[disc], seed=1)
+    dwa = DynamicWindow(robot.cfg)
+    path = np.column_stack([np.linspace(0.6, 11.0, 200), np.full(200, 0.5)])
+    step, blocked, top = robot.step(0.0, 0.0, 0.0), [], 0.0
+    for _ in range(150):
+        ahead = path[path[:, 0] >= step.pose[0] - 0.05]  # the remaining path, as the navigator passes it
+        cmd = dwa.command(step.pose, step.velocity, step.scan.points_in_base(), ahead)
+        step = robot.step(cmd.v, cmd.w, 0.1)
+        assert not step.collision
+        top, blocked = max(top, step.velocity[0]), blocked + [cmd.blocked]
+    assert top > 0.9  # it was at full speed when the disc appeared
+    gap = np.hypot(*(step.pose[:2] - disc.spot)) - disc.radius - robot.cfg.radius
+    assert 0.0 < gap < 0.6 and abs(step.velocity[0]) < 1e-9
+    assert blocked[-1]
+
+
+def test_dwa_swerves_round_a_disc_that_appears_in_a_hall(hall):
+    world, grid = hall
+    disc = PopUpDisc([5.0, 2.0], 0.3, 1.8)
+    robot = Robot(world, [1.0, 2.0, 0.0], obstacles=[disc], seed=2)
+    result = run_navigation(world, robot, grid, [9.0, 2.0], "dwa")
+    assert result.success and result.collisions == 0 and result.min_clearance > 0.0
+    passing = result.trajectory[np.abs(result.trajectory[:, 0] - 5.0) < 0.05]
+    assert np.abs(passing[:, 1] - 2.0).min() > disc.radius + robot.cfg.radius  # it went round
+
+
+# --- the avoidance state machine -----------------------------------------------------------------
+
+
+def hand_scan(points_deg_m) -> Scan:
+    """A 360-beam scan that sees nothing except the given (bearing deg, range m) returns."""
+    angles = np.deg2rad(np.arange(-180.0, 180.0, 1.0))
+    ranges = np.full(360, 12.0)
+    for bearing, rng in points_deg_m:  # noqa: B007
+        ranges[int(round(bearing)) + 180] = rng
+    return Scan(0.0, ranges, angles, 0.05, 12.0)
+
+
+@pytest.mark.parametrize(
+    "returns, bits, state, action",
+    [
+        ([], (0, 0, 0, 0), 0, "straight"),
+        ([(0, 1.0)], (1, 0, 0, 0), 8, "farthest"),  # far ahead: only the 30° sector
+        ([(20, 0.8)], (0, 1, 0, 0), 4, "straight"),  # outside ±15°, inside ±30° within 0.9 m
+        ([(45, 0.5)], (0, 0, 1, 0), 2, "farthest"),  # front periphery only
+        ([(-80, 0.35)], (0, 0, 0, 1), 1, "straight"),  # a wall close at the side
+        ([(0, 0.5)], (1, 1, 1, 0), 14, "u-turn"),
+        ([(0, 0.3)], (1, 1, 1, 1), 15, "reverse"),
+        ([(-50, 0.5), (50, 0.5), (-89, 0.3)], (0, 0, 1, 1), 3, "straight"),  # a narrow passage
+        ([(100, 0.2), (-170, 0.3)], (0, 0, 0, 0), 0, "straight"),  # behind the 180° sector
+    ],
+)
+def test_state_machine_sectors_and_state(returns, bits, state, action):
+    cfg = FsmConfig()  # far 1.2, fairly far 0.9, medium 0.6, near 0.4 m
+    points = hand_scan(returns).points_in_base()
+    assert tuple(int(b) for b in sector_bits(points, cfg)) == bits
+    assert state_code(sector_bits(points, cfg)) == state
+    fsm = AvoidanceStateMachine(RobotConfig(), cfg)
+    path = np.array([[0.0, 0.0], [5.0, 0.0]])
+    fsm.command(np.zeros(3), np.zeros(2), points, path)
+    assert fsm.state == state and fsm.action == action == ACTIONS[state]
+
+
+def test_state_machine_table_stuck_and_reverse():
+    assert ACTIONS[11] == "straight" and ACTIONS[13] == "straight" and ACTIONS[14] == "u-turn"
+    assert all(a == "stuck" for a in ACTIONS[16:]) and state_code([1, 0, 1, 1], stuck=True) == 27
+    fsm, straight = AvoidanceStateMachine(), np.array([[0.0, 0.0], [5.0, 0.0]])
+    wall = hand_scan([(b, 0.3) for b in range(-20, 21)]).points_in_base()
+    first = fsm.command(np.zeros(3), np.zeros(2), wall, straight)
+    assert fsm.action == "reverse" and first.v == 0.0 and first.w != 0.0  # turns on the spot
+    # latched: keeps turning on the spot until half a turn is done, whatever the sectors say
+    heading, cmds = 0.0, []
+    for _ in range(60):
+        cmd = fsm.command(np.array([0.0, 0.0, heading]), np.zeros(2), np.zeros((0, 2)), straight)
+        cmds.append(cmd)
+        if cmd.state != "reverse":
+            break
+        heading += cmd.w * 0.1
+    assert all(c.v == 0.0 for c in cmds[:-1]) and abs(abs(heading) - np.pi) < 0.1
+    # no displacement for longer than stuck_time while it keeps commanding motion: the alarm
+    fsm = AvoidanceStateMachine(config=FsmConfig(stuck_time=1.0))
+    for calls in range(1, 30):
+        cmd = fsm.command(np.zeros(3), np.zeros(2), np.zeros((0, 2)), straight)
+        if cmd.blocked:
+            break
+    assert calls == 12 and fsm.state == 16 and cmd.state == "stuck" and (cmd.v, cmd.w) == (0.0, 0.0)
+
+
+# --- unreachable goals ----------------------------------------------------------------------------
+
+
+def test_goal_enclosed_by_walls_is_unreachable_at_once():
+    world = World.from_polygons([box(0, 0, 10, 6), box(6, 2, 8, 4)], name="vault")
+    robot = Robot(world, [1.0, 1.0, 0.0], seed=0)
+    result = run_navigation(world, robot, world_grid(world), [7.0, 3.0], "dwa")
+    assert not result.success and "no path" in result.reason and "unreachable" in result.reason
+    assert result.steps == 0 and result.collisions == 0
+
+
+@pytest.mark.parametrize("planner", ["dwa", "fsm"])
+def test_goal_behind_an_unmapped_blockage_ends_unreachable_within_the_budget(planner):
+    """The map shows a free corridor; a disc the map lacks blocks it: recovery runs out, the run ends."""
+    world = World.from_polygons([box(0, 0, 12, 1.0)], name="corridor")
+    disc = PopUpDisc([6.0, 0.5], 0.35, 100.0)
+    robot = Robot(world, [1.0, 0.5, 0.0], obstacles=[disc], seed=3)
+    cfg = NavigatorConfig(max_recoveries=2, stuck_time=3.0)
+    result = run_navigation(world, robot, world_grid(world), [11.0, 0.5], planner, cfg)
+    assert not result.success and result.reason.startswith("recovery exhausted")
+    assert result.recoveries == 3 and result.time < 60.0
+    if planner == "dwa":
+        assert result.collisions == 0
+
+
+# --- worlds -----------------------------------------------------------------------------------------
+
+
+def test_office_goal_reached_on_the_known_map():
+    world = World.office()
+    robot = Robot(world, [5.5, 4.225, 0.0], seed=0)
+    result = run_navigation(world, robot, world_grid(world), [17.0, 10.0, np.pi / 2], "dwa")
+    assert result.success and result.reason == "goal reached"
+    assert result.goal_error <= 0.05 and result.heading_error <= np.deg2rad(2.0)
+    assert result.collisions == 0 and result.min_clearance > 0.05
+    assert result.path_length <= 1.15 * result.optimal_length
+    assert result.planner_hz >= 20.0
+
+
+@pytest.mark.parametrize("planner", ["dwa", "fsm"])
+def test_doorway_of_0_8_m_passed_by_a_0_4_m_robot(planner):
+    wall = [box(3.95, 0, 4.05, 1.6), box(3.95, 2.4, 4.05, 4)]  # a wall at x = 4 with a gap y in (1.6, 2.4)
+    world = World.from_polygons([box(0, 0, 8, 4), *wall], name="doorway")
+    robot = Robot(world, [1.5, 0.8, 0.5], RobotConfig(radius=0.2), seed=4)
+    result = run_navigation(world, robot, world_grid(world), [6.5, 3.2], planner)
+    assert result.success and result.collisions == 0 and result.goal_error <= 0.05
+    through = result.trajectory[np.abs(result.trajectory[:, 0] - 4.0) < 0.05]
+    assert len(through) and (np.abs(through[:, 1] - 2.0) < 0.2).all()
+
+
+def test_a_new_map_that_blocks_the_path_makes_the_navigator_replan(hall):
+    world, grid = hall
+    nav = Navigator([9.0, 2.0], RobotConfig(), NavigatorConfig())
+    pose = np.array([1.0, 2.0, 0.0])
+    nav.step(pose, np.zeros(2), np.zeros((0, 2)), grid, 0.0)
+    assert nav.replans == 0 and np.abs(nav.path[:, 1] - 2.0).max() < 0.1
+    walled = world_grid(World.from_polygons([box(0, 0, 10, 4), box(4.9, 0.0, 5.1, 3.0)]))
+    nav.step(pose, np.zeros(2), np.zeros((0, 2)), walled, 0.1)
+    assert nav.replans == 1 and nav.status == "active"
+    crossing = nav.path[np.abs(nav.path[:, 0] - 5.0) < 0.3]
+    assert (crossing[:, 1] > 3.0).all()  # round the new wall's end
+    nav.step(pose, np.zeros(2), np.zeros((0, 2)), walled, 0.2)  # the same map again: no replan
+    assert nav.replans == 1
