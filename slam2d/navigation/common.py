@@ -26,10 +26,11 @@ class Command:
 class LocalPlanner(Protocol):
     """Turns the laser's view and the remaining path into a velocity command."""
 
-    def command(self, pose, velocity, points, path) -> Command:
+    def command(self, pose, velocity, points, path, unmapped=None) -> Command:
         """Command from the robot ``pose`` (3,) (world), its ``velocity`` (v m/s, w rad/s),
         laser hit ``points`` (M, 2) in the robot frame (m) and the remaining ``path``
-        (L, 2) world waypoints (m) from near the robot to the goal (its last point)."""
+        (L, 2) world waypoints (m) from near the robot to the goal (its last point);
+        ``unmapped`` (M,) bool marks points the map does not explain, if known."""
         ...
 
     def reset(self) -> None:

@@ -9,12 +9,13 @@ full deceleration, stops before its disc (radius + margin) would touch a point.
 Admissible arcs are scored by
 
 - heading: the heading towards the carrot (a point ``lookahead`` metres along
-  the path) where the arc comes closest to it,
+  the path) at the arc's end, or where it comes closest to the carrot if it
+  passes it,
 - progress: how much closer to the carrot the arc comes,
 - path: how far beyond ``path_band`` from the path that closest point lies,
 - clearance: the closest approach to any point along the arc (capped),
-- velocity: closeness to the target speed (full speed, or the speed that stops
-  at the goal),
+- velocity: closeness to the target speed (full speed, lowered where the path
+  ahead bends away from the heading and near the goal to the speed that stops there),
 
 and the best is returned. Arcs × trajectory samples × points are one numpy
 array: no Python loop over samples or beams.
@@ -51,6 +52,8 @@ class DwaConfig(Section):
     path_weight: float = Field(1.0, ge=0)
     clearance_weight: float = Field(0.4, ge=0)
     velocity_weight: float = Field(0.6, ge=0)
+    obstacle_speed: float = Field(0.5, ge=0, description="m/s assumed for points the map does not explain")
+    obstacle_reach: float = Field(0.3, ge=0, description="m, most such a point's margin grows along an arc")
     path_band: float = Field(0.1, ge=0, description="m from the path within which straying costs nothing")
 
 
@@ -63,12 +66,12 @@ def arcs(v, w, times) -> np.ndarray:
 
 
 def thin_points(points: np.ndarray, size: float) -> np.ndarray:
-    """One point (the first) of ``points`` (M, 2) per ``size``-metre square: a dense scan's near
-    walls cost less, and no point moves."""
+    """Indices of one point (the first) of ``points`` (M, 2) per ``size``-metre square: a dense
+    scan's near walls cost less, and no point moves."""
     if len(points) == 0:
-        return points
+        return np.zeros(0, np.int64)
     _, first = np.unique(np.floor(points / size).astype(np.int64), axis=0, return_index=True)
-    return points[np.sort(first)]
+    return np.sort(first)
 
 
 class DynamicWindow:
@@ -92,14 +95,21 @@ class DynamicWindow:
         vv, ww = np.meshgrid(vs, ws, indexing="ij")
         return vv.ravel(), ww.ravel()
 
-    def command(self, pose, velocity, points, path) -> Command:
-        """Best admissible (v, w) towards the path; ``blocked`` when no forward arc is admissible."""
+    def command(self, pose, velocity, points, path, unmapped=None) -> Command:
+        """Best admissible (v, w) towards the path; ``blocked`` when no forward arc is admissible.
+
+        ``unmapped`` (M,) bool marks points the map does not explain (people, new furniture):
+        they may be moving, so their margin grows by ``obstacle_speed`` per second along the
+        arcs, up to ``obstacle_reach``.
+        """
         pose = np.asarray(pose, dtype=np.float64)
         path = path_ahead(path, pose)
         v, w = self.window(velocity)
         v, w = self._with_pursuit(v, w, pose, velocity, path)
         traj = arcs(v, w, self.times)
-        dist = self._distances(traj, np.asarray(points, dtype=np.float64).reshape(-1, 2), v.max())
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        unmapped = np.zeros(len(points), bool) if unmapped is None else np.asarray(unmapped, bool).reshape(-1)
+        dist = self._distances(traj, points, unmapped, v.max())
         ok, clearance = self._admissible(v, dist)
         score = self._scores(v, traj, clearance, pose, path)
         score[~ok] = -np.inf
@@ -114,31 +124,52 @@ class DynamicWindow:
         carrot = in_robot_frame(pose, point_along(path, self.cfg.lookahead))
         d = float(np.hypot(*carrot))
         alpha = float(np.arctan2(carrot[1], carrot[0]))
-        vp = self._target_speed(path) * max(0.0, np.cos(alpha))
+        vp = self._target_speed(pose, path)
         wp = 2.0 * vp * np.sin(alpha) / max(d, 1e-6) if vp > 0 else 2.0 * alpha
         vp, wp = np.clip(vp, v.min(), v.max()), np.clip(wp, w.min(), w.max())
         return np.append(v, vp), np.append(w, wp)
 
-    def _target_speed(self, path) -> float:
-        """Full speed, or the speed (m/s) that stops at the goal (the path's end)."""
+    def _target_speed(self, pose, path) -> float:
+        """Speed (m/s) to aim for: full speed, lowered where the path ahead bends away from the
+        heading (cosine of the larger bearing to the carrot and to a point twice as far), and
+        the speed that stops at the goal (the path's end)."""
         left = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
-        return min(self.robot.max_speed, approach_speed(left, self.cfg.decel * self.robot.max_accel))
+        marks = [point_along(path, self.cfg.lookahead), point_along(path, 2 * self.cfg.lookahead)]
+        ahead = in_robot_frame(pose, np.stack(marks))
+        bend = np.abs(np.arctan2(ahead[:, 1], ahead[:, 0]))
+        bend = bend[np.hypot(*ahead.T) > 0.05].max(initial=0.0)
+        turn = self.robot.max_speed * max(float(np.cos(bend)), 0.0)
+        return min(turn, approach_speed(left, self.cfg.decel * self.robot.max_accel))
 
-    def _distances(self, traj: np.ndarray, points: np.ndarray, v_max: float) -> np.ndarray:
-        """Distance (S, K + 1) m from the robot's centre on each arc sample (now first) to the nearest point."""
-        reach = v_max * self.cfg.horizon + self.robot.radius + self.cfg.margin + 0.1
-        near = points[np.einsum("ij,ij->i", points, points) < reach**2]
+    def _distances(self, traj: np.ndarray, points: np.ndarray, unmapped: np.ndarray, v_max: float) -> np.ndarray:
+        """Distance (S, K + 1) m from the robot's centre on each arc sample (now first) to the nearest
+        point, less the grown margin of unmapped points."""
+        c = self.cfg
+        reach = v_max * c.horizon + self.robot.radius + c.margin + c.obstacle_reach + 0.1
+        keep = np.einsum("ij,ij->i", points, points) < reach**2
+        near, moving = points[keep], unmapped[keep]
         s, k = traj.shape[:2]
         if len(near) == 0:
             return np.full((s, k + 1), np.inf)
-        near = thin_points(near, VOXEL).astype(np.float32)
+        thin = thin_points(near, VOXEL)
+        near, moving = near[thin], moving[thin]
+        order = np.argsort(moving, kind="stable")  # mapped points first, then the unmapped ones
+        near, n_static = near[order].astype(np.float32), int((~moving).sum())
         now = np.full(s, np.sqrt(np.einsum("ij,ij->i", near, near).min()))  # the same points as along the arcs
         flat = traj[:, :, :2].reshape(-1, 2).astype(np.float32)
         d2 = flat @ (-2.0 * near.T)  # |a - b|^2 = |a|^2 + |b|^2 - 2 a.b, one matrix product
         d2 += np.einsum("ij,ij->i", near, near)[None, :]
-        along = d2.min(axis=1) + np.einsum("ij,ij->i", flat, flat)
-        along = np.sqrt(np.maximum(along, 0.0)).astype(np.float64).reshape(s, k)
+        ff = np.einsum("ij,ij->i", flat, flat)
+        along = np.full((s, k), np.inf)
+        for cols, grow in ((slice(0, n_static), 0.0), (slice(n_static, None), self._growth())):
+            if d2[:, cols].shape[1]:
+                d = np.sqrt(np.maximum(d2[:, cols].min(axis=1) + ff, 0.0)).astype(np.float64).reshape(s, k)
+                along = np.minimum(along, d - grow)
         return np.column_stack([now, along])
+
+    def _growth(self) -> np.ndarray:
+        """Margin (K,) m an unmapped point has grown by at each trajectory sample time."""
+        return np.minimum(self.cfg.obstacle_speed * self.times, self.cfg.obstacle_reach)
 
     def _admissible(self, v: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Whether each arc stops before its disc touches a point, and its clearance (S,) m.
@@ -146,7 +177,7 @@ class DynamicWindow:
         Where the robot is already within the margin, an arc is safe while it gets no closer.
         """
         r, now = self.robot.radius, dist[:, 0]
-        limit = np.minimum(r + self.cfg.margin, now - 0.001)
+        limit = np.minimum(r + self.cfg.margin, now - 1e-4)
         hit = dist[:, 1:] < limit[:, None]
         first = np.where(hit.any(axis=1), hit.argmax(axis=1), len(self.times))
         free_time = np.concatenate([[0.0], self.times])[first]  # last sample before the hit
@@ -160,7 +191,8 @@ class DynamicWindow:
         local = in_robot_frame(pose, path)
         carrot = in_robot_frame(pose, point_along(path, c.lookahead))
         gap = np.hypot(traj[..., 0] - carrot[0], traj[..., 1] - carrot[1])  # (S, K)
-        near = traj[np.arange(len(traj)), gap.argmin(axis=1)]  # each arc's pose closest to the carrot
+        closest = np.where(gap[:, -1] <= gap.min(axis=1) + 1e-3, gap.shape[1] - 1, gap.argmin(axis=1))
+        near = traj[np.arange(len(traj)), closest]  # where each arc comes closest to the carrot (or its end)
         to_carrot = carrot - near[:, :2]
         bearing = np.arctan2(to_carrot[:, 1], to_carrot[:, 0]) - near[:, 2]
         heading = 1.0 - np.abs(np.angle(np.exp(1j * bearing))) / np.pi
@@ -169,7 +201,7 @@ class DynamicWindow:
         window = local[np.einsum("ij,ij->i", local, local) < (c.lookahead + vmax * c.horizon) ** 2]
         window = window if len(window) else local[-1:]
         off = np.sqrt(((near[:, None, :2] - window[None]) ** 2).sum(-1).min(axis=1))
-        velocity = 1.0 - np.abs(v - self._target_speed(path)) / vmax
+        velocity = 1.0 - np.abs(v - self._target_speed(pose, path)) / vmax
         stray = np.maximum(off - c.path_band, 0.0) / 0.5
         return (c.heading_weight * heading + c.progress_weight * progress - c.path_weight * stray
                 + c.clearance_weight * np.clip(clearance, 0, c.clearance_cap) / c.clearance_cap

@@ -108,8 +108,9 @@ class AvoidanceStateMachine:
         self.state = 0
         self.action = STRAIGHT
 
-    def command(self, pose, velocity, points, path) -> Command:
-        """Command of the current state's action; ``blocked`` on the stuck alarm."""
+    def command(self, pose, velocity, points, path, unmapped=None) -> Command:
+        """Command of the current state's action; ``blocked`` on the stuck alarm (``unmapped``
+        is not used: the thesis's sectors treat every point alike)."""
         pose = np.asarray(pose, dtype=np.float64)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         path = path_ahead(path, pose)

@@ -38,6 +38,7 @@ __all__ = ["NavigatorConfig", "Navigator", "NavigationResult", "run_navigation",
 ACTIVE, REACHED, UNREACHABLE, TIMEOUT = "active", "reached", "unreachable", "timeout"
 _SNAP = 0.5  # m, farthest a start cell inside the inflation is moved to a free one
 _AHEAD = 40  # path points searched ahead of the last nearest one
+_EXPLAINED_CELLS = 2  # a laser point this many cells from a blocked map cell is the map's
 
 
 class NavigatorConfig(Section):
@@ -88,6 +89,7 @@ class Navigator:
         self.paths: list[np.ndarray] = []
         self.replans = self.recoveries = 0
         self.planner_seconds: list[float] = []
+        self.events: list[tuple[float, str, str]] = []  # (time s, "replan" / "recovery", why)
         self._map_src = self._raw = self._grid = None
         self._index, self._level, self._arrived, self._last_distance = 0, 0, False, np.inf
         self._best = (np.inf, 0.0)  # (remaining path m, time)
@@ -107,7 +109,17 @@ class Navigator:
             return False
         self._raw = PlanningGrid(free, res, origin)
         self._grid = self._inflate(self._raw)
+        self._mapped = ndimage.binary_dilation(~free, iterations=_EXPLAINED_CELLS)
         return True
+
+    def unmapped(self, pose, points) -> np.ndarray:
+        """Which laser ``points`` (M, 2) (robot frame) lie in no blocked cell of the map (within
+        ``_EXPLAINED_CELLS``); points outside the map count as mapped."""
+        cells = self._raw.world_to_cell(geometry.transform_points(pose, points))
+        inside = self._raw.in_bounds(cells)
+        out = np.zeros(len(points), dtype=bool)
+        out[inside] = ~self._mapped[cells[inside, 0], cells[inside, 1]]
+        return out
 
     def _inflate(self, raw: PlanningGrid) -> PlanningGrid:
         radius = (self.robot.radius + self.cfg.inflation_margin) / raw.resolution
@@ -178,7 +190,7 @@ class Navigator:
         changed = self.update_map(map_grid)
         if self.path is None or (changed and self._path_blocked()):
             if self.path is not None:
-                self.replans += 1
+                self._log(now, "replan", "the new map blocks the path")
             if why := self.plan(pose):
                 return self._finish(UNREACHABLE, why)
         if self._at_goal(pose, velocity):
@@ -189,13 +201,13 @@ class Navigator:
             return cmd
         self._track(pose)
         if np.hypot(*(pose[:2] - self.path[self._index])) > self.cfg.off_path:
-            self.replans += 1
+            self._log(now, "replan", "off the path")
             if why := self.plan(pose):
                 return self._finish(UNREACHABLE, why)
         if self._no_progress(pose, now):
             return self._recover(pose, points, now)
         t0 = _time.perf_counter()
-        cmd = self.local.command(pose, velocity, points, self.path[self._index :])
+        cmd = self.local.command(pose, velocity, points, self.path[self._index :], self.unmapped(pose, points))
         self.planner_seconds.append(_time.perf_counter() - t0)
         if cmd.blocked:
             self._blocked_since = now if self._blocked_since is None else self._blocked_since
@@ -204,6 +216,11 @@ class Navigator:
         else:
             self._blocked_since = None
         return cmd
+
+    def _log(self, now: float, kind: str, why: str) -> None:
+        """Counts a replan and records ``(time s, kind, why)`` in ``events``."""
+        self.replans += kind == "replan"
+        self.events.append((float(now), kind, why))
 
     def _finish(self, status: str, reason: str) -> Command:
         self.status, self.reason = status, reason
@@ -278,6 +295,7 @@ class Navigator:
         """Next recovery: replan with the laser's points; later also back off and turn to the path."""
         self._level += 1
         self.recoveries += 1
+        self._log(now, "recovery", f"level {self._level}")
         self._blocked_since = None
         self._level_mark = min(self._level_mark, self._remaining(pose))
         if self._level > self.cfg.max_recoveries:
@@ -302,7 +320,7 @@ class Navigator:
             if np.hypot(*(pose[:2] - data)) < self.cfg.backoff and now - since < 4.0 and self._rear_clear(points):
                 return Command(-0.2, 0.0, False, "back off")
         elif kind == "replan":
-            self.replans += 1
+            self._log(now, "replan", "recovery, with the laser's points in the map")
             marked = geometry.transform_points(pose, points[np.hypot(*points.T) < self.cfg.mark_range])
             if why := self.plan(pose, marked):
                 return self._finish(UNREACHABLE, why)
@@ -326,7 +344,8 @@ class NavigationResult:
     ``optimal_length`` of the grid path (m), ``collisions`` (contact events), ``min_clearance`` (m
     between the robot's disc and walls or obstacles), ``replans``, ``recoveries``, ``goal_error``
     (m) and ``heading_error`` (rad) at the end, the true ``trajectory`` (N, 3), ``commands``
-    (N - 1, 2), ``stamps`` (N,) s, the planned ``paths`` and the local planner's mean ``planner_hz``."""
+    (N - 1, 2), ``stamps`` (N,) s, the planned ``paths``, the local planner's mean ``planner_hz`` and
+    the navigator's ``events`` (time s, "replan" / "recovery", why)."""
 
     success: bool
     reason: str
@@ -345,6 +364,7 @@ class NavigationResult:
     paths: list = field(default_factory=list)
     planner_hz: float = float("nan")
     steps: int = 0
+    events: list = field(default_factory=list)
 
     @property
     def length_ratio(self) -> float:
@@ -416,5 +436,5 @@ def _result(nav: Navigator, start, traj, commands, stamps, collisions, min_clear
         replans=nav.replans, recoveries=nav.recoveries,
         goal_error=float(np.hypot(*(end[:2] - goal[:2]))), heading_error=heading,
         trajectory=traj, commands=commands, stamps=stamps, paths=nav.paths, planner_hz=hz,
-        steps=len(commands),
+        steps=len(commands), events=nav.events,
     )  # fmt: skip
