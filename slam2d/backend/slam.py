@@ -62,6 +62,15 @@ class GraphSlamBackend:
         kf = self.graph.optimize_batch() if self.graph.num_keyframes > 1 else self.graph.estimate()
         return geometry.compose(kf[np.array(self._scan_keyframe)], np.array(self._scan_offset))
 
+    def current_pose(self) -> np.ndarray:
+        """Current estimate (3,) (m, m, rad) of the latest scan: its keyframe's estimate composed
+        with the scan's offset, as ``finish`` composes them (before the final optimisation)."""
+        return geometry.compose(self.graph.pose(self._scan_keyframe[-1]), self._scan_offset[-1])
+
+    def scan_anchors(self, start: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Keyframe key (M,) and pose in that keyframe's frame (M, 3) of scans ``start`` onwards."""
+        return np.array(self._scan_keyframe[start:], dtype=int), np.array(self._scan_offset[start:]).reshape(-1, 3)
+
     def _is_keyframe(self, delta: np.ndarray) -> bool:
         return bool(
             np.hypot(delta[0], delta[1]) >= self.cfg.keyframe_distance

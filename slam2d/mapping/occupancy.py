@@ -33,7 +33,10 @@ from slam2d.config import MappingConfig
 from slam2d.errors import InputError
 from slam2d.types import GridFrame, Scan
 
-__all__ = ["OccupancyGrid", "build_grid", "check_resolution", "logit", "NO_RETURN_CLEAR_M", "MARGIN_M", "MAX_CELLS"]
+__all__ = [
+    "OccupancyGrid", "build_grid", "beam_segments", "trace_beams", "check_resolution", "logit",
+    "NO_RETURN_CLEAR_M", "MARGIN_M", "MAX_CELLS",
+]
 
 NO_RETURN_CLEAR_M = 5.0
 """Farthest a no-return beam clears free space when ``cfg.max_range`` is unset, m.
@@ -115,18 +118,27 @@ def build_grid(poses, scans: Sequence[Scan], cfg: MappingConfig) -> OccupancyGri
         raise ValueError("poses contain NaN or inf")
     step = cfg.every_nth_scan
     poses, scans = poses[::step], list(scans)[::step]
-    origins, ends, is_hit, offsets = _beam_endpoints(poses, scans, cfg)
+    origins, ends, is_hit, offsets = beam_segments(poses, scans, cfg)
     grid = _empty_grid(np.vstack([origins, ends]), cfg.resolution)
-    _integrate(
-        grid.log_odds, _cell_coords(grid, origins), _cell_coords(grid, ends), is_hit, offsets,
-        np.float32(cfg.log_odds_hit), np.float32(cfg.log_odds_miss),
-        np.float32(cfg.log_odds_min), np.float32(cfg.log_odds_max),
-    )  # fmt: skip
+    trace_beams(grid, origins, ends, is_hit, offsets, cfg)
     return grid
 
 
-def _beam_endpoints(poses: np.ndarray, scans: list[Scan], cfg: MappingConfig):
-    """Sensor positions (S, 2), beam ends (B, 2), hit flags (B,), scan offsets (S+1,).
+def trace_beams(grid: OccupancyGrid, sensors, ends, is_hit, offsets, cfg: MappingConfig, clamp: bool = True) -> None:
+    """Ray-cast beams (as :func:`beam_segments` returns them, in the grid's frame, m) into
+    ``grid.log_odds`` in place, scan by scan, with the beam model of :func:`build_grid`.
+    ``clamp=False`` sums the updates without clamping to ``[cfg.log_odds_min, cfg.log_odds_max]``."""
+    low, high = (cfg.log_odds_min, cfg.log_odds_max) if clamp else (-np.inf, np.inf)
+    _integrate(
+        grid.log_odds, _cell_coords(grid, sensors), _cell_coords(grid, ends), is_hit, offsets,
+        np.float32(cfg.log_odds_hit), np.float32(cfg.log_odds_miss), np.float32(low), np.float32(high),
+    )  # fmt: skip
+
+
+def beam_segments(poses: np.ndarray, scans: list[Scan], cfg: MappingConfig):
+    """The beams :func:`build_grid` traces for ``scans`` at base ``poses`` (S, 3): sensor positions
+    (S, 2) m, beam ends (B, 2) m, hit flags (B,), scan offsets (S+1,) (beams of scan s are
+    ``offsets[s]:offsets[s+1]``).
 
     Only usable beams are returned: hits end at the hit, no-return beams at
     their clearing range.
