@@ -189,3 +189,15 @@ def test_keyframe_grid_is_build_grid_when_each_keyframe_is_one_scan():
 def test_online_needs_the_pose_graph_back_end():
     with pytest.raises(InputError, match="backend.name"):
         OnlineSlam(config.load(None, ["backend.name=none"]))
+
+
+def test_grid_takes_every_nth_scan_as_build_grid_does():
+    cfg = config.load(None, ["parallel=false", "dataset.max_scans=120", "mapping.every_nth_scan=3"])
+    online = OnlineSlam(cfg)
+    for scan in open_dataset(cfg.dataset, seed=cfg.seed):
+        online.add(scan)
+    keys, offsets = online.backend.scan_anchors()
+    grid = online.grid
+    at_placed = np.nan_to_num(geometry.compose(online.map.placed_poses()[keys], offsets))  # NaN: no scan taken
+    assert same_log_odds(grid, build_grid(at_placed, online.scans, cfg.mapping)) > 0.99
+    assert agreement(grid, build_grid(online.poses, online.scans, cfg.mapping)) >= 0.99

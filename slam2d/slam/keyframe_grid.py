@@ -103,7 +103,7 @@ class KeyframeGrid:
 
     def add_scan(self, key: int, offset, scan: Scan) -> None:
         """Scan ``scan`` taken at ``offset`` (3,) in keyframe ``key``'s frame joins that keyframe."""
-        self._reserve(key + 1)
+        self.reserve(key + 1)
         sensors, ends, hit, offsets = beam_segments(np.asarray(offset, float).reshape(1, 3), [scan], self.cfg)
         self._beams[key] = _join(self._beams[key], sensors, ends, hit, offsets)
         self._reach[key] = self._beams[key].reach
@@ -118,7 +118,7 @@ class KeyframeGrid:
         since, or were traced where a beam end lies more than ``tolerance`` from its place at ``poses``."""
         poses = np.asarray(poses, float).reshape(-1, 3)
         k = len(poses)
-        self._reserve(k)
+        self.reserve(k)
         placed, reach, scans, traced = self._placed[:k], self._reach[:k], self._scans[:k], self._traced[:k]
         turn = np.abs(geometry.wrap_angle(poses[:, 2] - placed[:, 2]))
         shift = np.hypot(poses[:, 0] - placed[:, 0], poses[:, 1] - placed[:, 1]) + reach * turn
@@ -179,8 +179,8 @@ class KeyframeGrid:
         _fold(log_odds.ravel(), _NO_MASK if mask is None else mask.ravel(), mask is not None,
               patch.flat, patch.val, *self._limits)
 
-    def _reserve(self, k: int) -> None:
-        """Room for keyframes 0..k-1."""
+    def reserve(self, k: int) -> None:
+        """Room for keyframes 0..k-1 (with no scans yet)."""
         extra = max(0, k - len(self._beams))
         if extra:
             self._beams += [None] * extra

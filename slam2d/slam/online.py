@@ -53,8 +53,9 @@ class OnlineSlam:
         n = len(self.scans)
         self.scans.append(scan)
         self.confidences.append(result.confidence)
+        key, offset = self.backend.scan_anchors(n)
+        self.map.reserve(int(key[0]) + 1)
         if n % self.cfg.mapping.every_nth_scan == 0:
-            key, offset = self.backend.scan_anchors(n)
             self.map.add_scan(int(key[0]), offset[0], scan)
         if self.backend.graph.num_keyframes > keyframes > 0:
             self.update_grid(open_keyframe=False)
