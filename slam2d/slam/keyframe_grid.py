@@ -202,9 +202,9 @@ class KeyframeGrid:
         block = OccupancyGrid(np.zeros(hi - lo + 1, np.float32), res, (lo[1] * res, lo[0] * res))
         trace_beams(block, sensors, ends, beams.hit, beams.offsets, self.cfg, clamp=False)
         self._cover(lo, hi)
-        rows, cols = np.nonzero(block.log_odds)
-        flat = (rows + (lo[0] - self._corner[0])) * self._base.shape[1] + cols + (lo[1] - self._corner[1])
-        return _Patch(np.concatenate([lo, hi]), flat.astype(np.int32), block.log_odds[rows, cols])
+        width = self._base.shape[1]
+        flat, val = _nonzero(block.log_odds, width, (lo[0] - self._corner[0]) * width + lo[1] - self._corner[1])
+        return _Patch(np.concatenate([lo, hi]), flat, val)
 
     def _cover(self, lo: np.ndarray, hi: np.ndarray) -> None:
         """Grow the base, with room to spare, so that lattice cells ``lo``..``hi`` (row, col) lie inside it;
@@ -235,6 +235,25 @@ def _fold(log_odds, mask, masked, flat, val, l_min, l_max):
         f = flat[e]
         if not masked or mask[f]:
             log_odds[f] = min(max(log_odds[f] + val[e], l_min), l_max)
+
+
+@njit(cache=True, nogil=True)
+def _nonzero(block, width, first):
+    """Flat indices (int32) in a grid ``width`` cells wide, where ``block``'s cell [0, 0] has index
+    ``first``, and values of ``block``'s non-zero cells (row-major)."""
+    h, w = block.shape
+    n = 0
+    for r in range(h):
+        for c in range(w):
+            n += block[r, c] != 0
+    flat, val = np.empty(n, np.int32), np.empty(n, np.float32)
+    n = 0
+    for r in range(h):
+        for c in range(w):
+            if block[r, c] != 0:
+                flat[n], val[n] = first + r * width + c, block[r, c]
+                n += 1
+    return flat, val
 
 
 def _join(beams: _Beams | None, sensors, ends, hit, offsets) -> _Beams:
