@@ -44,3 +44,108 @@ def test_sparsity_reports_the_five_percent_rule():
     assert s["nonzero_share"] == pytest.approx(50 * 80 / (60 * 90))
     assert not s["nonzero_sparse"]
     assert s["occupied_share"] == pytest.approx((80 + 80 + 48) / (60 * 90)) and s["occupied_sparse"]
+
+
+# --------------------------------------------------------------------------- quadtree
+
+
+def _thesis_tree():
+    """Root [-1, 2] x [-1, 2] m (extent 1 m + 200 %), 1024 cells a side; its centre is (0.5, 0.5)."""
+    from slam2d.mapping.quadtree import QuadTree
+
+    return QuadTree.from_points([[0.0, 0.0], [1.0, 1.0], [0.5, 1.0]], max_depth=10)
+
+
+def _cell_centre(tree, ix, iy):
+    return tree.corner[0] + (ix + 0.5) * tree.cell, tree.corner[1] + (iy + 0.5) * tree.cell
+
+
+def test_quadtree_root_and_the_quadrant_boundary():
+    from slam2d.mapping.quadtree import Outcome
+
+    tree = _thesis_tree()
+    assert tree.corner == (-1.0, -1.0) and tree.side == 3.0 and tree.depth == 10
+    # x == xMid, y > yMid: the upper right child, as its region says (the thesis sent it lower right)
+    assert tree.quadrants(0.5, 1.0)[0] == 1
+    assert tree.quadrants(0.5, 0.5)[0] == 1 and tree.quadrants(0.4999, 0.5)[0] == 2
+    assert tree.quadrants(0.4999, 0.4999)[0] == 3 and tree.quadrants(0.5, 0.4999)[0] == 4
+    assert tree.find(0.5, 1.0) == Outcome.OCCUPIED
+    assert tree.find(2.0, 0.0) == Outcome.OUTSIDE and tree.find(-1.0, -1.0) == Outcome.FREE
+
+
+def test_quadtree_find_has_three_outcomes():
+    from slam2d.mapping.quadtree import Outcome
+
+    tree = _thesis_tree()
+    ix, iy = (int(v[0]) for v in tree._lattice(np.array([[0.0, 0.0]])))
+    assert (ix, iy) == (341, 341)
+    assert tree.find(0.0, 0.0) == Outcome.OCCUPIED
+    assert tree.find(*_cell_centre(tree, 340, 341)) == Outcome.NEAR  # a sibling of the occupied cell
+    assert tree.find(*_cell_centre(tree, 342, 341)) == Outcome.FREE  # the next cell, another parent
+    assert tree.find(1.8, -0.8) == Outcome.FREE
+
+
+def test_quadtree_insert_and_delete_collapse_empty_siblings():
+    from slam2d.mapping.quadtree import Outcome, QuadTree
+
+    tree = _thesis_tree()
+    n0 = tree.node_count
+    sibling = _cell_centre(tree, 340, 341)
+    tree.insert(*sibling)
+    assert tree.node_count == n0 + 1 and tree.find(*sibling) == Outcome.OCCUPIED  # one leaf beside (0, 0)
+    tree.insert(1.8, -0.8)
+    assert tree.node_count == n0 + 1 + 10  # an empty root quadrant: a new branch, levels 1 to 10
+    assert tree.delete(1.8, -0.8) and tree.node_count == n0 + 1  # the whole branch collapses
+    assert tree.delete(0.0, 0.0) and tree.node_count == n0
+    assert tree.find(0.0, 0.0) == Outcome.NEAR  # its sibling is still there
+    assert tree.delete(*sibling) and not tree.delete(*sibling)
+    assert tree.find(0.0, 0.0) == Outcome.FREE and tree.find(*sibling) == Outcome.FREE
+    rest = QuadTree(tree.corner, tree.cell, tree.depth, *tree.cells()[:2])
+    assert tree.node_count == rest.node_count == QuadTree.from_bytes(tree.to_bytes()).node_count
+    capacity = len(tree.children)
+    tree.insert(0.0, 0.0)  # freed nodes are reused
+    assert tree.find(0.0, 0.0) == Outcome.OCCUPIED and len(tree.children) == capacity
+    assert tree.node_count == QuadTree(tree.corner, tree.cell, tree.depth, *tree.cells()[:2]).node_count == n0
+
+
+def test_quadtree_rebuilds_on_growth_and_keeps_its_cells():
+    from slam2d.mapping.quadtree import Outcome
+
+    tree = _thesis_tree()
+    before = tree.find_many([[0.0, 0.0], [1.0, 1.0], [0.5, 1.0]])
+    assert tree.find(30.0, -5.0) == Outcome.OUTSIDE
+    n0 = tree.node_count
+    tree.insert(30.0, -5.0)  # a noise point far out
+    assert tree.find(30.0, -5.0) == Outcome.OCCUPIED
+    assert np.array_equal(tree.find_many([[0.0, 0.0], [1.0, 1.0], [0.5, 1.0]]), before)
+    assert tree.cell == 3.0 / 1024 and tree.side >= 3 * 31.0 and tree.depth > 10
+    assert tree.node_count < n0 + 3 * tree.depth  # absorbed by a few branches
+
+
+def test_quadtree_of_a_grid_round_trips_and_batches():
+    from slam2d.mapping.quadtree import Outcome, QuadTree
+
+    rng = np.random.default_rng(3)
+    mask = rng.random((70, 130)) < 0.03
+    tree = QuadTree.from_mask(mask, 0.05, (-2.0, 1.0))
+    assert tree.depth == 9 and np.array_equal(tree.to_mask(), mask)
+    back = QuadTree.from_bytes(tree.to_bytes())
+    assert np.array_equal(back.to_mask(), mask) and back.node_count == tree.node_count
+    assert len(tree.to_bytes()) < mask.size // 10
+    rows, cols = np.indices(mask.shape)
+    assert np.array_equal(tree[rows, cols], mask) and tree[0, 0] == mask[0, 0]
+    xy = rng.uniform([-4.0, -1.0], [6.0, 6.0], (20_000, 2))  # inside, around and outside the grid
+    col, row = np.floor((xy[:, 0] + 2.0) / 0.05).astype(int), np.floor((xy[:, 1] - 1.0) / 0.05).astype(int)
+    inside = (row >= 0) & (row < 70) & (col >= 0) & (col < 130)
+    dense = np.zeros(len(xy), bool)
+    dense[inside] = mask[row[inside], col[inside]]
+    assert np.array_equal(tree.occupied(xy), dense)
+    assert np.all(tree.find_many([[np.nan, 0.0], [1e9, 0.0]]) == Outcome.OUTSIDE)
+    with pytest.raises(ValueError, match="magic"):
+        QuadTree.from_bytes(b"XXXX" + tree.to_bytes()[4:])
+
+
+def test_quadtree_figure_draws(tmp_path):
+    from slam2d.mapping.quadtree import draw_tree
+
+    assert draw_tree(_thesis_tree(), tmp_path / "tree.png").stat().st_size > 1000
