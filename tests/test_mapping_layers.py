@@ -149,3 +149,65 @@ def test_quadtree_figure_draws(tmp_path):
     from slam2d.mapping.quadtree import draw_tree
 
     assert draw_tree(_thesis_tree(), tmp_path / "tree.png").stat().st_size > 1000
+
+
+# --------------------------------------------------------------------------- line map
+
+
+def test_collinear_overlapping_segments_merge_into_one():
+    from slam2d.mapping.geometric import merge_collinear
+
+    seg = np.array([[[0.0, 0.0], [2.0, 0.01]], [[3.0, 0.0], [1.5, 0.0]], [[0.0, 1.0], [1.0, 1.0]]])
+    out = merge_collinear(seg, angle_tol_deg=3.0, offset_tol=0.05, gap=0.1)
+    assert len(out) == 2  # the parallel one a metre away stays apart
+    long = out[np.argmax(np.linalg.norm(out[:, 1] - out[:, 0], axis=1))]
+    assert np.allclose(sorted(long[:, 0]), [0.0, 3.0], atol=1e-3) and np.all(np.abs(long[:, 1]) < 0.01)
+    touching = merge_collinear([[[0.0, 0.0], [1.0, 0.0]], [[1.08, 0.0], [2.0, 0.0]]], gap=0.1)
+    assert len(touching) == 1
+    apart = merge_collinear([[[0.0, 0.0], [1.0, 0.0]], [[1.3, 0.0], [2.0, 0.0]]], gap=0.1)
+    assert len(apart) == 2
+
+
+def test_an_l_corner_becomes_one_polyline_through_the_corner():
+    from slam2d.mapping.geometric import link_corners
+
+    lines = link_corners([[[0.0, 0.0], [1.96, 0.0]], [[2.0, 0.05], [2.0, 1.5]]], corner_gap=0.15)
+    assert len(lines) == 1
+    assert np.allclose(lines[0], [[0.0, 0.0], [2.0, 0.0], [2.0, 1.5]])
+    # a square's four sides close into one ring
+    square = [[[0.02, 0], [0.98, 0]], [[1, 0.02], [1, 0.98]], [[0.98, 1], [0.02, 1]], [[0, 0.98], [0, 0.02]]]
+    ring = link_corners(square, corner_gap=0.1)
+    assert len(ring) == 1 and len(ring[0]) == 5 and np.allclose(ring[0][0], ring[0][-1])
+
+
+def _office_grid(res: float = 0.05):
+    from slam2d.sim.world import World
+
+    world = World.office()
+    origin = (-1.0, -1.0)
+    w, h = int(round(22 / res)), int(round(14 / res))
+    x, y = np.meshgrid(origin[0] + (np.arange(w) + 0.5) * res, origin[1] + (np.arange(h) + 0.5) * res)
+    return world, world.occupied(np.column_stack([x.ravel(), y.ravel()])).reshape(h, w), res, origin
+
+
+def test_line_map_of_the_office_finds_its_walls():
+    from slam2d.mapping.geometric import extract_line_map, line_scores
+
+    world, occ, res, origin = _office_grid()
+    lines = extract_line_map(occ, res, origin)
+    score = line_scores(lines.segments, world.segments, tol=0.05, angle_tol_deg=1.0, occupied=world.occupied)
+    assert score["precision"] >= 0.95 and score["recall"] >= 0.95, score
+    assert len(lines.to_json()) * 20 < occ.size  # far smaller than the grid
+
+
+def test_line_map_json_and_svg(tmp_path):
+    from slam2d.mapping.geometric import LineMap
+
+    lines = LineMap([np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.5]]), np.array([[1.0, 1.0], [1.5, 1.0]])],
+                    0.05, (-0.5, -0.5), (60, 80), {"method": "contour"})
+    back = LineMap.load(lines.save(tmp_path / "lines.json"))
+    assert len(back.polylines) == 2 and all(np.allclose(a, b) for a, b in zip(back.polylines, lines.polylines))
+    assert back.segments.shape == (3, 2, 2) and back.length() == pytest.approx(4.0)
+    svg = lines.to_svg(np.zeros((60, 80), np.float32))
+    assert svg.count("<polyline") == 2 and "data:image/png;base64," in svg and svg.startswith("<svg")
+    assert lines.save_png(tmp_path / "lines.png").stat().st_size > 1000

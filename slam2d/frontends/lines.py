@@ -29,7 +29,7 @@ After the patrol-robot thesis (Tian 2016, sections 2.3.1 and 2.3.3):
   calibrated online from the accepted matches (see ``gate.HeadingCalibration``).
 
 :func:`lines_from_grid` extracts map lines from an occupancy grid (Canny and
-probabilistic Hough, scikit-image); :meth:`LineFrontend.reanchor` rebuilds the
+probabilistic Hough, scikit-image, through ``slam2d.mapping.geometric``); :meth:`LineFrontend.reanchor` rebuilds the
 map lines from such a grid (the ``reanchor_every`` option does it from the
 frontend's own recent scans).
 """
@@ -680,7 +680,8 @@ def _chi2(pose, c_obs, a_obs, w_d, w_a, n_map, d_map, a_map) -> np.ndarray:
 def lines_from_grid(occupancy, resolution: float, origin=(0.0, 0.0), *, canny_sigma: float = 1.0,
                     threshold: int = 10, min_length: float = 0.5, max_gap: float = 0.15,
                     use_canny: bool = True, seed: int = 0) -> Segments:
-    """Wall segments (map frame, m) of an occupancy grid by Canny edges and the probabilistic Hough transform.
+    """Wall segments (map frame, m) of an occupancy grid by Canny edges and the probabilistic Hough transform
+    (:func:`slam2d.mapping.geometric.hough_segments`, which takes the Hough options).
 
     ``occupancy`` (H, W): row = y, col = x, cell [0, 0] with its lower-left
     corner at ``origin``; boolean (occupied) or probability in [0, 1].
@@ -689,17 +690,13 @@ def lines_from_grid(occupancy, resolution: float, origin=(0.0, 0.0), *, canny_si
     (thin walls). Normals face the free side. Each segment gets moments as if
     sampled once per cell along it.
     """
-    from skimage.feature import canny
-    from skimage.transform import probabilistic_hough_line
+    from slam2d.mapping.geometric import hough_segments
 
-    grid = np.asarray(occupancy, dtype=float)
-    occupied = grid >= 0.5
-    edges = canny(occupied.astype(float), sigma=canny_sigma) if use_canny else occupied
-    raw = probabilistic_hough_line(edges, threshold=threshold, line_length=max(2, int(round(min_length / resolution))),
-                                   line_gap=max(1, int(round(max_gap / resolution))), rng=seed)
-    if not raw:
+    occupied = np.asarray(occupancy, dtype=float) >= 0.5
+    ends = hough_segments(occupied, resolution, origin, canny_sigma=canny_sigma, threshold=threshold,
+                          min_length=min_length, max_gap=max_gap, use_canny=use_canny, seed=seed)
+    if not len(ends):
         return Segments.empty()
-    ends = (np.asarray(raw, float) + 0.5) * resolution + np.asarray(origin, float)  # (K, 2, 2) as (x, y)
     segs = Segments.from_ends(ends, resolution)
     h, w = occupied.shape
 
