@@ -21,6 +21,8 @@ from slam2d.errors import InputError
 ROBUST_KERNELS = ("none", "huber", "cauchy", "dcs")
 GNC_LOSSES = ("gm", "tls")  # Geman-McClure, truncated least squares
 GNC_INLIER_PROBABILITY = 0.99  # chi-square probability mass an inlier residual stays within
+GNC_METHODS = {"gnc": "tls", "gnc_tls": "tls", "gnc_gm": "gm"}  # batch g2o method -> GNC loss
+BATCH_METHODS = ROBUST_KERNELS + tuple(GNC_METHODS)  # what ``solve_g2o(robust=...)`` accepts
 
 
 def check_information(matrix, where: str = "information", kind: str = "information") -> np.ndarray:
@@ -78,3 +80,11 @@ def gnc_params(known_inliers, loss: str = "gm", lm_params=None):
     params.setLossType(gtsam.GncLossType.GM if name == "gm" else gtsam.GncLossType.TLS)
     params.setKnownInliers([int(k) for k in known_inliers])
     return params
+
+
+def gnc_loss(method: str) -> str | None:
+    """The GNC loss of a batch method ("gnc" = TLS), None for an M-estimator; InputError if unknown."""
+    name = str(method).lower()
+    if name not in BATCH_METHODS:
+        raise InputError("robust", f"unknown robust method {method!r} (choose from {', '.join(BATCH_METHODS)})")
+    return GNC_METHODS.get(name)

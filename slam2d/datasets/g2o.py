@@ -153,3 +153,82 @@ def write_g2o(path, graph: PoseGraphFile) -> None:
     for a, b, m, u in zip(graph.i.tolist(), graph.j.tolist(), graph.measurements.tolist(), upper.tolist()):
         rows.append(f"EDGE_SE2 {a} {b} " + " ".join(map(repr, m + u)))
     Path(path).write_text("\n".join(rows) + "\n")
+
+
+# ------------------------------------------------------------ outlier loops
+
+OUTLIER_KINDS = ("random", "local", "group")
+OUTLIER_SPAN_M = 10.0  # m: a false loop's translation is uniform within +-this (heading within +-pi)
+LOCAL_SPAN = 10  # local false loops join poses at most this many vertices apart
+GROUP_SIZE = 10  # group false loops come in clusters of this many mutually consistent edges
+
+
+def odometry_mask(graph: PoseGraphFile) -> np.ndarray:
+    """(M,) bool: the first edge from each vertex to the next id (``j == i + 1``); the rest are loops."""
+    mask = np.zeros(len(graph.i), bool)
+    seen: set[int] = set()
+    for k, (a, b) in enumerate(zip(graph.i.tolist(), graph.j.tolist())):
+        if b == a + 1 and a not in seen:
+            mask[k] = True
+            seen.add(a)
+    return mask
+
+
+def _outlier_pairs(n: int, count: int, kind: str, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex rows (a, b) of ``count`` false loops: uniform pairs, or pairs 2..LOCAL_SPAN apart."""
+    if kind == "random":
+        a = rng.integers(0, n, count)
+        b = (a + rng.integers(1, n, count)) % n  # never a == b
+        return a, b
+    a = rng.integers(0, n - 2, count)
+    b = np.minimum(a + rng.integers(2, LOCAL_SPAN + 1, count), n - 1)
+    return a, b
+
+
+def _group_outliers(graph: PoseGraphFile, count: int, rng):
+    """Clusters of GROUP_SIZE false loops (a+k, b+k), consistent with one false offset and the graph's poses."""
+    n, rows_a, rows_b, meas = len(graph.ids), [], [], []
+    while len(rows_a) < count:
+        size = min(GROUP_SIZE, count - len(rows_a))
+        a, b = rng.integers(0, n - size, 2)
+        if abs(int(a) - int(b)) < 2 * size:
+            continue
+        offset = _random_measurement(rng)
+        for k in range(size):
+            da = geometry.between(graph.poses[a], graph.poses[a + k])
+            db = geometry.between(graph.poses[b], graph.poses[b + k])
+            meas.append(geometry.compose(geometry.inverse(da), geometry.compose(offset, db)))
+            rows_a.append(a + k)
+            rows_b.append(b + k)
+    return np.array(rows_a), np.array(rows_b), np.array(meas).reshape(-1, 3)
+
+
+def _random_measurement(rng, count: int | None = None) -> np.ndarray:
+    size = 3 if count is None else (count, 3)
+    return rng.uniform(-1, 1, size) * np.array([OUTLIER_SPAN_M, OUTLIER_SPAN_M, np.pi])
+
+
+def inject_outliers(graph: PoseGraphFile, count: int, kind: str = "random", seed: int = 0):
+    """``graph`` with ``count`` false loop closures appended, the Vertigo way; returns
+    ``(graph, injected)`` with ``injected`` (M',) True on the new edges.
+
+    ``random``: uniform vertex pairs; ``local``: pairs 2..LOCAL_SPAN vertices apart;
+    ``group``: clusters of GROUP_SIZE mutually consistent false loops. Measurements
+    are uniform within +-OUTLIER_SPAN_M m and +-pi rad (one per group); each takes the
+    information of a random true loop (of any edge if there is none)."""
+    if kind not in OUTLIER_KINDS:
+        raise InputError("outlier kind", f"unknown kind {kind!r} (choose from {', '.join(OUTLIER_KINDS)})")
+    if count < 0 or len(graph.ids) < GROUP_SIZE + 2:
+        raise InputError("outliers", f"need count >= 0 and at least {GROUP_SIZE + 2} vertices")
+    rng = np.random.default_rng(seed)
+    if kind == "group":
+        a, b, meas = _group_outliers(graph, count, rng)
+    else:
+        a, b = _outlier_pairs(len(graph.ids), count, kind, rng)
+        meas = _random_measurement(rng, count)
+    loops = np.flatnonzero(~odometry_mask(graph))
+    pool = loops if len(loops) else np.arange(len(graph.i))
+    info = graph.information[rng.choice(pool, count)]
+    out = PoseGraphFile(graph.ids, graph.poses, np.r_[graph.i, graph.ids[a]], np.r_[graph.j, graph.ids[b]],
+                        np.r_[graph.measurements, meas].reshape(-1, 3), np.r_[graph.information, info].reshape(-1, 3, 3))
+    return out, np.r_[np.zeros(len(graph.i), bool), np.ones(count, bool)]
