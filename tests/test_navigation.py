@@ -16,7 +16,7 @@ from slam2d.navigation import (
     world_grid,
 )
 from slam2d.navigation.fsm import ACTIONS, sector_bits, state_code
-from slam2d.sim import Robot, RobotConfig, World
+from slam2d.sim import Robot, RobotConfig, World, scatter_wanderers
 from slam2d.types import Scan
 
 
@@ -176,6 +176,15 @@ def test_office_goal_reached_on_the_known_map():
     assert result.collisions == 0 and result.min_clearance > 0.05
     assert result.path_length <= 1.15 * result.optimal_length
     assert result.planner_hz >= 20.0
+
+
+def test_office_with_five_people_walking_about():
+    world = World.office()
+    start, goal = np.array([2.0, 4.2, 0.0]), np.array([17.5, 9.5])
+    people = scatter_wanderers(world, 5, np.random.default_rng(7), keep_clear=([start[:2], goal], [1.0, 1.0]))
+    robot = Robot(world, start, obstacles=people, seed=7)
+    result = run_navigation(world, robot, world_grid(world), goal, "dwa")
+    assert result.success and result.collisions == 0 and result.goal_error <= 0.05
 
 
 @pytest.mark.parametrize("planner", ["dwa", "fsm"])
