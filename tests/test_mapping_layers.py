@@ -211,3 +211,35 @@ def test_line_map_json_and_svg(tmp_path):
     svg = lines.to_svg(np.zeros((60, 80), np.float32))
     assert svg.count("<polyline") == 2 and "data:image/png;base64," in svg and svg.startswith("<svg")
     assert lines.save_png(tmp_path / "lines.png").stat().st_size > 1000
+
+
+# --------------------------------------------------------------------------- wall mesh
+
+
+def test_wall_of_one_segment_has_two_triangles_facing_right():
+    from slam2d.mapping.mesh import wall_arrays, wall_mesh
+
+    v, t = wall_arrays([[[1.0, 1.0], [1.0, 3.0]]], height=2.0)  # p1 -> p2 along +y
+    assert np.allclose(v, [[1, 1, 0], [1, 3, 0], [1, 3, 2], [1, 1, 2]]) and t.tolist() == [[0, 1, 2], [0, 2, 3]]
+    mesh = wall_mesh([[[1.0, 1.0], [1.0, 3.0]]], height=2.0)
+    assert len(mesh.triangles) == 2
+    assert np.allclose(np.asarray(mesh.triangle_normals), [1.0, 0.0, 0.0])  # direction x z: the right side
+    with_floor = wall_mesh([[[1.0, 1.0], [1.0, 3.0]]], height=2.0, floor_extent=(0.0, 4.0, 0.0, 4.0))
+    assert len(with_floor.triangles) == 4 and np.allclose(np.asarray(with_floor.triangle_normals)[2:], [0, 0, 1])
+
+
+def test_thick_walls_are_watertight_solids(tmp_path):
+    import open3d as o3d
+
+    from slam2d.mapping.mesh import render_mesh, save_mesh, wall_mesh
+
+    mesh = wall_mesh([[[0.0, 0.0], [2.0, 0.0]], [[2.5, 0.0], [2.5, 1.0]]], height=2.5, thickness=0.1)
+    assert len(mesh.triangles) == 24 and mesh.is_watertight()
+    assert mesh.get_volume() == pytest.approx(2.5 * 0.1 * 3.0)
+    centres = np.asarray(mesh.vertices)[np.asarray(mesh.triangles)].mean(1)
+    box = np.repeat(np.asarray(mesh.vertices).reshape(2, 8, 3).mean(1), 12, axis=0)
+    assert np.all(((centres - box) * np.asarray(mesh.triangle_normals)).sum(1) > 0)  # normals point out
+    for name in ("walls.ply", "walls.obj"):
+        back = o3d.io.read_triangle_mesh(str(save_mesh(mesh, tmp_path / name)))
+        assert len(back.triangles) == 24
+    assert render_mesh(mesh, tmp_path / "walls.png").stat().st_size > 1000
