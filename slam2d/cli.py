@@ -19,6 +19,7 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, help="2D laser SLA
 CONFIG_ARG = typer.Argument(None, help="experiment YAML; omitted: the built-in simulator default")
 SET_OPT = typer.Option([], "--set", "-s", help="override a config key, e.g. --set frontend.name=odometry")
 QUIET_OPT = typer.Option(False, "--quiet", "-q", help="no progress bars, warnings and errors only")
+PLUGIN_OPT = typer.Option([], "--plugin", "-p", help="Python file or module to import first (its frontends)")
 
 
 def _setup_logging(quiet: bool) -> None:
@@ -60,15 +61,17 @@ def _stoppable(what: str):
 
 
 @app.command()
-def run(config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, quiet: bool = QUIET_OPT) -> None:
+def run(
+    config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT,
+    quiet: bool = QUIET_OPT,
+) -> None:
     """Run one experiment; print the results folder."""
-    from slam2d import config as config_mod
     from slam2d.experiment import run_experiment
 
     _setup_logging(quiet)
     with _stoppable("no results folder written"):
         try:
-            cfg = config_mod.load(config, set_)
+            cfg = _load(config, set_, plugin)
             folder = run_experiment(cfg, quiet=quiet)
         except InputError as err:
             _fail(err)
@@ -105,13 +108,13 @@ def ablate(
 
 
 @app.command("dump-config")
-def dump_config(config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT) -> None:
+def dump_config(config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT) -> None:
     """Print the fully resolved config (defaults included) as YAML."""
     from slam2d import config as config_mod
     from slam2d.experiment import resolved
 
     try:
-        typer.echo(config_mod.dump(resolved(config_mod.load(config, set_))), nl=False)
+        typer.echo(config_mod.dump(resolved(_load(config, set_, plugin))), nl=False)
     except InputError as err:
         _fail(err)
 
@@ -186,11 +189,26 @@ class _NoPath(Exception):
     """The planner found no path (its reason is the message)."""
 
 
-@app.command()
-def frontends() -> None:
-    """List the registered frontends."""
-    from slam2d.frontends import available_frontends
+def _load(config, set_: list[str], plugins: list[str]):
+    """The config file (or defaults) with ``--set`` overrides and ``--plugin`` files or modules added."""
+    from slam2d import config as config_mod
 
+    cfg = config_mod.load(config, set_)
+    if plugins:
+        cfg.plugins = [*cfg.plugins, *(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugins)]
+    return cfg
+
+
+@app.command()
+def frontends(plugin: list[str] = PLUGIN_OPT) -> None:
+    """List the registered frontends (with those of --plugin files or modules)."""
+    from slam2d.frontends import available_frontends
+    from slam2d.plugins import load_plugins
+
+    try:
+        load_plugins(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin)
+    except InputError as err:
+        _fail(err)
     for name in available_frontends():
         typer.echo(name)
 

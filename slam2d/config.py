@@ -159,6 +159,9 @@ class ExperimentConfig(Section):
     name: str = Field("sim", description="results folder name: no '/' or '\\', no leading '.'")
     seed: int = Field(0, ge=0, lt=2**63, description="one seed for every random choice")
     parallel: bool = Field(True, description="reader and frontend in a worker process ahead of the back end")
+    plugins: list[str] = Field(
+        default_factory=list, description="Python files or modules imported first (frontends they register)"
+    )
     dataset: DatasetConfig = DatasetConfig()
     frontend: FrontendConfig = FrontendConfig()
     backend: BackendConfig = BackendConfig()
@@ -269,7 +272,12 @@ def load(path: str | Path | None = None, overrides: list[str] | dict[str, Any] =
     items = overrides.items() if isinstance(overrides, dict) else map(parse_override, overrides)
     for key, value in items:
         set_key(data, key, value)
-    return validate(data, str(path) if path else "config")
+    cfg = validate(data, str(path) if path else "config")
+    if path and cfg.plugins:
+        from slam2d.plugins import resolve
+
+        cfg.plugins = [resolve(p, Path(path).parent) for p in cfg.plugins]
+    return cfg
 
 
 def dump(cfg: ExperimentConfig) -> str:

@@ -117,9 +117,11 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
 
 
 def resolved(cfg: ExperimentConfig) -> ExperimentConfig:
-    """``cfg`` with the frontend's options completed by its defaults."""
+    """``cfg`` with the frontend's options completed by its defaults (its plugins imported first)."""
     from slam2d.frontends.base import resolve_options
+    from slam2d.plugins import load_plugins
 
+    load_plugins(cfg.plugins)
     params = resolve_options(cfg.frontend.name, cfg.frontend.options)
     if params is None:
         return cfg
@@ -330,11 +332,21 @@ def _sweep_base(sweep: dict[str, Any], path: Path) -> dict[str, Any]:
         if not isinstance(sweep["base"], str):
             got = config_mod.short_repr(sweep["base"])
             raise InputError(f"{path}: base", f"expected a config file name, got {got}")
-        return config_mod.load_dict(path.parent / sweep["base"])
+        base_path = path.parent / sweep["base"]
+        return _plugins_from(config_mod.load_dict(base_path), base_path.parent)
     base = sweep.get("config") or {}
     if not isinstance(base, dict):
         raise InputError(f"{path}: config", f"expected a mapping of config keys, got {config_mod.short_repr(base)}")
-    return dict(base)
+    return _plugins_from(dict(base), path.parent)
+
+
+def _plugins_from(data: dict[str, Any], folder: Path) -> dict[str, Any]:
+    """``data`` with its relative plugin files resolved against ``folder`` (the file that names them)."""
+    from slam2d.plugins import resolve
+
+    if isinstance(data.get("plugins"), list):
+        data["plugins"] = [resolve(p, folder) if isinstance(p, str) else p for p in data["plugins"]]
+    return data
 
 
 def _expand(sweep: dict[str, Any], path: Path) -> list[Variant]:

@@ -193,7 +193,10 @@ class SlamPipeline:
     """
 
     def __init__(self, cfg: ExperimentConfig):
+        from slam2d.plugins import load_plugins
+
         self.cfg = cfg
+        load_plugins(cfg.plugins)
         self.frontend = create_frontend(cfg.frontend.name, cfg.frontend.options)
 
     def _new_backend(self):

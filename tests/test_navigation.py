@@ -211,3 +211,35 @@ def test_a_new_map_that_blocks_the_path_makes_the_navigator_replan(hall):
     assert (crossing[:, 1] > 3.0).all()  # round the new wall's end
     nav.step(pose, np.zeros(2), np.zeros((0, 2)), walled, 0.2)  # the same map again: no replan
     assert nav.replans == 1
+
+
+@pytest.mark.parametrize("unknown_free", [False, True])
+def test_unknown_cells_of_an_occupancy_map_are_free_or_blocked_as_configured(hall, unknown_free):
+    from slam2d.mapping.occupancy import OccupancyGrid
+
+    world, grid = hall
+    log_odds = np.where(grid.free, -2.0, 2.0)
+    log_odds[:, 80:120] = 0.0  # x from 4 to 6 m never seen
+    occupancy = OccupancyGrid(log_odds, grid.resolution, grid.origin)
+    robot = Robot(world, [1.0, 2.0, 0.0], seed=5)
+    cfg = NavigatorConfig(unknown_free=unknown_free)
+    result = run_navigation(world, robot, occupancy, [9.0, 2.0], "dwa", cfg)
+    assert result.success == unknown_free
+    if not unknown_free:
+        assert result.reason.startswith("no path") and result.steps == 0
+
+
+def test_a_live_map_given_as_a_callable_is_read_at_every_step(hall):
+    world, grid = hall
+    walled = world_grid(World.from_polygons([box(0, 0, 10, 4), box(4.9, 0.0, 5.1, 3.0)]))
+    robot = Robot(world, [1.0, 2.0, 0.0], seed=6)
+    result = run_navigation(world, robot, lambda step: walled if step.scan.stamp >= 1.0 else grid, [9.0, 2.0])
+    assert result.success and result.replans >= 1 and result.events[0][1:] == ("replan", "the new map blocks the path")
+    assert result.trajectory[np.abs(result.trajectory[:, 0] - 5.0) < 0.1, 1].min() > 3.0  # round the mapped wall
+
+
+def test_the_time_budget_ends_a_run_that_has_not_arrived(hall):
+    world, grid = hall
+    robot = Robot(world, [1.0, 2.0, 0.0], seed=0)
+    result = run_navigation(world, robot, grid, [9.0, 2.0], "dwa", NavigatorConfig(max_time=2.0))
+    assert not result.success and result.reason.startswith("time budget") and result.time <= 2.1
