@@ -1,4 +1,4 @@
-"""The slam2d command line: run, ablate, dump-config, frontends.
+"""The slam2d command line: run, ablate, dump-config, segment, plan, optimize, frontends.
 
 Heavy imports happen inside the commands so that ``slam2d --help`` is instant.
 """
@@ -187,6 +187,135 @@ def plan(
 
 class _NoPath(Exception):
     """The planner found no path (its reason is the message)."""
+
+
+@app.command("map")
+def map_layers(
+    map_path: Path = typer.Argument(..., help="map.yaml (map_server) of an existing map"),
+    layers: str = typer.Option("sparse,quadtree,lines,mesh", help="comma-separated: sparse, quadtree, lines, mesh"),
+    wall_height: Optional[float] = typer.Option(None, help="wall height of the mesh, m (default 2.5)"),
+    root: Path = typer.Option(Path("results"), "--out", "-o", help="results folders are created under this"),
+    quiet: bool = QUIET_OPT,
+) -> None:
+    """Make mapping layers (sparse, quadtree, line map, wall mesh) of an existing map."""
+    from slam2d.experiment import results_folder
+
+    _setup_logging(quiet)
+    with _stoppable("no results folder written"):
+        try:
+            chosen = _layer_names(layers)
+            if wall_height is not None and not wall_height > 0:
+                raise InputError("--wall-height", f"must be > 0 m, got {wall_height}")
+            from slam2d.mapping.export import load_map_server
+            from slam2d.mapping.layers import write_layers
+
+            grid = load_map_server(map_path)
+            with results_folder(root, f"map-{map_path.stem}", "--out") as (work, published):
+                stats = write_layers(grid, chosen, work, wall_height=wall_height)
+        except InputError as err:
+            _fail(err)
+    typer.echo(" ".join(f"{k}={v['bytes']}B" for k, v in stats.items() if "bytes" in v))
+    typer.echo(f"results: {published[0]}")
+
+
+def _layer_names(text: str) -> list[str]:
+    from slam2d.mapping.layers import LAYERS
+
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in LAYERS]
+    if unknown or not names:
+        raise InputError("--layers", f"unknown layer '{unknown[0] if unknown else ''}' (one of {', '.join(LAYERS)})")
+    return names
+
+
+@app.command()
+def optimize(
+    graph_path: Path = typer.Argument(..., help="2D pose graph, g2o or TORO"),
+    init: Optional[str] = typer.Option(None, help="chordal, spanning_tree or file (default: chordal; "
+                                       "spanning_tree under a robust method)"),
+    robust: str = typer.Option("none", help="none, huber, cauchy, dcs, gnc (TLS), gnc_tls or gnc_gm"),
+    robust_param: float = typer.Option(1.0, help="M-estimator width, whitened units (sigmas)"),
+    outliers: int = typer.Option(0, help="false loop closures to inject before optimising"),
+    outlier_kind: str = typer.Option("random", help="random, local or group (clusters of 10)"),
+    seed: int = typer.Option(0, help="seed of the outlier injection"),
+    reference: Optional[Path] = typer.Option(None, help="g2o whose poses are the reference for the RMSE"),
+    verify: bool = typer.Option(True, help="also optimise from two other starts and check they agree"),
+    root: Path = typer.Option(Path("results"), "--out", "-o", help="results folders are created under this"),
+    quiet: bool = QUIET_OPT,
+) -> None:
+    """Optimise a pose graph in one batch: optimised g2o, overlay figure, metrics."""
+    _setup_logging(quiet)
+    with _stoppable("no results folder written"):
+        try:
+            from slam2d.experiment import results_folder
+
+            with results_folder(root, f"optimize-{graph_path.stem}", "--out") as (work, published):
+                metrics = _optimize_into(work, graph_path, init, robust, robust_param, outliers, outlier_kind,
+                                         seed, reference, verify)
+        except InputError as err:
+            _fail(err)
+    keys = ("gtsam_error", "iterations", "seconds", "verified", "loops_rejected", "precision", "recall",
+            "rmse_to_reference")
+    typer.echo(" ".join(f"{k}={metrics[k]:.6g}" if isinstance(metrics[k], float) else f"{k}={metrics[k]}"
+                        for k in keys if k in metrics))
+    typer.echo(f"results: {published[0]}")
+
+
+def _optimize_into(work: Path, graph_path, init, robust, robust_param, outliers, outlier_kind, seed,
+                   reference, verify) -> dict:
+    """Read, inject, solve and write config.yaml, graph.g2o, loops.csv, overlay.png, metrics.json to ``work``."""
+    import json
+
+    import numpy as np
+    import yaml
+
+    from slam2d.backend import pose_graph as pgm
+    from slam2d.datasets import g2o
+
+    graph = g2o.read_g2o(graph_path)
+    injected = np.zeros(len(graph.i), bool)
+    if outliers:
+        graph, injected = g2o.inject_outliers(graph, outliers, outlier_kind, seed)
+    ref = pgm.reference_poses(graph, g2o.read_g2o(reference)) if reference else None
+    result = pgm.solve_g2o(graph, robust, robust_param, init, verify)
+    options = {"graph": str(graph_path), "init": result.init, "robust": robust, "robust_param": robust_param,
+               "outliers": outliers, "outlier_kind": outlier_kind, "seed": seed,
+               "reference": str(reference) if reference else None, "verify": verify}
+    (work / "config.yaml").write_text(yaml.safe_dump(options, sort_keys=False))
+    g2o.write_g2o(work / "graph.g2o", g2o.PoseGraphFile(graph.ids, result.poses, graph.i, graph.j,
+                                                         graph.measurements, graph.information))
+    rows = ["i,j,loop,injected,inlier"] + [
+        f"{a},{b},{int(lp)},{int(x)},{int(k)}" for a, b, lp, x, k in
+        zip(graph.i.tolist(), graph.j.tolist(), (~g2o.odometry_mask(graph)).tolist(), injected.tolist(),
+            result.inlier.tolist())]
+    (work / "edges.csv").write_text("\n".join(rows) + "\n")
+    metrics = pgm.g2o_metrics(graph, result, injected if outliers else None, ref)
+    (work / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float) + "\n")
+    _overlay_figure(work / "overlay.png", graph, result, ref)
+    return metrics
+
+
+def _overlay_figure(path: Path, graph, result, reference) -> None:
+    """Start (grey), optimised (blue), reference (green) trajectories and rejected loops (red)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 8))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    rows = {k: n for n, k in enumerate(graph.ids.tolist())}
+    for a, b in zip(graph.i[~result.inlier].tolist(), graph.j[~result.inlier].tolist()):
+        p, q = result.poses[rows[a]], result.poses[rows[b]]
+        ax.plot([p[0], q[0]], [p[1], q[1]], color="tab:red", lw=0.3, alpha=0.5)
+    ax.plot(graph.poses[:, 0], graph.poses[:, 1], color="0.7", lw=0.6, label="file start")
+    if reference is not None:
+        ax.plot(reference[:, 0], reference[:, 1], color="tab:green", lw=1.5, label="reference")
+    ax.plot(result.poses[:, 0], result.poses[:, 1], color="tab:blue", lw=0.8, label=f"optimised ({result.init})")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="best")
+    fig.savefig(path, dpi=120, bbox_inches="tight")
 
 
 def _load(config, set_: list[str], plugins: list[str]):

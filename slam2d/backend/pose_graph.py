@@ -626,3 +626,35 @@ def replay_g2o(graph: g2o.PoseGraphFile, cfg: BackendConfig | None = None, gate:
         if added:
             pg.update()
     return pg
+
+
+def g2o_metrics(graph: g2o.PoseGraphFile, result: BatchResult, injected=None, reference=None) -> dict:
+    """metrics.json content of a batch solve: errors, iterations, time (s), verification,
+    loops kept / rejected, precision / recall against ``injected`` (M,) bool, and the
+    position RMSE (m, after SE(2) alignment) against ``reference`` poses (N, 3)."""
+    from slam2d.evaluation.trajectory import ate
+
+    loops = ~g2o.odometry_mask(graph)
+    out = {
+        "vertices": len(graph.ids), "edges": len(graph.i), "loops": int(loops.sum()),
+        "init": result.init, "initial_error": result.initial_error, "start_error": result.start_error,
+        "gtsam_error": result.final_error, "iterations": result.iterations, "seconds": result.seconds,
+        "verified": result.verified,
+        "loops_rejected": int(np.sum(~result.inlier & loops)),
+    }
+    if injected is not None and np.any(injected):
+        out.update(loop_metrics(result.inlier, injected))
+        kept = result.inlier & ~np.asarray(injected, bool)
+        out["true_loops_kept"] = float(np.sum(kept & loops) / max(1, np.sum(loops & ~injected)))
+    if reference is not None:
+        out["rmse_to_reference"] = ate(result.poses, reference)["rmse"]
+    return out
+
+
+def reference_poses(graph: g2o.PoseGraphFile, reference: g2o.PoseGraphFile) -> np.ndarray:
+    """The ``reference`` graph's poses (N, 3) for ``graph``'s vertex ids; InputError if any is missing."""
+    rows = np.searchsorted(reference.ids, graph.ids)
+    rows = np.minimum(rows, len(reference.ids) - 1)
+    if not np.array_equal(reference.ids[rows], graph.ids):
+        raise InputError("--reference", "the reference lacks some of the graph's vertices")
+    return reference.poses[rows]
