@@ -16,6 +16,7 @@ from slam2d.navigation import (
     world_grid,
 )
 from slam2d.navigation.fsm import ACTIONS, sector_bits, state_code
+from slam2d.planning.grid import PlanningGrid
 from slam2d.sim import Robot, RobotConfig, World, scatter_wanderers
 from slam2d.types import Scan
 
@@ -243,3 +244,14 @@ def test_the_time_budget_ends_a_run_that_has_not_arrived(hall):
     robot = Robot(world, [1.0, 2.0, 0.0], seed=0)
     result = run_navigation(world, robot, grid, [9.0, 2.0], "dwa", NavigatorConfig(max_time=2.0))
     assert not result.success and result.reason.startswith("time budget") and result.time <= 2.1
+
+
+def test_a_map_updated_in_place_counts_as_changed(hall):
+    world, grid = hall
+    live = PlanningGrid(grid.free.copy(), grid.resolution, grid.origin)
+    nav = Navigator([9.0, 2.0], RobotConfig(), NavigatorConfig())
+    pose = np.array([1.0, 2.0, 0.0])
+    nav.step(pose, np.zeros(2), np.zeros((0, 2)), live, 0.0)
+    live.free[:60, 98:102] = False  # a wall at x = 5 from y = 0 to 3 m, drawn into the same grid
+    nav.step(pose, np.zeros(2), np.zeros((0, 2)), live, 0.1)
+    assert nav.replans == 1 and (nav.path[np.abs(nav.path[:, 0] - 5.0) < 0.3, 1] > 3.0).all()

@@ -90,7 +90,7 @@ class Navigator:
         self.replans = self.recoveries = 0
         self.planner_seconds: list[float] = []
         self.events: list[tuple[float, str, str]] = []  # (time s, "replan" / "recovery", why)
-        self._map_src = self._raw = self._grid = None
+        self._raw = self._grid = None
         self._index, self._level, self._arrived, self._last_distance = 0, 0, False, np.inf
         self._best = (np.inf, 0.0)  # (remaining path m, time)
         self._level_mark = np.inf  # remaining path m at the first recovery of a run of them
@@ -100,14 +100,15 @@ class Navigator:
     # map and plan --------------------------------------------------------
 
     def update_map(self, map_grid) -> bool:
-        """Take the current map; True when it differs from the last one (re-inflated then)."""
-        if map_grid is self._map_src and self._grid is not None:
-            return False
+        """Take the current map; True when it differs from the last one (re-inflated then).
+
+        The free mask is compared at every call, so a map updated in place counts as changed.
+        """
         free, res, origin = free_mask(map_grid, self.cfg.unknown_free)
-        self._map_src = map_grid
-        if self._raw is not None and self._raw.free.shape == free.shape and np.array_equal(self._raw.free, free):
+        same_frame = self._raw is not None and (res, tuple(origin)) == (self._raw.resolution, self._raw.origin)
+        if same_frame and self._raw.free.shape == free.shape and np.array_equal(self._raw.free, free):
             return False
-        self._raw = PlanningGrid(free, res, origin)
+        self._raw = PlanningGrid(np.array(free, dtype=bool), res, origin)  # a copy: the source may change
         self._grid = self._inflate(self._raw)
         self._mapped = ndimage.binary_dilation(~free, iterations=_EXPLAINED_CELLS)
         return True
