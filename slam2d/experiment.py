@@ -179,6 +179,10 @@ def _write_outputs(cfg: ExperimentConfig, result, out: Path) -> None:
         result.graph.write_g2o(out / "graph.g2o")
     grid = build_grid(result.poses, result.scans, cfg.mapping)
     save_map_server(grid, out / "map", cfg.mapping)
+    if set(cfg.mapping.layers) - {"grid"}:
+        from slam2d.mapping.layers import write_layers
+
+        write_layers(grid, cfg.mapping.layers, out, cfg.mapping.occupied_thresh, cfg.output.figures)
     if cfg.output.figures:
         trajectories = {"estimate": result.poses, "odometry": result.odometry}
         if result.ground_truth is not None:

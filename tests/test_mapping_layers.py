@@ -243,3 +243,50 @@ def test_thick_walls_are_watertight_solids(tmp_path):
         back = o3d.io.read_triangle_mesh(str(save_mesh(mesh, tmp_path / name)))
         assert len(back.triangles) == 24
     assert render_mesh(mesh, tmp_path / "walls.png").stat().st_size > 1000
+
+
+# --------------------------------------------------------------------------- run outputs and the map command
+
+
+def test_layers_default_to_the_grid_and_reject_unknown_names():
+    from slam2d import config
+    from slam2d.errors import InputError
+
+    assert config.load(None, []).mapping.layers == ["grid"]
+    assert config.load(None, ["mapping.layers=[grid,quadtree,mesh]"]).mapping.layers == ["grid", "quadtree", "mesh"]
+    with pytest.raises(InputError, match="mapping.layers"):
+        config.load(None, ["mapping.layers=[grid,octree]"])
+
+
+def test_run_writes_the_chosen_layers_and_map_makes_them_again(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from slam2d import config
+    from slam2d.cli import app
+    from slam2d.experiment import run_experiment
+    from slam2d.mapping.quadtree import QuadTree
+
+    cfg = config.load(None, ["dataset.max_scans=40", "mapping.resolution=0.1", f"output.root={tmp_path / 'r'}",
+                             "mapping.layers=[grid,sparse,quadtree,lines,mesh]"])
+    folder = run_experiment(cfg, quiet=True)
+    for name in ("map.pgm", "map_sparse.npz", "map.quadtree", "quadtree.png", "lines.json", "lines.svg",
+                 "walls.ply", "walls.png", "layers.json"):
+        assert (folder / name).is_file(), name
+    stats = json.loads((folder / "layers.json").read_text())
+    assert stats["quadtree"]["bytes"] < stats["grid"]["dense_uint8_bytes"] / 10
+    from slam2d.mapping.export import load_map_server
+
+    grid = load_map_server(folder / "map.yaml")
+    assert np.array_equal(QuadTree.load(folder / "map.quadtree").to_mask(), grid.occupied_mask())
+
+    runner = CliRunner()
+    out = runner.invoke(app, ["map", str(folder / "map.yaml"), "--layers", "quadtree,lines", "-o", str(tmp_path / "m"),
+                              "--quiet"])
+    assert out.exit_code == 0, out.output
+    made = next((tmp_path / "m").glob("map-map-*"))
+    assert (made / "map.quadtree").read_bytes() == (folder / "map.quadtree").read_bytes()
+    assert (made / "lines.json").is_file() and not (made / "walls.ply").exists()
+    bad = runner.invoke(app, ["map", str(folder / "map.yaml"), "--layers", "octree", "-o", str(tmp_path / "m")])
+    assert bad.exit_code == 2 and "--layers" in bad.output

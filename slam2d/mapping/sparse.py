@@ -27,8 +27,8 @@ def sparsity(grid: OccupancyGrid, occupied_thresh: float = 0.65) -> dict:
     n = grid.log_odds.size
     nonzero = np.count_nonzero(grid.log_odds) / n
     occupied = np.count_nonzero(grid.occupied_mask(occupied_thresh)) / n
-    return {"cells": n, "nonzero_share": nonzero, "occupied_share": occupied,
-            "nonzero_sparse": nonzero < SPARSE_SHARE, "occupied_sparse": occupied < SPARSE_SHARE}
+    return {"cells": int(n), "nonzero_share": float(nonzero), "occupied_share": float(occupied),
+            "nonzero_sparse": bool(nonzero < SPARSE_SHARE), "occupied_sparse": bool(occupied < SPARSE_SHARE)}
 
 
 @dataclass(eq=False)
