@@ -105,7 +105,7 @@ class DynamicWindow:
         pose = np.asarray(pose, dtype=np.float64)
         path = path_ahead(path, pose)
         v, w = self.window(velocity)
-        v, w = self._with_pursuit(v, w, pose, velocity, path)
+        v, w = self._with_pursuit(v, w, pose, path)
         traj = arcs(v, w, self.times)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         unmapped = np.zeros(len(points), bool) if unmapped is None else np.asarray(unmapped, bool).reshape(-1)
@@ -119,7 +119,7 @@ class DynamicWindow:
         best = int(np.argmax(score))
         return Command(float(v[best]), float(w[best]), not forward.any(), "dwa")
 
-    def _with_pursuit(self, v, w, pose, velocity, path):
+    def _with_pursuit(self, v, w, pose, path):
         """Adds the pure-pursuit command towards the carrot (clipped to the window) to the samples."""
         carrot = in_robot_frame(pose, point_along(path, self.cfg.lookahead))
         d = float(np.hypot(*carrot))

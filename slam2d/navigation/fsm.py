@@ -24,8 +24,9 @@ state picks the action (Fig. 23, with state 11 as Straight):
   else the beam with the longest range (the thesis).
 - U-turn: turn while moving forward, towards the side with more room.
 - Reverse: stop, turn 180° on the spot (latched until done), then go forward.
-- Stuck alarm: no displacement for ``stuck_time`` while commanding motion;
-  reported as ``blocked`` so that the navigator's recovery takes over.
+- Stuck alarm: less than ``stuck_distance`` of displacement for ``stuck_time``
+  (outside the latched Reverse turn); reported as ``blocked`` so that the
+  navigator's recovery (back off, replan, turn) tries the other actions.
 
 Speeds are lowered to the one that stops at the goal; nothing else is added,
 so this stays the paper's baseline, not a safe planner.
