@@ -55,7 +55,7 @@ def _sparse(grid: OccupancyGrid, folder: Path, occupied_thresh: float) -> dict:
     t = Triplets.from_grid(grid)
     np.savez_compressed(folder / "map_sparse.npz", rows=t.rows, cols=t.cols, values=t.values,
                         shape=np.array(t.shape), resolution=t.resolution, origin=np.array(t.origin))
-    return {"file": "map_sparse.npz", "cells": len(t), "bytes": t.nbytes, **sparsity(grid, occupied_thresh)}
+    return {"file": "map_sparse.npz", "triplets": len(t), "bytes": t.nbytes, **sparsity(grid, occupied_thresh)}
 
 
 def _quadtree(grid: OccupancyGrid, occupied: np.ndarray, folder: Path, figures: bool) -> dict:
