@@ -290,3 +290,13 @@ def test_run_writes_the_chosen_layers_and_map_makes_them_again(tmp_path):
     assert (made / "lines.json").is_file() and not (made / "walls.ply").exists()
     bad = runner.invoke(app, ["map", str(folder / "map.yaml"), "--layers", "octree", "-o", str(tmp_path / "m")])
     assert bad.exit_code == 2 and "--layers" in bad.output
+
+
+def test_chamfer_of_a_wall_and_its_line():
+    from slam2d.mapping.geometric import chamfer
+
+    occ = np.zeros((20, 40), bool)
+    occ[10, 5:35] = True  # cells of centres y = 0.525 m, x from 0.275 to 1.725 m at 0.05 m
+    line = [[[0.275, 0.525], [1.725, 0.525]]]
+    assert chamfer(line, occ, 0.05) < 0.01  # samples every half cell between cell centres
+    assert chamfer([[[0.275, 0.575], [1.725, 0.575]]], occ, 0.05) == pytest.approx(0.05, abs=0.01)

@@ -1,20 +1,21 @@
 """Geometric map: wall polylines from an occupancy grid (Tian 2016, section 3.2).
 
-Pipeline, after the thesis: the occupied cells as a binary image, Canny edges
-(its Gaussian blur included), probabilistic Hough segments
-(:func:`hough_segments`, the one grid line extractor; the line frontend's
-``lines_from_grid`` calls it), then what the thesis left as future work:
+The thesis blurs the occupied cells, runs Canny and the Hough transform and
+merges the segments (its merge left as future work). Two segment sources
+(:data:`EXTRACTORS`), measured on the simulator office (benchmarks/mapping_layers.py):
 
-1. each segment refitted by total least squares to the edge pixels within
-   ``fit_tol`` of it, its ends trimmed to those pixels' extent;
-2. collinear segments that overlap or touch (gap <= ``gap``, directions within
-   ``angle_tol_deg``, offsets within ``fit_tol``) merged into one, repeatedly;
-3. ends of two non-parallel segments whose lines meet within ``corner_gap`` of
-   both ends snapped to that corner and linked, so walls become polylines.
+- ``contour`` (default): marching-squares contours of the occupied cells (on
+  the cell edges), split at Douglas-Peucker vertices, each piece refitted by
+  total least squares (:func:`contour_segments`);
+- ``hough``: Canny + probabilistic Hough (:func:`hough_segments`, the one grid
+  Hough extractor; the line frontend's ``lines_from_grid`` calls it).
 
-:class:`LineMap` stores the polylines (JSON, SVG over the grid); its
-``segments`` are the thesis's m x 2 x 2 endpoint table. :func:`line_scores`
-measures a line map against true walls (precision and recall of length).
+Then, the merge: pieces shorter than ``min_length`` dropped; collinear segments
+that overlap or touch joined (:func:`merge_collinear`); ends of non-parallel
+segments whose lines meet close to both snapped to the corner and linked into
+polylines (:func:`link_corners`). :class:`LineMap` stores the polylines (JSON,
+SVG over the grid, PNG); its ``segments`` are the thesis's endpoint table
+(eq. 12). :func:`line_scores` measures a line map against true walls.
 """
 
 from __future__ import annotations
@@ -25,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["hough_segments", "contour_segments", "extract_line_map", "merge_collinear", "link_corners", "LineMap", "line_scores"]
+__all__ = ["hough_segments", "contour_segments", "extract_line_map", "merge_collinear", "link_corners", "LineMap",
+           "line_scores", "chamfer"]
 
 
 def hough_segments(occupied, resolution: float, origin=(0.0, 0.0), *, canny_sigma: float = 1.0,
@@ -48,14 +50,6 @@ def hough_segments(occupied, resolution: float, origin=(0.0, 0.0), *, canny_sigm
     if not raw:
         return np.zeros((0, 2, 2))
     return (np.asarray(raw, float) + 0.5) * resolution + np.asarray(origin, float)  # (K, 2, 2) as (x, y)
-
-
-def _edge_points(occupied: np.ndarray, resolution: float, origin, sigma: float) -> np.ndarray:
-    """Centres (P, 2) m of the Canny edge cells of ``occupied``."""
-    from skimage.feature import canny
-
-    rows, cols = np.nonzero(canny(occupied.astype(float), sigma=sigma))
-    return (np.column_stack([cols, rows]) + 0.5) * resolution + np.asarray(origin, float)
 
 
 # --------------------------------------------------------------------------- segment geometry
@@ -110,15 +104,6 @@ def _fit_groups(points: np.ndarray, group: np.ndarray, k: int, extent=None) -> n
     seg = np.stack([c + lo[:, None] * u, c + hi[:, None] * u], axis=1)
     seg[n_fit < 2] = np.nan
     return seg
-
-
-def refit(seg: np.ndarray, points: np.ndarray, tol: float) -> np.ndarray:
-    """Segments (K, 2, 2) refitted by TLS to the points (P, 2) m within ``tol`` m of them (each point
-    to its nearest segment); segments that keep fewer than two points are dropped."""
-    idx, dist = _nearest_segment(points, seg)
-    near = dist <= tol
-    out = _fit_groups(points[near], idx[near], len(seg))
-    return out[np.isfinite(out).all(axis=(1, 2))]
 
 
 # --------------------------------------------------------------------------- merging
@@ -180,7 +165,8 @@ def _join(seg: np.ndarray, group: np.ndarray, k: int) -> np.ndarray:
     """One segment per group: length-weighted mean direction through the weighted midpoint, spanning every end."""
     u, length, mid = _frame(seg)
     w = np.maximum(length, 1e-9)
-    phi2 = np.arctan2(np.bincount(group, w * 2 * u[:, 0] * u[:, 1], k), np.bincount(group, w * (u[:, 0]**2 - u[:, 1]**2), k))
+    sin2, cos2 = 2 * u[:, 0] * u[:, 1], u[:, 0] ** 2 - u[:, 1] ** 2  # doubled angles: directions, not signs
+    phi2 = np.arctan2(np.bincount(group, w * sin2, k), np.bincount(group, w * cos2, k))
     d = np.column_stack([np.cos(phi2 / 2), np.sin(phi2 / 2)])
     c = np.column_stack([np.bincount(group, w * mid[:, i], k) for i in range(2)]) / np.bincount(group, w, k)[:, None]
     t = ((seg - c[group][:, None]) * d[group][:, None]).sum(-1)  # (K, 2)
@@ -306,8 +292,9 @@ class LineMap:
                  f'height="{height * px_per_m:.0f}" viewBox="{ox} {-oy - height} {width} {height}">',
                  '<g transform="scale(1 -1)">']  # y up; the grid image (row 0 = lowest y) is mirrored with it
         if grid_log_odds is not None:
+            png = _grid_png_base64(grid_log_odds)
             parts.append(f'<image x="{ox}" y="{oy}" width="{width}" height="{height}" preserveAspectRatio="none" '
-                         f'style="image-rendering:pixelated" href="data:image/png;base64,{_grid_png_base64(grid_log_odds)}"/>')
+                         f'style="image-rendering:pixelated" href="data:image/png;base64,{png}"/>')
         parts.append(f'<g fill="none" stroke="#d62728" stroke-width="{2 * self.resolution}" stroke-linejoin="round">')
         parts += [f'<polyline points="{" ".join(f"{x:.3f},{y:.3f}" for x, y in p)}"/>' for p in self.polylines]
         return "\n".join(parts + ["</g>", "</g>", "</svg>", ""])
@@ -431,7 +418,8 @@ def _samples(seg: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 def _matched(points, owner, seg_p, seg_q, tol, angle_tol) -> np.ndarray:
-    """Whether each sample point (of seg_p[owner]) lies within ``tol`` m of a seg_q segment at most ``angle_tol`` off."""
+    """Whether each sample point (of seg_p[owner]) lies within ``tol`` m of a seg_q segment at most ``angle_tol``
+    rad off."""
     u_p, _, _ = _frame(seg_p)
     u_q, _, _ = _frame(seg_q)
     ok = np.zeros(len(points), bool)
@@ -462,5 +450,23 @@ def line_scores(found, truth, *, tol: float = 0.05, angle_tol_deg: float = 1.0, 
     pf, of, wf = _samples(found, step)
     rec = _matched(pt, ot, truth, found, tol, angle_tol) if len(found) else np.zeros(len(pt), bool)
     pre = _matched(pf, of, found, truth, tol, angle_tol) if len(truth) else np.zeros(len(pf), bool)
-    return {"precision": float(wf[pre].sum() / max(wf.sum(), 1e-12)), "recall": float(wt[rec].sum() / max(wt.sum(), 1e-12)),
+    return {"precision": float(wf[pre].sum() / max(wf.sum(), 1e-12)),
+            "recall": float(wt[rec].sum() / max(wt.sum(), 1e-12)),
             "found_m": float(wf.sum()), "truth_m": float(wt.sum())}
+
+
+def chamfer(segments, occupied, resolution: float, origin=(0.0, 0.0)) -> float:
+    """Symmetric mean distance (m) between points along ``segments`` (K, 2, 2) m and the centres of the
+    boundary cells of ``occupied`` (H, W) bool (occupied cells with a non-occupied 4-neighbour); NaN if
+    either is empty."""
+    from scipy.ndimage import binary_erosion
+    from scipy.spatial import cKDTree
+
+    occupied = np.asarray(occupied, bool)
+    rows, cols = np.nonzero(occupied & ~binary_erosion(occupied))
+    cells = (np.column_stack([cols, rows]) + 0.5) * resolution + np.asarray(origin, float)
+    segments = np.asarray(segments, float).reshape(-1, 2, 2)
+    if len(segments) == 0 or len(cells) == 0:
+        return float("nan")
+    pts, _, _ = _samples(segments, resolution / 2)
+    return float((cKDTree(cells).query(pts)[0].mean() + _nearest_segment(cells, segments)[1].mean()) / 2)
