@@ -147,7 +147,7 @@ def test_goal_enclosed_by_walls_is_unreachable_at_once():
     world = World.from_polygons([box(0, 0, 10, 6), box(6, 2, 8, 4)], name="vault")
     robot = Robot(world, [1.0, 1.0, 0.0], seed=0)
     result = run_navigation(world, robot, world_grid(world), [7.0, 3.0], "dwa")
-    assert not result.success and "no path" in result.reason and "unreachable" in result.reason
+    assert not result.success and result.status == "unreachable" and result.reason.startswith("no path")
     assert result.steps == 0 and result.collisions == 0
 
 
@@ -159,7 +159,7 @@ def test_goal_behind_an_unmapped_blockage_ends_unreachable_within_the_budget(pla
     robot = Robot(world, [1.0, 0.5, 0.0], obstacles=[disc], seed=3)
     cfg = NavigatorConfig(max_recoveries=2, stuck_time=3.0)
     result = run_navigation(world, robot, world_grid(world), [11.0, 0.5], planner, cfg)
-    assert not result.success and result.reason.startswith("recovery exhausted")
+    assert result.status == "unreachable" and result.reason.startswith("recovery exhausted")
     assert result.recoveries == 3 and result.time < 60.0
     if planner == "dwa":
         assert result.collisions == 0
@@ -172,7 +172,7 @@ def test_office_goal_reached_on_the_known_map():
     world = World.office()
     robot = Robot(world, [5.5, 4.225, 0.0], seed=0)
     result = run_navigation(world, robot, world_grid(world), [17.0, 10.0, np.pi / 2], "dwa")
-    assert result.success and result.reason == "goal reached"
+    assert result.success and result.status == "reached" and result.reason == "goal reached"
     assert result.goal_error <= 0.05 and result.heading_error <= np.deg2rad(2.0)
     assert result.collisions == 0 and result.min_clearance > 0.05
     assert result.path_length <= 1.15 * result.optimal_length
@@ -243,7 +243,7 @@ def test_the_time_budget_ends_a_run_that_has_not_arrived(hall):
     world, grid = hall
     robot = Robot(world, [1.0, 2.0, 0.0], seed=0)
     result = run_navigation(world, robot, grid, [9.0, 2.0], "dwa", NavigatorConfig(max_time=2.0))
-    assert not result.success and result.reason.startswith("time budget") and result.time <= 2.1
+    assert result.status == "timeout" and result.reason.startswith("time budget") and result.time <= 2.1
 
 
 def test_a_map_updated_in_place_counts_as_changed(hall):

@@ -10,7 +10,11 @@ itself blocked for ``blocked_time`` or the remaining path has not shortened by
 ``progress`` within ``stuck_time``: first a replan with the laser's points put
 into the map, then backing off, a replan and a turn towards the new path. After
 ``max_recoveries`` recoveries without a metre of progress, or when no path
-exists on the map, the goal is unreachable; ``max_time`` bounds every run.
+exists on the map, the goal is unreachable; ``max_time`` bounds every run
+(status ``timeout``). Laser points the map does not explain are passed to the
+local planner as such (DWA gives them a growing margin: they may move). Within
+``final_approach`` of the goal a point controller closes in, then the robot
+turns to the goal heading if one was given.
 """
 
 from __future__ import annotations
@@ -33,7 +37,17 @@ from slam2d.planning.astar import AStar
 from slam2d.planning.grid import PlanningGrid, inflate, wall_cost
 from slam2d.sim.robot import RobotConfig
 
-__all__ = ["NavigatorConfig", "Navigator", "NavigationResult", "run_navigation", "ACTIVE", "REACHED", "UNREACHABLE"]
+__all__ = [
+    "NavigatorConfig",
+    "Navigator",
+    "NavigationResult",
+    "run_navigation",
+    "make_local_planner",
+    "ACTIVE",
+    "REACHED",
+    "UNREACHABLE",
+    "TIMEOUT",
+]
 
 ACTIVE, REACHED, UNREACHABLE, TIMEOUT = "active", "reached", "unreachable", "timeout"
 _SNAP = 0.5  # m, farthest a start cell inside the inflation is moved to a free one
@@ -76,7 +90,7 @@ def make_local_planner(name: str, robot: RobotConfig, cfg: NavigatorConfig):
 
 class Navigator:
     """Drives towards ``goal`` (x, y[, theta]) with :meth:`step`; ``status`` is ``active``,
-    ``reached`` or ``unreachable`` (``reason`` says why)."""
+    ``reached``, ``unreachable`` or ``timeout`` (``reason`` says why)."""
 
     def __init__(self, goal, robot: RobotConfig | None = None, config: NavigatorConfig | None = None):
         self.robot, self.cfg = robot or RobotConfig(), config or NavigatorConfig()
@@ -341,14 +355,16 @@ class Navigator:
 
 @dataclass(eq=False)
 class NavigationResult:
-    """One navigation run: ``success``, ``reason``, ``time`` (s), ``path_length`` travelled and
-    ``optimal_length`` of the grid path (m), ``collisions`` (contact events), ``min_clearance`` (m
-    between the robot's disc and walls or obstacles), ``replans``, ``recoveries``, ``goal_error``
-    (m) and ``heading_error`` (rad) at the end, the true ``trajectory`` (N, 3), ``commands``
-    (N - 1, 2), ``stamps`` (N,) s, the planned ``paths``, the local planner's mean ``planner_hz`` and
-    the navigator's ``events`` (time s, "replan" / "recovery", why)."""
+    """One navigation run: ``success``, ``status`` (reached / unreachable / timeout), ``reason``,
+    ``time`` (s), ``path_length`` travelled and ``optimal_length`` of the grid path (m),
+    ``collisions`` (contact events), ``min_clearance`` (m between the robot's disc and walls or
+    obstacles), ``replans``, ``recoveries``, ``goal_error`` (m) and ``heading_error`` (rad) at the
+    end, the true ``trajectory`` (N, 3), ``commands`` (N - 1, 2), ``stamps`` (N,) s, the planned
+    ``paths``, the local planner's mean ``planner_hz`` and the navigator's ``events``
+    (time s, "replan" / "recovery", why)."""
 
     success: bool
+    status: str
     reason: str
     time: float
     path_length: float
@@ -374,7 +390,7 @@ class NavigationResult:
 
     def metrics(self) -> dict:
         """The scalar fields (for metrics.json)."""
-        keys = ("success", "reason", "time", "path_length", "optimal_length", "collisions", "min_clearance",
+        keys = ("success", "status", "reason", "time", "path_length", "optimal_length", "collisions", "min_clearance",
                 "replans", "recoveries", "goal_error", "heading_error", "planner_hz", "steps")  # fmt: skip
         return {k: getattr(self, k) for k in keys} | {"length_ratio": self.length_ratio}
 
@@ -431,7 +447,7 @@ def _result(nav: Navigator, start, traj, commands, stamps, collisions, min_clear
     hz = 1.0 / float(np.mean(nav.planner_seconds)) if nav.planner_seconds else float("nan")
     optimal = nav.optimal_length(start) if nav._grid is not None else float("inf")
     return NavigationResult(
-        success=nav.status == REACHED, reason=nav.reason, time=float(stamps[-1] - stamps[0]),
+        success=nav.status == REACHED, status=nav.status, reason=nav.reason, time=float(stamps[-1] - stamps[0]),
         path_length=float(np.linalg.norm(np.diff(traj[:, :2], axis=0), axis=1).sum()),
         optimal_length=optimal, collisions=collisions, min_clearance=float(min_clear),
         replans=nav.replans, recoveries=nav.recoveries,
