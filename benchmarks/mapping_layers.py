@@ -8,9 +8,11 @@ occupied cells are stored four ways, each lossless (checked): dense uint8
 share of the full log-odds grid (the thesis's < 5 % rule), the quadtree's
 build time and node share of its 4^depth lattice, batched occupancy lookups of
 10^6 uniform random points in the map's extent by the quadtree vs dense numpy
-indexing (median of 5, same answers checked), the line map's JSON size vs
+indexing (median of 5, the two alternated; same answers checked), the line map's JSON size vs
 the dense grid and its symmetric Chamfer distance to the wall cells (boundary
-cells of the occupied mask), and the wall mesh's size. A second table scores
+cells of the occupied mask), and the wall mesh's size (quads; its footprint is
+the line map itself) and whether the walls as boxes one cell thick are closed
+surfaces (every edge shared by two triangles). A second table scores
 both line extractors on the simulator office (true walls known).
 
     nice .venv/bin/python benchmarks/mapping_layers.py [MAP.yaml ...] [--points 1000000] [--repeat 5]
@@ -28,7 +30,7 @@ import numpy as np
 from slam2d.mapping.export import LOADED_LOG_ODDS, load_map_server
 from slam2d.mapping.geometric import chamfer, extract_line_map, line_scores
 from slam2d.mapping.image import read_grey
-from slam2d.mapping.mesh import wall_arrays
+from slam2d.mapping.mesh import wall_arrays, wall_mesh
 from slam2d.mapping.occupancy import OccupancyGrid
 from slam2d.mapping.quadtree import QuadTree
 from slam2d.mapping.sparse import HashedGrid, Triplets, sparsity
@@ -56,6 +58,12 @@ def timed(fn, repeat: int) -> tuple[float, object]:
     return statistics.median(times), out
 
 
+def interleaved(a, b, repeat: int):
+    """((median s, result) of ``a``, (median s, result) of ``b``), the two called alternately (fair under load)."""
+    runs = [(timed(a, 1), timed(b, 1)) for _ in range(repeat)]
+    return [(statistics.median(r[k][0] for r in runs), runs[-1][k][1]) for k in (0, 1)]
+
+
 def dense_lookup(mask: np.ndarray, grid: OccupancyGrid, xy: np.ndarray) -> np.ndarray:
     """Occupancy of points (M, 2) m by numpy indexing of the dense mask (outside: False)."""
     col = np.floor((xy[:, 0] - grid.origin[0]) / grid.resolution).astype(np.int64)
@@ -76,11 +84,11 @@ def measure(name: str, grid: OccupancyGrid, n_points: int, repeat: int, rng) -> 
     x0, x1, y0, y1 = grid.extent
     xy = rng.uniform([x0, y0], [x1, y1], (n_points, 2))
     tree.occupied(xy[:10])  # compiled before timing
-    qt_s, qt = timed(lambda: tree.occupied(xy), repeat)
-    np_s, dense = timed(lambda: dense_lookup(mask, grid, xy), repeat)
+    (qt_s, qt), (np_s, dense) = interleaved(lambda: tree.occupied(xy), lambda: dense_lookup(mask, grid, xy), repeat)
     assert np.array_equal(qt, dense)
     line_s, lines = timed(lambda: extract_line_map(mask, grid.resolution, grid.origin), 1)
     v, t = wall_arrays(lines.segments)
+    closed = wall_mesh(lines.segments, thickness=grid.resolution).is_edge_manifold(allow_boundary_edges=False)
     return dict(map=name, shape=f"{grid.shape[0]} x {grid.shape[1]}", occupied=100 * mask.mean(),
                 nonzero=100 * sparsity(grid)["nonzero_share"], dense=mask.size, coo=coo.nbytes, hashed=hashed.nbytes,
                 quadtree=len(stream), qt_share=100 * len(stream) / mask.size,
@@ -88,7 +96,7 @@ def measure(name: str, grid: OccupancyGrid, n_points: int, repeat: int, rng) -> 
                 depth=tree.depth, build_ms=1e3 * build_s, ratio=qt_s / np_s, qt_ms=1e3 * qt_s, np_ms=1e3 * np_s,
                 lines=len(lines.to_json()), line_ratio=mask.size / len(lines.to_json()), line_s=line_s,
                 polylines=len(lines.polylines), chamfer=chamfer(lines.segments, mask, grid.resolution, grid.origin),
-                mesh_v=len(v), mesh_t=len(t))
+                mesh_v=len(v), mesh_t=len(t), closed="yes" if closed else "no")
 
 
 def office_scores() -> list[str]:
@@ -120,14 +128,15 @@ def main() -> None:
     rows = [measure(n, load(p), args.points, args.repeat, rng) for n, p in zip(names, paths + list(args.maps))]
     print("| map | cells | occupied % | non-zero % | dense B | COO B | hash B | quadtree B | quadtree / dense % "
           "| nodes / 4^d % | depth | build ms | lookup 10^6 ms (quadtree / numpy) | ratio | lines JSON B "
-          "| grid / lines | polylines | Chamfer m | mesh tris | lines s |")
-    print("|" + "---|" * 20)
+          "| grid / lines | polylines | Chamfer m | mesh V / T | solid walls closed | lines s |")
+    print("|" + "---|" * 21)
     for r in rows:
         print(f"| {r['map']} | {r['shape']} | {r['occupied']:.2f} | {r['nonzero']:.1f} | {r['dense']} | {r['coo']} "
               f"| {r['hashed']} | {r['quadtree']} | {r['qt_share']:.2f} | {r['nodes']:.3f} | {r['depth']} "
               f"| {r['build_ms']:.1f} | {r['qt_ms']:.1f} / {r['np_ms']:.1f} | {r['ratio']:.2f} | {r['lines']} "
-              f"| {r['line_ratio']:.0f} | {r['polylines']} | {r['chamfer']:.3f} | {r['mesh_t']} | {r['line_s']:.2f} |")
-    print(f"| {THESIS} | 600 x 600 | 0.735 | - | 360000 | - | - | - | - | 0.26 | 10 |" + " - |" * 9)
+              f"| {r['line_ratio']:.0f} | {r['polylines']} | {r['chamfer']:.3f} | {r['mesh_v']} / {r['mesh_t']} | {r['closed']} "
+              f"| {r['line_s']:.2f} |")
+    print(f"| {THESIS} | 600 x 600 | 0.735 | - | 360000 | - | - | - | - | 0.26 | 10 |" + " - |" * 10)
     print()
     print("\n".join(office_scores()))
 

@@ -145,6 +145,15 @@ def test_quadtree_of_a_grid_round_trips_and_batches():
         QuadTree.from_bytes(b"XXXX" + tree.to_bytes()[4:])
 
 
+def test_an_empty_quadtree_has_nothing_near():
+    from slam2d.mapping.quadtree import Outcome, QuadTree
+
+    tree = QuadTree.from_mask(np.zeros((4, 4), bool), 0.5)
+    assert tree.node_count == 1 and tree.find(1.0, 1.0) == Outcome.FREE and not tree[0, 0]
+    tree.insert(1.0, 1.0)
+    assert tree.find(1.0, 1.0) == Outcome.OCCUPIED and tree.delete(1.0, 1.0) and tree.node_count == 1
+
+
 def test_quadtree_figure_draws(tmp_path):
     from slam2d.mapping.quadtree import draw_tree
 

@@ -283,9 +283,7 @@ def _build(ix: np.ndarray, iy: np.ndarray, depth: int) -> np.ndarray:
 
 @njit(cache=True, inline="always")
 def _descend(ix, iy, depth, children):
-    """Outcome code of lattice cell (ix, iy) inside the root."""
-    if children[0, 0] < 0 and children[0, 1] < 0 and children[0, 2] < 0 and children[0, 3] < 0:
-        return 0  # an empty tree: nothing near
+    """Outcome code of lattice cell (ix, iy) inside the root of a tree that is not empty."""
     node = 0
     for level in range(depth):
         s = depth - 1 - level
@@ -300,18 +298,20 @@ def _descend(ix, iy, depth, children):
 @njit(cache=True, nogil=True)
 def _find_points(xy, x0, y0, cell, depth, children, out):
     n = 2**depth
+    empty = children[0, 0] < 0 and children[0, 1] < 0 and children[0, 2] < 0 and children[0, 3] < 0
     for i in range(len(xy)):
         fx, fy = (xy[i, 0] - x0) / cell, (xy[i, 1] - y0) / cell
-        if fx >= 0 and fy >= 0 and fx < n and fy < n:  # NaN fails too
-            out[i] = _descend(int(fx), int(fy), depth, children)
-        else:
+        if not (fx >= 0 and fy >= 0 and fx < n and fy < n):  # NaN fails too
             out[i] = -1
+        else:
+            out[i] = 0 if empty else _descend(int(fx), int(fy), depth, children)
 
 
 @njit(cache=True, nogil=True)
 def _find_cells(ix, iy, depth, children, out):
+    empty = children[0, 0] < 0 and children[0, 1] < 0 and children[0, 2] < 0 and children[0, 3] < 0
     for i in range(len(ix)):
-        out[i] = _descend(ix[i], iy[i], depth, children)
+        out[i] = 0 if empty else _descend(ix[i], iy[i], depth, children)
 
 
 def draw_tree(tree: QuadTree, path, levels: int = 6, title: str | None = None) -> Path:
