@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from slam2d.mapping.export import LOADED_LOG_ODDS, load_map_server
+from slam2d.mapping.export import LOADED_LOG_ODDS
 from slam2d.mapping.geometric import chamfer, extract_line_map, line_scores
-from slam2d.mapping.image import read_grey
+from slam2d.mapping.layers import load_grid
 from slam2d.mapping.mesh import wall_arrays, wall_mesh
 from slam2d.mapping.occupancy import OccupancyGrid
 from slam2d.mapping.quadtree import QuadTree
@@ -37,15 +37,6 @@ from slam2d.mapping.sparse import HashedGrid, Triplets, sparsity
 
 ROOMS = Path("/work/shared/datasets/rooms")
 THESIS = "thesis (600 x 600 / depth 10)"
-
-
-def load(path: Path) -> OccupancyGrid:
-    """A map_server YAML, or a floor-plan PNG as log-odds (occupied +, free -, grey unknown 0), rows y-up."""
-    if path.suffix in (".yaml", ".yml"):
-        return load_map_server(path)
-    grey = read_grey(path)[::-1]
-    lo = np.where(grey < 128, LOADED_LOG_ODDS, np.where(grey >= 250, -LOADED_LOG_ODDS, 0.0))
-    return OccupancyGrid(lo.astype(np.float32), 0.05, (0.0, 0.0))
 
 
 def timed(fn, repeat: int) -> tuple[float, object]:
@@ -125,7 +116,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     paths = [p for p in sorted(ROOMS.glob("*.png")) if not p.stem.endswith(("_furnitures", "_gt_segmentation"))]
     names = [p.stem for p in paths] + [f"{p.parent.name}/{p.name}" for p in args.maps]
-    rows = [measure(n, load(p), args.points, args.repeat, rng) for n, p in zip(names, paths + list(args.maps))]
+    rows = [measure(n, load_grid(p), args.points, args.repeat, rng) for n, p in zip(names, paths + list(args.maps))]
     print("| map | cells | occupied % | non-zero % | dense B | COO B | hash B | quadtree B | quadtree / dense % "
           "| nodes / 4^d % | depth | build ms | lookup 10^6 ms (quadtree / numpy) | ratio | lines JSON B "
           "| grid / lines | polylines | Chamfer m | mesh V / T | solid walls closed | lines s |")

@@ -191,7 +191,7 @@ class _NoPath(Exception):
 
 @app.command("map")
 def map_layers(
-    map_path: Path = typer.Argument(..., help="map.yaml (map_server) of an existing map"),
+    map_path: Path = typer.Argument(..., help="map.yaml (map_server), or a floor-plan image (0.05 m/px)"),
     layers: str = typer.Option("sparse,quadtree,lines,mesh", help="comma-separated: sparse, quadtree, lines, mesh"),
     wall_height: Optional[float] = typer.Option(None, help="wall height of the mesh, m (default 2.5)"),
     root: Path = typer.Option(Path("results"), "--out", "-o", help="results folders are created under this"),
@@ -206,10 +206,9 @@ def map_layers(
             chosen = _layer_names(layers)
             if wall_height is not None and not wall_height > 0:
                 raise InputError("--wall-height", f"must be > 0 m, got {wall_height}")
-            from slam2d.mapping.export import load_map_server
-            from slam2d.mapping.layers import write_layers
+            from slam2d.mapping.layers import load_grid, write_layers
 
-            grid = load_map_server(map_path)
+            grid = load_grid(map_path)
             with results_folder(root, f"map-{map_path.stem}", "--out") as (work, published):
                 stats = write_layers(grid, chosen, work, wall_height=wall_height)
         except InputError as err:

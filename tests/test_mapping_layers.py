@@ -309,3 +309,25 @@ def test_chamfer_of_a_wall_and_its_line():
     line = [[[0.275, 0.525], [1.725, 0.525]]]
     assert chamfer(line, occ, 0.05) < 0.01  # samples every half cell between cell centres
     assert chamfer([[[0.275, 0.575], [1.725, 0.575]]], occ, 0.05) == pytest.approx(0.05, abs=0.01)
+
+
+def test_map_command_takes_a_floor_plan_image(tmp_path):
+    from PIL import Image
+    from typer.testing import CliRunner
+
+    from slam2d.cli import app
+    from slam2d.mapping.layers import load_grid
+    from slam2d.mapping.quadtree import QuadTree
+
+    img = np.full((40, 60), 255, np.uint8)
+    img[5, 5:55] = img[35, 5:55] = 0  # two walls; image row 0 is the top
+    img[10:20, 10:20] = 205  # unknown
+    Image.fromarray(img).save(tmp_path / "plan.png")
+    grid = load_grid(tmp_path / "plan.png")
+    assert grid.resolution == 0.05 and np.array_equal(grid.occupied_mask(), img[::-1] == 0)
+    assert np.count_nonzero(grid.log_odds == 0) == 100
+    out = CliRunner().invoke(app, ["map", str(tmp_path / "plan.png"), "--layers", "quadtree,lines", "-o",
+                                   str(tmp_path / "r"), "--quiet"])
+    assert out.exit_code == 0, out.output
+    made = next((tmp_path / "r").glob("map-plan-*"))
+    assert np.array_equal(QuadTree.load(made / "map.quadtree").to_mask(), img[::-1] == 0)

@@ -18,10 +18,24 @@ import numpy as np
 from slam2d.config import MappingConfig
 from slam2d.mapping.occupancy import OccupancyGrid
 
-__all__ = ["LAYERS", "write_layers"]
+__all__ = ["LAYERS", "write_layers", "load_grid"]
 
 LAYERS = get_args(get_args(MappingConfig.model_fields["layers"].annotation)[0])
 """Layer names of ``mapping.layers`` (declared by the config)."""
+
+
+def load_grid(path, resolution: float = 0.05) -> OccupancyGrid:
+    """A map_server YAML, or a floor-plan image at ``resolution`` m/px (origin its lower-left corner): pixels
+    darker than 128 occupied, 250 and lighter free, the rest unknown."""
+    from slam2d.mapping.export import LOADED_LOG_ODDS, load_map_server
+    from slam2d.mapping.image import read_grey
+
+    path = Path(path)
+    if path.suffix.lower() in (".yaml", ".yml"):
+        return load_map_server(path)
+    grey = read_grey(path)[::-1]  # rows up in y
+    lo = np.where(grey < 128, LOADED_LOG_ODDS, np.where(grey >= 250, -LOADED_LOG_ODDS, 0.0))
+    return OccupancyGrid(lo.astype(np.float32), resolution, (0.0, 0.0))
 
 
 def write_layers(grid: OccupancyGrid, layers, folder, occupied_thresh: float = 0.65, figures: bool = True,
