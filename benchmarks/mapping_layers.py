@@ -4,7 +4,8 @@ For each map (the ten floor plans of the rooms benchmark, 0.05 m/px, dark
 pixels < 128 occupied, white >= 250 free; plus any map.yaml given) the
 occupied cells are stored four ways, each lossless (checked): dense uint8
 (1 B a cell), COO triplets (row, col int32 + float32 value), a hash table
-(CPython dict) and the quadtree's breadth-first stream. Also: the non-zero
+(CPython dict) and the quadtree's breadth-first stream; the whole trinary map
+(free / occupied / unknown) as a region quadtree with uniform children pruned. Also: the non-zero
 share of the full log-odds grid (the thesis's < 5 % rule), the quadtree's
 build time and node share of its 4^depth lattice, batched occupancy lookups of
 10^6 uniform random points in the map's extent by the quadtree vs dense numpy
@@ -32,7 +33,7 @@ from slam2d.mapping.geometric import chamfer, extract_line_map, line_scores
 from slam2d.mapping.layers import load_grid
 from slam2d.mapping.mesh import wall_arrays, wall_mesh
 from slam2d.mapping.occupancy import OccupancyGrid
-from slam2d.mapping.quadtree import QuadTree
+from slam2d.mapping.quadtree import QuadTree, decode_trinary, encode_trinary, trinary_values
 from slam2d.mapping.sparse import HashedGrid, Triplets, sparsity
 
 ROOMS = Path("/work/shared/datasets/rooms")
@@ -72,6 +73,9 @@ def measure(name: str, grid: OccupancyGrid, n_points: int, repeat: int, rng) -> 
     build_s, tree = timed(lambda: QuadTree.from_mask(mask, grid.resolution, grid.origin), 3)
     stream = tree.to_bytes()
     assert np.array_equal(QuadTree.from_bytes(stream).to_mask(), mask)
+    classes = trinary_values(grid)
+    trinary = encode_trinary(classes)
+    assert np.array_equal(decode_trinary(trinary), classes)
     x0, x1, y0, y1 = grid.extent
     xy = rng.uniform([x0, y0], [x1, y1], (n_points, 2))
     tree.occupied(xy[:10])  # compiled before timing
@@ -82,7 +86,7 @@ def measure(name: str, grid: OccupancyGrid, n_points: int, repeat: int, rng) -> 
     closed = wall_mesh(lines.segments, thickness=grid.resolution).is_edge_manifold(allow_boundary_edges=False)
     return dict(map=name, shape=f"{grid.shape[0]} x {grid.shape[1]}", occupied=100 * mask.mean(),
                 nonzero=100 * sparsity(grid)["nonzero_share"], dense=mask.size, coo=coo.nbytes, hashed=hashed.nbytes,
-                quadtree=len(stream), qt_share=100 * len(stream) / mask.size,
+                quadtree=len(stream), qt_share=100 * len(stream) / mask.size, trinary=100 * len(trinary) / mask.size,
                 nodes=100 * tree.node_count / 4.0**tree.depth,
                 depth=tree.depth, build_ms=1e3 * build_s, ratio=qt_s / np_s, qt_ms=1e3 * qt_s, np_ms=1e3 * np_s,
                 lines=len(lines.to_json()), line_ratio=mask.size / len(lines.to_json()), line_s=line_s,
@@ -117,17 +121,21 @@ def main() -> None:
     paths = [p for p in sorted(ROOMS.glob("*.png")) if not p.stem.endswith(("_furnitures", "_gt_segmentation"))]
     names = [p.stem for p in paths] + [f"{p.parent.name}/{p.name}" for p in args.maps]
     rows = [measure(n, load_grid(p), args.points, args.repeat, rng) for n, p in zip(names, paths + list(args.maps))]
-    print("| map | cells | occupied % | non-zero % | dense B | COO B | hash B | quadtree B | quadtree / dense % "
-          "| nodes / 4^d % | depth | build ms | lookup 10^6 ms (quadtree / numpy) | ratio | lines JSON B "
-          "| grid / lines | polylines | Chamfer m | mesh V / T | solid walls closed | lines s |")
-    print("|" + "---|" * 21)
+    columns = ["map", "cells", "occupied %", "non-zero %", "dense B", "COO B", "hash B", "quadtree B",
+               "quadtree / dense %", "trinary quadtree / dense %", "nodes / 4^d %", "depth", "build ms",
+               "lookup 10^6 ms (quadtree / numpy)", "ratio", "lines JSON B", "grid / lines", "polylines", "Chamfer m",
+               "mesh V / T", "solid walls closed", "lines s"]
+    print("| " + " | ".join(columns) + " |")
+    print("|" + "---|" * len(columns))
     for r in rows:
-        print(f"| {r['map']} | {r['shape']} | {r['occupied']:.2f} | {r['nonzero']:.1f} | {r['dense']} | {r['coo']} "
-              f"| {r['hashed']} | {r['quadtree']} | {r['qt_share']:.2f} | {r['nodes']:.3f} | {r['depth']} "
-              f"| {r['build_ms']:.1f} | {r['qt_ms']:.1f} / {r['np_ms']:.1f} | {r['ratio']:.2f} | {r['lines']} "
-              f"| {r['line_ratio']:.0f} | {r['polylines']} | {r['chamfer']:.3f} | {r['mesh_v']} / {r['mesh_t']} | {r['closed']} "
-              f"| {r['line_s']:.2f} |")
-    print(f"| {THESIS} | 600 x 600 | 0.735 | - | 360000 | - | - | - | - | 0.26 | 10 |" + " - |" * 10)
+        cells = [r["map"], r["shape"], f"{r['occupied']:.2f}", f"{r['nonzero']:.1f}", r["dense"], r["coo"], r["hashed"],
+                 r["quadtree"], f"{r['qt_share']:.2f}", f"{r['trinary']:.2f}", f"{r['nodes']:.3f}", r["depth"],
+                 f"{r['build_ms']:.1f}", f"{r['qt_ms']:.1f} / {r['np_ms']:.1f}", f"{r['ratio']:.2f}", r["lines"],
+                 f"{r['line_ratio']:.0f}", r["polylines"], f"{r['chamfer']:.3f}", f"{r['mesh_v']} / {r['mesh_t']}",
+                 r["closed"], f"{r['line_s']:.2f}"]
+        print("| " + " | ".join(map(str, cells)) + " |")
+    thesis = [THESIS, "600 x 600", "0.735", "-", "360000"] + ["-"] * 5 + ["0.26", "10"] + ["-"] * 10
+    print("| " + " | ".join(thesis) + " |")
     print()
     print("\n".join(office_scores()))
 

@@ -206,11 +206,12 @@ def map_layers(
             chosen = _layer_names(layers)
             if wall_height is not None and not wall_height > 0:
                 raise InputError("--wall-height", f"must be > 0 m, got {wall_height}")
+            from slam2d.config import MappingConfig
             from slam2d.mapping.layers import load_grid, write_layers
 
             grid = load_grid(map_path)
             with results_folder(root, f"map-{map_path.stem}", "--out") as (work, published):
-                stats = write_layers(grid, chosen, work, wall_height=wall_height)
+                stats = write_layers(grid, work, MappingConfig(layers=chosen), wall_height=wall_height)
         except InputError as err:
             _fail(err)
     typer.echo(" ".join(f"{k}={v['bytes']}B" for k, v in stats.items() if "bytes" in v))

@@ -182,7 +182,7 @@ def _write_outputs(cfg: ExperimentConfig, result, out: Path) -> None:
     if set(cfg.mapping.layers) - {"grid"}:
         from slam2d.mapping.layers import write_layers
 
-        write_layers(grid, cfg.mapping.layers, out, cfg.mapping.occupied_thresh, cfg.output.figures)
+        write_layers(grid, out, cfg.mapping, cfg.output.figures)
     if cfg.output.figures:
         trajectories = {"estimate": result.poses, "odometry": result.odometry}
         if result.ground_truth is not None:

@@ -154,6 +154,25 @@ def test_an_empty_quadtree_has_nothing_near():
     assert tree.find(1.0, 1.0) == Outcome.OCCUPIED and tree.delete(1.0, 1.0) and tree.node_count == 1
 
 
+def test_trinary_quadtree_round_trips_and_prunes_uniform_children():
+    from slam2d.mapping.quadtree import _TRI_HEADER, decode_trinary, encode_trinary, trinary_values
+
+    rng = np.random.default_rng(5)
+    for shape in [(1, 1), (3, 5), (17, 9), (64, 64)]:
+        v = rng.integers(0, 3, shape).astype(np.uint8)
+        assert np.array_equal(decode_trinary(encode_trinary(v)), v)
+    assert len(encode_trinary(np.zeros((64, 64), np.uint8))) == _TRI_HEADER.size + 1  # one leaf: the root
+    v = np.full((64, 64), 2, np.uint8)
+    v[:32, 32:] = 0  # one free quadrant (lower right), the rest unknown
+    assert len(encode_trinary(v)) == _TRI_HEADER.size + 2  # the root (mixed) and its four children
+    v[40, 3] = 1
+    assert np.array_equal(decode_trinary(encode_trinary(v)), v)
+    assert np.array_equal(trinary_values(_grid()), np.where(_grid().occupied_mask(), 1,
+                                                            np.where(_grid().free_mask(), 0, 2)))
+    with pytest.raises(ValueError):
+        encode_trinary(np.full((2, 2), 3, np.uint8))
+
+
 def test_quadtree_figure_draws(tmp_path):
     from slam2d.mapping.quadtree import draw_tree
 
@@ -280,7 +299,8 @@ def test_run_writes_the_chosen_layers_and_map_makes_them_again(tmp_path):
     cfg = config.load(None, ["dataset.max_scans=40", "mapping.resolution=0.1", f"output.root={tmp_path / 'r'}",
                              "mapping.layers=[grid,sparse,quadtree,lines,mesh]"])
     folder = run_experiment(cfg, quiet=True)
-    for name in ("map.pgm", "map_sparse.npz", "map.quadtree", "quadtree.png", "lines.json", "lines.svg",
+    for name in ("map.pgm", "map_sparse.npz", "map.quadtree", "map_trinary.quadtree", "quadtree.png", "lines.json",
+                 "lines.svg",
                  "walls.ply", "walls.png", "layers.json"):
         assert (folder / name).is_file(), name
     stats = json.loads((folder / "layers.json").read_text())
@@ -289,6 +309,9 @@ def test_run_writes_the_chosen_layers_and_map_makes_them_again(tmp_path):
 
     grid = load_map_server(folder / "map.yaml")
     assert np.array_equal(QuadTree.load(folder / "map.quadtree").to_mask(), grid.occupied_mask())
+    from slam2d.mapping.quadtree import decode_trinary, trinary_values
+
+    assert np.array_equal(decode_trinary((folder / "map_trinary.quadtree").read_bytes()), trinary_values(grid))
 
     runner = CliRunner()
     out = runner.invoke(app, ["map", str(folder / "map.yaml"), "--layers", "quadtree,lines", "-o", str(tmp_path / "m"),

@@ -2,7 +2,8 @@
 
 ``grid`` is ``map.pgm`` + ``map.yaml`` (written by the caller, always);
 ``sparse`` ``map_sparse.npz`` (the COO table); ``quadtree`` ``map.quadtree``
-(+ ``quadtree.png``, the first six levels); ``lines`` ``lines.json`` +
+(occupied cells; + ``quadtree.png``, the first six levels) and
+``map_trinary.quadtree`` (free / occupied / unknown, uniform children pruned); ``lines`` ``lines.json`` +
 ``lines.svg`` (+ ``lines.png``); ``mesh`` ``walls.ply`` + ``walls.png``.
 Sizes and counts go to ``layers.json``.
 """
@@ -38,19 +39,21 @@ def load_grid(path, resolution: float = 0.05) -> OccupancyGrid:
     return OccupancyGrid(lo.astype(np.float32), resolution, (0.0, 0.0))
 
 
-def write_layers(grid: OccupancyGrid, layers, folder, occupied_thresh: float = 0.65, figures: bool = True,
+def write_layers(grid: OccupancyGrid, folder, cfg: MappingConfig, figures: bool = True,
                  wall_height: float | None = None) -> dict:
-    """Write the chosen ``layers`` of ``grid`` into ``folder``; returns (and writes to ``layers.json``) their
-    sizes in bytes and counts. ``wall_height`` m defaults to :data:`slam2d.mapping.mesh.WALL_HEIGHT`."""
-    folder = Path(folder)
-    occupied = grid.occupied_mask(occupied_thresh)
+    """Write the layers ``cfg.layers`` of ``grid`` (classified by ``cfg``'s thresholds) into ``folder``; returns
+    (and writes to ``layers.json``) their sizes in bytes and counts. ``wall_height`` m defaults to
+    :data:`slam2d.mapping.mesh.WALL_HEIGHT`."""
+    folder, layers = Path(folder), cfg.layers
+    occupied = grid.occupied_mask(cfg.occupied_thresh)
     stats: dict = {"grid": {"shape": list(grid.shape), "resolution": grid.resolution,
                             "dense_uint8_bytes": int(grid.log_odds.size),
                             "occupied_share": float(occupied.mean()) if occupied.size else 0.0}}
     if "sparse" in layers:
-        stats["sparse"] = _sparse(grid, folder, occupied_thresh)
+        stats["sparse"] = _sparse(grid, folder, cfg.occupied_thresh)
     if "quadtree" in layers:
         stats["quadtree"] = _quadtree(grid, occupied, folder, figures)
+        stats["quadtree"]["trinary_bytes"] = _trinary(grid, folder, cfg)
     if "lines" in layers or "mesh" in layers:
         from slam2d.mapping.geometric import extract_line_map
 
@@ -81,6 +84,14 @@ def _quadtree(grid: OccupancyGrid, occupied: np.ndarray, folder: Path, figures: 
         draw_tree(tree, folder / "quadtree.png")
     return {"file": "map.quadtree", "bytes": size, "nodes": tree.node_count, "depth": tree.depth,
             "node_share": tree.node_count / 4.0**tree.depth}
+
+
+def _trinary(grid: OccupancyGrid, folder: Path, cfg: MappingConfig) -> int:
+    from slam2d.mapping.quadtree import encode_trinary, trinary_values
+
+    data = encode_trinary(trinary_values(grid, cfg.occupied_thresh, cfg.free_thresh))
+    (folder / "map_trinary.quadtree").write_bytes(data)
+    return len(data)
 
 
 def _lines(lines, grid: OccupancyGrid, folder: Path, figures: bool) -> dict:

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-__all__ = ["Outcome", "QuadTree", "draw_tree", "GROWTH"]
+__all__ = ["Outcome", "QuadTree", "draw_tree", "GROWTH", "encode_trinary", "decode_trinary", "trinary_values"]
 
 GROWTH = 3.0
 """Root side / side of the points' extent: the thesis's extent + 200 %."""
@@ -312,6 +312,67 @@ def _find_cells(ix, iy, depth, children, out):
     empty = children[0, 0] < 0 and children[0, 1] < 0 and children[0, 2] < 0 and children[0, 3] < 0
     for i in range(len(ix)):
         out[i] = 0 if empty else _descend(ix[i], iy[i], depth, children)
+
+
+# --------------------------------------------------------------------------- free / occupied / unknown
+
+_TRI_MAGIC = b"QT3\x00"
+_TRI_HEADER = struct.Struct("<4sB2i")  # magic, depth, H, W
+MIXED = 3
+"""Code of a node whose cells differ (it has four children); 0 free, 1 occupied, 2 unknown are uniform leaves."""
+
+
+def encode_trinary(values) -> bytes:
+    """A region quadtree of a trinary map ``values`` (H, W) uint8 in {0 free, 1 occupied, 2 unknown}, uniform
+    children pruned (as OctoMap does in 3D), as a breadth-first stream of 2-bit node codes (4 a byte)."""
+    values = np.asarray(values, np.uint8)
+    if values.size and values.max() > 2:
+        raise ValueError("trinary values must be 0 (free), 1 (occupied) or 2 (unknown)")
+    h, w = values.shape
+    depth = max(0, math.ceil(math.log2(max(h, w, 1))))
+    levels = [np.full((2**depth, 2**depth), 2, np.uint8)]
+    levels[0][:h, :w] = values
+    for _ in range(depth):  # bottom-up: a 2 x 2 block of one uniform value becomes its parent's value
+        a = levels[0]
+        q = [a[1::2, 1::2], a[1::2, 0::2], a[0::2, 0::2], a[0::2, 1::2]]  # UR, UL, LL, LR
+        same = (q[0] == q[1]) & (q[0] == q[2]) & (q[0] == q[3]) & (q[0] != MIXED)
+        levels.insert(0, np.where(same, q[0], MIXED).astype(np.uint8))
+    codes, ry, rx = [levels[0].ravel()], np.zeros(1, np.int64), np.zeros(1, np.int64)
+    for level in range(depth):  # top-down: the four children of every mixed node, in order
+        mixed = levels[level][ry, rx] == MIXED
+        ry = (2 * ry[mixed, None] + _BY).ravel()
+        rx = (2 * rx[mixed, None] + _BX).ravel()
+        codes.append(levels[level + 1][ry, rx])
+    c = np.concatenate(codes)
+    c = np.append(c, np.zeros(-len(c) % 4, np.uint8))
+    packed = c[0::4] | (c[1::4] << 2) | (c[2::4] << 4) | (c[3::4] << 6)
+    return _TRI_HEADER.pack(_TRI_MAGIC, depth, h, w) + packed.tobytes()
+
+
+def decode_trinary(data: bytes) -> np.ndarray:
+    """The trinary map (H, W) uint8 that :func:`encode_trinary` wrote."""
+    magic, depth, h, w = _TRI_HEADER.unpack_from(data)
+    if magic != _TRI_MAGIC:
+        raise ValueError("not a slam2d trinary quadtree (bad magic)")
+    packed = np.frombuffer(data, np.uint8, offset=_TRI_HEADER.size)
+    codes = np.column_stack([(packed >> s) & 3 for s in (0, 2, 4, 6)]).ravel()
+    grid, ry, rx, start = codes[:1].reshape(1, 1), np.zeros(1, np.int64), np.zeros(1, np.int64), 1
+    for _ in range(depth):  # each level: the parent's values doubled, then the mixed nodes' children read
+        mixed = grid[ry, rx] == MIXED
+        ry = (2 * ry[mixed, None] + _BY).ravel()
+        rx = (2 * rx[mixed, None] + _BX).ravel()
+        grid = np.repeat(np.repeat(grid, 2, axis=0), 2, axis=1)
+        grid[ry, rx] = codes[start : start + len(ry)]
+        start += len(ry)
+    return grid[:h, :w].copy()
+
+
+def trinary_values(grid, occupied_thresh: float = 0.65, free_thresh: float = 0.196) -> np.ndarray:
+    """Trinary codes (H, W) uint8 of an occupancy grid: 1 occupied, 0 free, 2 unknown (map_server's classes)."""
+    values = np.full(grid.shape, 2, np.uint8)
+    values[grid.free_mask(free_thresh)] = 0
+    values[grid.occupied_mask(occupied_thresh)] = 1
+    return values
 
 
 def draw_tree(tree: QuadTree, path, levels: int = 6, title: str | None = None) -> Path:
