@@ -42,7 +42,7 @@ def load_grid(path, resolution: float = 0.05) -> OccupancyGrid:
 def write_layers(grid: OccupancyGrid, folder, cfg: MappingConfig, figures: bool = True,
                  wall_height: float | None = None) -> dict:
     """Write the layers ``cfg.layers`` of ``grid`` (classified by ``cfg``'s thresholds) into ``folder``; returns
-    (and writes to ``layers.json``) their sizes in bytes and counts. ``wall_height`` m defaults to
+    (and writes to ``layers.json``) their file sizes (``bytes``) and counts. ``wall_height`` m defaults to
     :data:`slam2d.mapping.mesh.WALL_HEIGHT`."""
     folder, layers = Path(folder), cfg.layers
     occupied = grid.occupied_mask(cfg.occupied_thresh)
@@ -72,7 +72,8 @@ def _sparse(grid: OccupancyGrid, folder: Path, occupied_thresh: float) -> dict:
     t = Triplets.from_grid(grid)
     np.savez_compressed(folder / "map_sparse.npz", rows=t.rows, cols=t.cols, values=t.values,
                         shape=np.array(t.shape), resolution=t.resolution, origin=np.array(t.origin))
-    return {"file": "map_sparse.npz", "triplets": len(t), "bytes": t.nbytes, **sparsity(grid, occupied_thresh)}
+    return {"file": "map_sparse.npz", "triplets": len(t), "bytes": (folder / "map_sparse.npz").stat().st_size,
+            "table_bytes": t.nbytes, **sparsity(grid, occupied_thresh)}
 
 
 def _quadtree(grid: OccupancyGrid, occupied: np.ndarray, folder: Path, figures: bool) -> dict:
