@@ -101,6 +101,7 @@ def render_mesh(mesh, path, title: str | None = None, max_triangles: int = 20000
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_zlim(0, max(hi[2], 1e-3))
+    ax.set_zticks([0.0, hi[2]])  # the wall height; more ticks crowd a flat box
     ax.set_box_aspect((hi[0] - lo[0], hi[1] - lo[1], max(hi[2] - lo[2], 1e-3)))
     ax.view_init(elev=60, azim=-70)
     ax.set_xlabel("x (m)")
