@@ -110,3 +110,29 @@ def test_outlier_kinds_are_seeded_and_grouped():
     assert np.all(np.abs(local.j[-20:] - local.i[-20:]) <= 10)
     with pytest.raises(InputError, match="unknown kind"):
         inject_outliers(clean, 5, "clustered")
+
+
+def test_optimize_command_writes_results_folder(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from slam2d.cli import app
+    from slam2d.datasets.g2o import write_g2o
+
+    write_g2o(tmp_path / "laps.g2o", lap_graph(laps(), noise=1.0, seed=7))
+    out = tmp_path / "results"
+    ref = CliRunner().invoke(app, ["optimize", "-q", str(tmp_path / "laps.g2o"), "--out", str(out / "ref")])
+    assert ref.exit_code == 0, ref.output
+    (ref_graph,) = (out / "ref").glob("*/graph.g2o")
+    res = CliRunner().invoke(app, ["optimize", "-q", str(tmp_path / "laps.g2o"), "--robust", "dcs", "--outliers", "8",
+                                   "--outlier-kind", "local", "--seed", "2", "--reference", str(ref_graph),
+                                   "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    (folder,) = out.glob("optimize-laps-*")
+    assert {p.name for p in folder.iterdir()} >= {"config.yaml", "graph.g2o", "edges.csv", "overlay.png", "metrics.json"}
+    metrics = json.loads((folder / "metrics.json").read_text())
+    assert metrics["init"] == "spanning_tree" and metrics["outliers_rejected"] == 8
+    assert metrics["rmse_to_reference"] < 0.05
+    bad = CliRunner().invoke(app, ["optimize", "-q", str(tmp_path / "laps.g2o"), "--init", "lago", "--out", str(out)])
+    assert bad.exit_code == 2 and "unknown initialisation" in bad.output

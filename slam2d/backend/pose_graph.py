@@ -420,7 +420,8 @@ class BatchResult:
     """Result of a batch optimisation: poses (N, 3) in the graph's vertex order,
     errors (0.5 * sum of squared whitened residuals, robust kernel applied) at the
     file's poses (``initial_error``), at the start (``start_error``) and at the end,
-    LM iterations, wall time (s) of the optimisation, the start's name; ``verified``
+    LM iterations (-1 under GNC, whose count GTSAM does not expose), wall time (s) of
+    the optimisation (the start excluded), the start's name; ``verified``
     when a second start reached the same error (None: not checked); ``inlier`` (M,)
     bool per edge (odometry always; a loop when its GNC weight is >= 0.5, else when its
     whitened squared residual is within the chi-square 99 % gate)."""
