@@ -411,7 +411,8 @@ class PoseGraph:
 
 
 G2O_INIT = "chordal"  # batch start without outliers: reaches the best-known minimum on every benchmark graph
-G2O_ROBUST_INIT = "spanning_tree"  # batch start under a robust method: false loops do not bend odometry
+G2O_ROBUST_INITS = ("spanning_tree", "chordal")  # under a robust method both run, the lower robust cost kept:
+# false loops do not bend odometry, and a graph whose odometry start is poor (MIT) needs the chordal one
 VERIFY_REL = 1e-6  # relative error difference under which two optima agree
 
 
@@ -518,13 +519,39 @@ def _classify(graph: g2o.PoseGraphFile, poses, weights) -> np.ndarray:
     return keep | g2o.odometry_mask(graph)
 
 
-def _second_starts(graph: g2o.PoseGraphFile, init: str):
-    """Starts independent of ``init`` for verification: (name, poses) pairs."""
+@dataclass(frozen=True)
+class _Run:
+    """One optimisation from one start."""
+
+    init: str
+    start: np.ndarray
+    values: object
+    iterations: int
+    seconds: float
+    weights: np.ndarray | None
+    cost: float
+
+
+def _robust_cost(graph: g2o.PoseGraphFile, fg, values, weights) -> float:
+    """Error of ``fg`` at ``values``; under GNC (``weights`` given) each loop's error truncated at
+    GTSAM's inlier threshold (0.5 * CHI2_3DOF_99), the truncated-least-squares cost."""
+    if weights is None:
+        return float(fg.error(values))
+    e = np.array([fg.at(k).error(values) for k in range(fg.size())])
+    return float(np.sum(np.where(g2o.odometry_mask(graph), e, np.minimum(e, 0.5 * CHI2_3DOF_99))))
+
+
+def _run(graph: g2o.PoseGraphFile, fg, name: str, loss: str | None) -> _Run:
+    """Optimise from the start ``name`` ("chordal_isotropic": chordal with unit weights)."""
     from slam2d.backend import initialization as ini
 
-    other = "chordal" if init == "spanning_tree" else "spanning_tree"
-    yield other, ini.initial_poses(graph, other)
-    yield "chordal_isotropic", ini.chordal(graph, weighted=False)
+    start = ini.chordal(graph, weighted=False) if name == "chordal_isotropic" else ini.initial_poses(graph, name)
+    values, iters, seconds, weights = _optimize_from(graph, fg, start, loss)
+    return _Run(name, start, values, iters, seconds, weights, _robust_cost(graph, fg, values, weights))
+
+
+def _agree(a: float, b: float) -> bool:
+    return abs(a - b) <= VERIFY_REL * max(a, b, 1e-12)
 
 
 def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0,
@@ -535,37 +562,28 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     ``robust``: an M-estimator of ``robust.ROBUST_KERNELS`` on every edge (width
     ``robust_param``, whitened units) under Levenberg-Marquardt (GTSAM defaults), or
     GNC ("gnc" = TLS, "gnc_gm") with the odometry edges as known inliers. ``init``:
-    "chordal", "spanning_tree" or "file"; default ``G2O_INIT`` (``G2O_ROBUST_INIT``
-    under a robust method). ``verify``: also optimise from two other starts; the
-    result is the lowest error reached, verified if another start agrees (VERIFY_REL)."""
-    from slam2d.backend import initialization as ini
-
+    "chordal", "spanning_tree" or "file"; default ``G2O_INIT``, or under a robust method
+    each of ``G2O_ROBUST_INITS``. ``verify``: also optimise from the other starts
+    (chordal, spanning tree, isotropic chordal). Of several runs the lowest (robust) cost
+    is kept, verified when another run agrees with it (VERIFY_REL); None: one run only."""
     loss = rb.gnc_loss(robust)
     kernel = "none" if loss is not None else robust
-    init = str(init or (G2O_INIT if kernel == "none" and loss is None else G2O_ROBUST_INIT)).lower()
-    fg = _g2o_factors(graph, kernel, robust_param)
-    start = ini.initial_poses(graph, init)
-    values, iters, seconds, weights = _optimize_from(graph, fg, start, loss)
-    best = (fg.error(values), values, iters, seconds, weights)
-    verified = None
+    plain = kernel == "none" and loss is None
+    names = [str(init).lower()] if init else ([G2O_INIT] if plain else list(G2O_ROBUST_INITS))
     if verify:
-        verified = False
-        for name, other in _second_starts(graph, init):
-            res = _optimize_from(graph, fg, other, loss)
-            err = fg.error(res[0])
-            agree = abs(err - best[0]) <= VERIFY_REL * max(err, best[0], 1e-12)
-            log.info("g2o verify: from %s error %.9g (%s)", name, err, "agrees" if agree else "differs")
-            verified |= agree
-            if err < best[0] and not agree:
-                best = (err, *res)
-            if verified:
-                break
-    final, values, iters, seconds, weights = best
-    poses = _poses_in_vertex_order(values, graph.ids)
-    out = BatchResult(poses, fg.error(_g2o_values(graph.ids, graph.poses)), final, iters, seconds, init,
-                      fg.error(_g2o_values(graph.ids, start)), verified, _classify(graph, poses, weights))
+        names += [n for n in ("chordal", "spanning_tree", "chordal_isotropic") if n not in names]
+    fg = _g2o_factors(graph, kernel, robust_param)
+    runs = [_run(graph, fg, name, loss) for name in names]
+    best = min(runs, key=lambda r: r.cost)
+    verified = any(_agree(r.cost, best.cost) for r in runs if r is not best) if len(runs) > 1 else None
+    for r in runs:
+        log.info("g2o %s from %s: cost %.9g%s", robust, r.init, r.cost, " (kept)" if r is best else "")
+    poses = _poses_in_vertex_order(best.values, graph.ids)
+    out = BatchResult(poses, fg.error(_g2o_values(graph.ids, graph.poses)), float(fg.error(best.values)),
+                      best.iterations, best.seconds, best.init, fg.error(_g2o_values(graph.ids, best.start)),
+                      verified, _classify(graph, poses, best.weights))
     log.info("g2o %s from %s: error %.6g -> %.6g, %d iterations, %.3f s",
-             robust, init, out.start_error, out.final_error, out.iterations, seconds)
+             robust, best.init, out.start_error, out.final_error, out.iterations, best.seconds)
     return out
 
 
