@@ -8,7 +8,18 @@ keyframe with one iSAM2 update each, as a SLAM run would, and finished with
 ``optimize_batch``. Errors are GTSAM's: 0.5 * sum of squared whitened residuals
 over all edges (the prior excluded).
 
+Starts (``--inits``): the error reached by ``solve_g2o`` from the file's poses, the
+odometry spanning tree and the chordal initialisation against the best-known minimum,
+with the time of the start and of LM beside SE-Sync's published times.
+
+Outliers (``--outliers``): false loops injected the Vertigo way (random, local, group;
+seeded) into ``--outlier-graphs``; per robust method (from its default start, the
+odometry spanning tree) the position RMSE (m) to the outlier-free optimum, false loops
+rejected, true loops kept, precision of the rejections, the time (s, start and
+classification included) and its ratio to the outlier-free LM time ("x clean").
+
     .venv/bin/python benchmarks/posegraph_g2o.py [--data DIR] [--datasets intel MIT CSAIL M3500] [--no-replay]
+        [--no-inits] [--outliers 10 100 1000] [--outlier-graphs M3500] [--methods none huber cauchy dcs gnc]
 """
 
 from __future__ import annotations
@@ -22,12 +33,16 @@ import gtsam
 import numpy as np
 
 from slam2d import geometry
-from slam2d.backend.pose_graph import PRIOR_SIGMAS, g2o_error, replay_g2o, solve_g2o
+from slam2d.backend import initialization as ini
+from slam2d.backend.pose_graph import PRIOR_SIGMAS, g2o_error, loop_metrics, replay_g2o, solve_g2o
 from slam2d.config import BackendConfig
-from slam2d.datasets.g2o import read_g2o
+from slam2d.datasets.g2o import OUTLIER_KINDS, inject_outliers, odometry_mask, read_g2o
 
 DEFAULT_DATA = Path(os.environ.get("SLAM2D_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets"))
 DATASETS = ("intel", "MIT", "CSAIL", "M3500")
+BEST_KNOWN = {"intel": 22.502117, "CSAIL": 20.275442, "M3500": 68.957439, "MIT": 20.603474}  # GTSAM error
+SE_SYNC_S = {"intel": 0.071, "CSAIL": 0.010, "M3500": 0.080}  # published SE-Sync times (s); M3500 = manhattan
+METHODS = ("none", "huber", "cauchy", "dcs", "gnc")
 
 
 def gtsam_direct(path: Path):
@@ -51,12 +66,75 @@ def max_pose_difference(a, b) -> tuple[float, float]:
     return float(np.hypot(d[:, 0], d[:, 1]).max()), float(np.abs(geometry.wrap_angle(d[:, 2])).max())
 
 
+def starts_table(data: Path, names) -> None:
+    """Error from each start vs the best-known minimum; start and LM time vs SE-Sync."""
+    print(f"\n| graph | start | start error | final error | best known | rel. gap | iters | start s | LM s "
+          f"| total s | SE-Sync s | ratio | verified |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    ini.spanning_tree(read_g2o(data / "posegraphs" / f"{names[0]}.g2o"))  # scipy imported before timing
+    for name in names:
+        g = read_g2o(data / "posegraphs" / f"{name}.g2o")
+        for init in ("file", "spanning_tree", "chordal"):
+            t0 = time.perf_counter()
+            ini.initial_poses(g, init)
+            start_s = time.perf_counter() - t0
+            r = solve_g2o(g, init=init, verify=init == "chordal")
+            best = BEST_KNOWN.get(name, float("nan"))
+            total = start_s + r.seconds
+            sesync = SE_SYNC_S.get(name)
+            ratio = f"{total / sesync:.2f}" if sesync else "-"
+            verified = "-" if r.verified is None else ("yes" if r.verified else "no")
+            print(f"| {name} | {init} | {r.start_error:.6g} | {r.final_error:.6f} | {best} | "
+                  f"{(r.final_error - best) / best:+.1e} | {r.iterations} | {start_s:.3f} | {r.seconds:.3f} | "
+                  f"{total:.3f} | {sesync or '-'} | {ratio} | {verified} |", flush=True)
+
+
+def outlier_table(data: Path, names, counts, kinds, methods, seed: int = 1) -> None:
+    """Per graph, outlier count and kind, robust method: RMSE to the outlier-free optimum (m),
+    false loops rejected, true loops kept, time (s) and its ratio to the outlier-free solve."""
+    print(f"\n| graph | outliers | kind | method | RMSE m | false rejected | true kept | precision | time s | x clean |")
+    print("|---|---:|---|---|---:|---:|---:|---:|---:|---:|")
+    for name in names:
+        clean = read_g2o(data / "posegraphs" / f"{name}.g2o")
+        ref = solve_g2o(clean)
+        for count in counts:
+            for kind in kinds:
+                g, injected = inject_outliers(clean, count, kind, seed)
+                true_loops = ~odometry_mask(g) & ~injected
+                for method in methods:
+                    t0 = time.perf_counter()
+                    r = solve_g2o(g, robust=method)
+                    seconds = time.perf_counter() - t0
+                    m = loop_metrics(r.inlier, injected)
+                    rmse = float(np.sqrt(np.mean(np.sum((r.poses[:, :2] - ref.poses[:, :2]) ** 2, 1))))
+                    kept = np.sum(r.inlier & true_loops) / max(1, true_loops.sum())
+                    print(f"| {name} | {count} | {kind} | {method} | {rmse:.3g} | "
+                          f"{m['outliers_rejected']}/{count} ({100 * m['recall']:.1f} %) | {100 * kept:.1f} % | "
+                          f"{100 * m['precision']:.1f} % | {seconds:.2f} | {seconds / ref.seconds:.0f} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="dataset root holding posegraphs/")
     ap.add_argument("--datasets", nargs="+", default=list(DATASETS))
     ap.add_argument("--no-replay", action="store_true", help="skip the incremental iSAM2 replay")
+    ap.add_argument("--no-inits", action="store_true", help="skip the table of starts")
+    ap.add_argument("--outliers", nargs="*", type=int, default=[10, 100, 1000], help="outlier counts (none: skip)")
+    ap.add_argument("--outlier-graphs", nargs="+", default=["M3500"])
+    ap.add_argument("--outlier-kinds", nargs="+", default=list(OUTLIER_KINDS))
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), help="robust methods of solve_g2o")
+    ap.add_argument("--only-tables", action="store_true", help="skip the GTSAM / replay comparison")
     args = ap.parse_args()
+    if not args.only_tables:
+        compare(args)
+    if not args.no_inits:
+        starts_table(args.data, args.datasets)
+    if args.outliers:
+        outlier_table(args.data, args.outlier_graphs, args.outliers, args.outlier_kinds, args.methods)
+
+
+def compare(args) -> None:
+    """slam2d's reader and batch LM (file start) beside GTSAM's, and the iSAM2 replay."""
 
     header = (f"{'dataset':8} {'N':>5} {'M':>5}  {'method':22} {'initial':>12} {'final':>10} {'iters':>5} "
               f"{'read s':>7} {'opt s':>7}")
@@ -68,7 +146,7 @@ def main() -> None:
         t0 = time.perf_counter()
         g = read_g2o(path)
         ours_read_s = time.perf_counter() - t0
-        ours = solve_g2o(g)
+        ours = solve_g2o(g, init="file")
         n, m = len(g.ids), len(g.i)
         print(f"{name:8} {n:5d} {m:5d}  {'gtsam readG2o + LM':22} {e0:12.6g} {e1:10.6f} {iters:5d} "
               f"{read_s:7.3f} {opt_s:7.3f}")
