@@ -220,7 +220,8 @@ def test_unknown_cells_of_an_occupancy_map_are_free_or_blocked_as_configured(hal
 
     world, grid = hall
     log_odds = np.where(grid.free, -2.0, 2.0)
-    log_odds[:, 80:120] = 0.0  # x from 4 to 6 m never seen
+    (_, c0), (_, c1) = grid.world_to_cell([[4.0, 0.0], [6.0, 0.0]])
+    log_odds[:, c0:c1] = 0.0  # x from 4 to 6 m never seen
     occupancy = OccupancyGrid(log_odds, grid.resolution, grid.origin)
     robot = Robot(world, [1.0, 2.0, 0.0], seed=5)
     cfg = NavigatorConfig(unknown_free=unknown_free)
@@ -252,6 +253,17 @@ def test_a_map_updated_in_place_counts_as_changed(hall):
     nav = Navigator([9.0, 2.0], RobotConfig(), NavigatorConfig())
     pose = np.array([1.0, 2.0, 0.0])
     nav.step(pose, np.zeros(2), np.zeros((0, 2)), live, 0.0)
-    live.free[:60, 98:102] = False  # a wall at x = 5 from y = 0 to 3 m, drawn into the same grid
+    (r0, c0), (r1, c1) = grid.world_to_cell([[4.9, 0.0], [5.1, 3.0]])
+    live.free[r0:r1, c0:c1] = False  # a wall at x = 5 from y = 0 to 3 m, drawn into the same grid
     nav.step(pose, np.zeros(2), np.zeros((0, 2)), live, 0.1)
     assert nav.replans == 1 and (nav.path[np.abs(nav.path[:, 0] - 5.0) < 0.3, 1] > 3.0).all()
+
+
+def test_a_goal_closer_to_a_wall_than_the_margin_is_reached_and_one_without_room_is_not(hall):
+    world, grid = hall
+    robot = Robot(world, [1.0, 2.0, 0.0], seed=8)
+    result = run_navigation(world, robot, grid, [9.0, 3.77], "dwa")  # 0.23 m from the wall: radius 0.2 + 3 cm
+    assert result.success and result.collisions == 0 and result.goal_error <= 0.03
+    robot = Robot(world, [1.0, 2.0, 0.0], seed=8)
+    result = run_navigation(world, robot, grid, [9.0, 3.85], "dwa")  # 0.15 m: the robot does not fit
+    assert result.status == "unreachable" and "within the robot radius" in result.reason and result.steps == 0

@@ -53,7 +53,7 @@ class DwaConfig(Section):
     clearance_weight: float = Field(0.4, ge=0)
     velocity_weight: float = Field(0.6, ge=0)
     obstacle_speed: float = Field(0.8, ge=0, description="m/s assumed for points the map does not explain")
-    obstacle_reach: float = Field(0.5, ge=0, description="m, most such a point's margin grows along an arc")
+    obstacle_reach: float = Field(0.5, ge=0, description="m, the most such a point's margin grows along an arc")
     path_band: float = Field(0.1, ge=0, description="m from the path within which straying costs nothing")
 
 

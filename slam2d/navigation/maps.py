@@ -21,13 +21,14 @@ def world_grid(world, resolution: float = 0.05) -> PlanningGrid:
     """Planning grid (free mask) of a :class:`~slam2d.sim.World` at ``resolution`` (m/cell).
 
     A cell is blocked when a wall segment crosses it or its centre lies inside an
-    obstacle; the grid spans ``world.bounds``. A world read from a PNG keeps its
+    obstacle; the grid spans ``world.bounds`` and one cell more on every side, so
+    that walls lying on the bounds are in it. A world read from a PNG keeps its
     own cells and resolution.
     """
     if world.grid is not None:
         occ, res = world.grid
         return PlanningGrid(~np.asarray(occ, dtype=bool), res, (0.0, 0.0), world.name)
-    (x0, y0), (x1, y1) = world.bounds
+    (x0, y0), (x1, y1) = world.bounds - [[resolution], [-resolution]]  # a cell beyond: walls on the bounds
     shape = (max(1, int(np.ceil((y1 - y0) / resolution))), max(1, int(np.ceil((x1 - x0) / resolution))))
     grid = PlanningGrid(np.ones(shape, dtype=bool), resolution, (x0, y0), world.name)
     blocked = np.zeros(shape, dtype=bool)

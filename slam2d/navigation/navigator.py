@@ -53,6 +53,7 @@ ACTIVE, REACHED, UNREACHABLE, TIMEOUT = "active", "reached", "unreachable", "tim
 _SNAP = 0.5  # m, farthest a start cell inside the inflation is moved to a free one
 _AHEAD = 40  # path points searched ahead of the last nearest one
 _EXPLAINED_CELLS = 2  # a laser point this many cells from a blocked map cell is the map's
+_FINAL_GAP = 0.01  # m kept between the robot's disc and any point on the final approach
 
 
 class NavigatorConfig(Section):
@@ -140,21 +141,37 @@ class Navigator:
         radius = (self.robot.radius + self.cfg.inflation_margin) / raw.resolution
         return PlanningGrid(inflate(raw.free, radius), raw.resolution, raw.origin)
 
-    def plan(self, pose, points_world=None) -> str:
+    def plan(self, pose, points_world=None, unmapped=None) -> str:
         """Plans from ``pose`` (3,) to the goal, with ``points_world`` (P, 2) blocked if given;
-        '' on success, else why not. A failed plan with points falls back to the map alone."""
-        grid = self._grid
+        '' on success, else why not. Points flagged ``unmapped`` (P,) are first kept clear by the
+        local planner's extra reach for things that may move; failing that, by the inflation
+        only; failing that, the plan is on the map alone."""
+        tries = []
         if points_world is not None and len(points_world):
             marked = self._inflate(mark_points(self._raw, points_world))
-            if not self._plan_on(marked, pose):
+            tries.append(marked)
+            if unmapped is not None and np.any(unmapped):
+                tries.insert(0, self._keep_clear(marked, points_world[np.asarray(unmapped, dtype=bool)]))
+        for grid in tries:
+            if not self._plan_on(grid, pose):
                 return ""
-        return self._plan_on(grid, pose)
+        return self._plan_on(self._grid, pose)
+
+    def _keep_clear(self, grid: PlanningGrid, points) -> PlanningGrid:
+        """``grid`` with every cell within radius + margin + the DWA's ``obstacle_reach`` of ``points`` blocked."""
+        near = np.ones(grid.shape, dtype=bool)
+        cells = grid.world_to_cell(points)
+        cells = cells[grid.in_bounds(cells)]
+        near[cells[:, 0], cells[:, 1]] = False
+        clear = self.robot.radius + self.cfg.inflation_margin + self.cfg.dwa.obstacle_reach
+        far = ndimage.distance_transform_edt(near) * grid.resolution > clear
+        return PlanningGrid(grid.free & far, grid.resolution, grid.origin)
 
     def _plan_on(self, grid: PlanningGrid, pose) -> str:
-        goal = grid.world_to_cell(self.goal[:2])
-        if not grid.is_free(goal):
+        goal = self._goal_cell(grid)
+        if goal is None:
             return f"goal ({self.goal[0]:.2f}, {self.goal[1]:.2f}) is blocked or within the robot radius of an obstacle"
-        start = self._start_cell(grid, pose)
+        start = _nearest_free(grid, pose[:2], _SNAP)
         if start is None:
             return f"no free cell within {_SNAP} m of the robot at ({pose[0]:.2f}, {pose[1]:.2f})"
         cost = wall_cost(grid, self.cfg.wall_distance, self.cfg.wall_weight) if self.cfg.wall_weight > 0 else None
@@ -168,18 +185,17 @@ class Navigator:
         self._best = (np.inf, self._best[1])
         return ""
 
-    def _start_cell(self, grid: PlanningGrid, pose):
-        """The robot's cell, or the nearest free cell within ``_SNAP`` m of it; None if none."""
-        cell = grid.world_to_cell(pose[:2])
+    def _goal_cell(self, grid: PlanningGrid):
+        """The goal's cell, or, when only the margin is in the way (the robot's disc fits there),
+        the nearest free cell within the margin; None if the goal has no room for the robot."""
+        cell = grid.world_to_cell(self.goal[:2])
         if grid.is_free(cell):
             return cell
-        dist, (rows, cols) = ndimage.distance_transform_edt(~grid.free, return_indices=True)
-        if not grid.in_bounds(cell):
+        raw = self._raw
+        rc = raw.world_to_cell(self.goal[:2])
+        if not raw.in_bounds(rc) or raw.clearance()[rc[0], rc[1]] < self.robot.radius:
             return None
-        r, c = int(cell[0]), int(cell[1])
-        if dist[r, c] * grid.resolution > _SNAP:
-            return None
-        return np.array([rows[r, c], cols[r, c]])
+        return _nearest_free(grid, self.goal[:2], self.cfg.inflation_margin + 2 * grid.resolution)
 
     def optimal_length(self, start) -> float:
         """Length (m) of the shortest grid path from ``start`` (x, y) to the goal on the inflated map."""
@@ -212,7 +228,7 @@ class Navigator:
             return self._goal_command(pose, velocity)
         if self._manoeuvre:
             return self._manoeuvre_command(pose, points, now)
-        if (cmd := self._final_command(pose, points)) is not None:
+        if (cmd := self._final_command(pose, points, self.unmapped(pose, points))) is not None:
             return cmd
         self._track(pose)
         if np.hypot(*(pose[:2] - self.path[self._index])) > self.cfg.off_path:
@@ -287,16 +303,19 @@ class Navigator:
             return self._finish(REACHED, "goal reached")
         return Command(0.0, 0.0, False, "stop")
 
-    def _final_command(self, pose, points) -> Command | None:
-        """Within ``final_approach`` of the goal and with nothing in the way, drive straight at it:
-        turn on the spot while it is more than 0.3 rad off, then close in at the speed that stops there."""
+    def _final_command(self, pose, points, unmapped) -> Command | None:
+        """Within ``final_approach`` of the goal and with no laser point within the robot's radius
+        (+ 1 cm; + the DWA's margin and obstacle reach for ``unmapped`` points, which may move)
+        of the straight line to it, drive straight at it:
+        turn on the spot while it is more than 0.3 rad off, then close in at the speed that stops
+        there. This lets the robot reach goals closer to a wall than the local planner's margin."""
         d = float(np.hypot(*(pose[:2] - self.goal[:2])))
         if d > self.cfg.final_approach:
             return None
-        reach = self.robot.radius + self.cfg.dwa.margin + d
-        if len(points) and (np.hypot(*points.T) < reach).any():
-            return None
         goal = in_robot_frame(pose, self.goal[:2])
+        keep = self.robot.radius + _FINAL_GAP + unmapped * (self.cfg.dwa.margin + self.cfg.dwa.obstacle_reach)
+        if len(points) and (_segment_distance(points, goal) < keep).any():
+            return None
         bearing = float(np.arctan2(goal[1], goal[0]))
         w = float(np.clip(2.0 * bearing, -1.0, 1.0))
         if abs(bearing) > 0.3:
@@ -336,8 +355,9 @@ class Navigator:
                 return Command(-0.2, 0.0, False, "back off")
         elif kind == "replan":
             self._log(now, "replan", "recovery, with the laser's points in the map")
-            marked = geometry.transform_points(pose, points[np.hypot(*points.T) < self.cfg.mark_range])
-            if why := self.plan(pose, marked):
+            near = np.hypot(*points.T) < self.cfg.mark_range
+            marked = geometry.transform_points(pose, points[near])
+            if why := self.plan(pose, marked, self.unmapped(pose, points)[near]):
                 return self._finish(UNREACHABLE, why)
         elif kind == "turn":
             carrot = in_robot_frame(pose, point_along(self.path[self._index :], self.cfg.dwa.lookahead))
@@ -348,6 +368,27 @@ class Navigator:
         if self._manoeuvre:
             self._manoeuvre[0][2] = now
         return Command(0.0, 0.0, False, kind)
+
+
+def _segment_distance(points: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Distances (M,) m from points (M, 2) to the segment from the origin to ``end`` (2,)."""
+    ee = float(end @ end)
+    u = np.clip(points @ end / ee, 0.0, 1.0) if ee > 0 else np.zeros(len(points))
+    return np.hypot(*(points - u[:, None] * end).T)
+
+
+def _nearest_free(grid: PlanningGrid, xy, within: float):
+    """The cell of ``xy`` (m) if free, else the nearest free cell within ``within`` m; None if none."""
+    cell = grid.world_to_cell(xy)
+    if grid.is_free(cell):
+        return cell
+    if not grid.in_bounds(cell):
+        return None
+    dist, (rows, cols) = ndimage.distance_transform_edt(~grid.free, return_indices=True)
+    r, c = int(cell[0]), int(cell[1])
+    if dist[r, c] * grid.resolution > within:
+        return None
+    return np.array([rows[r, c], cols[r, c]])
 
 
 # --------------------------------------------------------------------------- the simulated run
