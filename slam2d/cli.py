@@ -231,8 +231,8 @@ def _layer_names(text: str) -> list[str]:
 @app.command()
 def optimize(
     graph_path: Path = typer.Argument(..., help="2D pose graph, g2o or TORO"),
-    init: Optional[str] = typer.Option(None, help="chordal, spanning_tree or file (default: chordal; under a "
-                                       "robust method both spanning_tree and chordal, the lower cost kept)"),
+    init: Optional[str] = typer.Option(None, help="chordal, spanning_tree or file (default: chordal; "
+                                       "spanning_tree under an M-estimator; both under GNC, the lower cost kept)"),
     robust: str = typer.Option("none", help="none, huber, cauchy, dcs, gnc (TLS), gnc_tls or gnc_gm"),
     robust_param: float = typer.Option(1.0, help="M-estimator width, whitened units (sigmas)"),
     outliers: int = typer.Option(0, help="false loop closures to inject before optimising"),
