@@ -68,7 +68,7 @@ def max_pose_difference(a, b) -> tuple[float, float]:
 
 def starts_table(data: Path, names) -> None:
     """Error from each start vs the best-known minimum; start and LM time vs SE-Sync."""
-    print(f"\n| graph | start | start error | final error | best known | rel. gap | iters | start s | LM s "
+    print("\n| graph | start | start error | final error | best known | rel. gap | iters | start s | LM s "
           f"| total s | SE-Sync s | ratio | verified |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     ini.spanning_tree(read_g2o(data / "posegraphs" / f"{names[0]}.g2o"))  # scipy imported before timing
@@ -92,7 +92,8 @@ def starts_table(data: Path, names) -> None:
 def outlier_table(data: Path, names, counts, kinds, methods, seed: int = 1) -> None:
     """Per graph, outlier count and kind, robust method: RMSE to the outlier-free optimum (m),
     false loops rejected, true loops kept, time (s) and its ratio to the outlier-free solve."""
-    print(f"\n| graph | outliers | kind | method | RMSE m | false rejected | true kept | precision | time s | x clean |")
+    print("\n| graph | outliers | kind | method | RMSE m | false rejected | true kept | precision | time s "
+          "| x clean |")
     print("|---|---:|---|---|---:|---:|---:|---:|---:|---:|")
     for name in names:
         clean = read_g2o(data / "posegraphs" / f"{name}.g2o")

@@ -37,7 +37,8 @@ def lap_graph(truth: np.ndarray, noise: float, seed: int = 0, start=None) -> Pos
     i = np.r_[np.arange(n - 1), np.arange(per_lap, n)]
     j = np.r_[np.arange(1, n), np.arange(per_lap, n) - per_lap]
     rng = np.random.default_rng(seed)
-    meas = geometry.compose(geometry.between(truth[i], truth[j]), rng.normal(size=(len(i), 3)) * noise / np.sqrt(np.diag(INFO)))
+    noise_xyt = rng.normal(size=(len(i), 3)) * noise / np.sqrt(np.diag(INFO))
+    meas = geometry.compose(geometry.between(truth[i], truth[j]), noise_xyt)
     poses = [truth[0]]
     for d in meas[: n - 1]:
         poses.append(geometry.compose(poses[-1], d))
@@ -130,7 +131,8 @@ def test_optimize_command_writes_results_folder(tmp_path):
                                    "--out", str(out)])
     assert res.exit_code == 0, res.output
     (folder,) = out.glob("optimize-laps-*")
-    assert {p.name for p in folder.iterdir()} >= {"config.yaml", "graph.g2o", "edges.csv", "overlay.png", "metrics.json"}
+    written = {p.name for p in folder.iterdir()}
+    assert written >= {"config.yaml", "graph.g2o", "edges.csv", "overlay.png", "metrics.json"}
     metrics = json.loads((folder / "metrics.json").read_text())
     assert metrics["init"] == "spanning_tree" and metrics["outliers_rejected"] == 8
     assert metrics["rmse_to_reference"] < 0.05

@@ -230,5 +230,6 @@ def inject_outliers(graph: PoseGraphFile, count: int, kind: str = "random", seed
     pool = loops if len(loops) else np.arange(len(graph.i))
     info = graph.information[rng.choice(pool, count)]
     out = PoseGraphFile(graph.ids, graph.poses, np.r_[graph.i, graph.ids[a]], np.r_[graph.j, graph.ids[b]],
-                        np.r_[graph.measurements, meas].reshape(-1, 3), np.r_[graph.information, info].reshape(-1, 3, 3))
+                        np.r_[graph.measurements, meas].reshape(-1, 3),
+                        np.r_[graph.information, info].reshape(-1, 3, 3))
     return out, np.r_[np.zeros(len(graph.i), bool), np.ones(count, bool)]
