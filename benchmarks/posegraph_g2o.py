@@ -69,7 +69,7 @@ def max_pose_difference(a, b) -> tuple[float, float]:
 def starts_table(data: Path, names) -> None:
     """Error from each start vs the best-known minimum; start and LM time vs SE-Sync."""
     print("\n| graph | start | start error | final error | best known | rel. gap | iters | start s | LM s "
-          f"| total s | SE-Sync s | ratio | verified |")
+          "| total s | SE-Sync s | ratio | verified |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     ini.spanning_tree(read_g2o(data / "posegraphs" / f"{names[0]}.g2o"))  # scipy imported before timing
     for name in names:
