@@ -32,6 +32,7 @@ from slam2d.sim.robot import RobotConfig
 
 __all__ = ["DwaConfig", "DynamicWindow", "arcs", "thin_points"]
 
+_SQUEEZE = 0.02  # m, closest an arc passing by may bring the robot's disc to a point within the margin
 VOXEL = 0.04  # m, laser points are thinned to one per square of this side (float32 distances)
 
 
@@ -174,10 +175,12 @@ class DynamicWindow:
     def _admissible(self, v: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Whether each arc stops before its disc touches a point, and its clearance (S,) m.
 
-        Where the robot is already within the margin, an arc is safe while it gets no closer.
+        Where the robot is already within the margin, an arc is safe while it gets no closer,
+        or, if it ends farther away than it starts (passing by), while it keeps ``_SQUEEZE``.
         """
         r, now = self.robot.radius, dist[:, 0]
-        limit = np.minimum(r + self.cfg.margin, now - 1e-4)
+        closer = np.where(dist[:, -1] >= now, np.minimum(r + _SQUEEZE, now - 1e-4), now - 1e-4)
+        limit = np.minimum(r + self.cfg.margin, closer)
         hit = dist[:, 1:] < limit[:, None]
         first = np.where(hit.any(axis=1), hit.argmax(axis=1), len(self.times))
         free_time = np.concatenate([[0.0], self.times])[first]  # last sample before the hit
