@@ -318,6 +318,27 @@ def _overlay_figure(path: Path, graph, result, reference) -> None:
     fig.savefig(path, dpi=120, bbox_inches="tight")
 
 
+@app.command()
+def navigate(
+    config: Optional[Path] = CONFIG_ARG,
+    goal: Optional[str] = typer.Option(None, help="x,y[,heading] in m (rad); overrides navigation.goal"),
+    set_: list[str] = SET_OPT,
+    plugin: list[str] = PLUGIN_OPT,
+    quiet: bool = QUIET_OPT,
+) -> None:
+    """Drive the simulated robot to a goal (online SLAM on by default); print the results folder."""
+    from slam2d.navigation.run import run_navigate
+
+    _setup_logging(quiet)
+    with _stoppable("no results folder written"):
+        try:
+            extra = [f"navigation.goal=[{goal}]"] if goal else []
+            folder = run_navigate(_load(config, [*set_, *extra], plugin))
+        except InputError as err:
+            _fail(err)
+    typer.echo(f"results: {folder}")
+
+
 def _load(config, set_: list[str], plugins: list[str]):
     """The config file (or defaults) with ``--set`` overrides and ``--plugin`` files or modules added."""
     from slam2d import config as config_mod

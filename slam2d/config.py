@@ -159,6 +159,25 @@ class OutputConfig(Section):
     figures: bool = True
 
 
+class NavigationConfig(Section):
+    """``slam2d navigate``: drive the simulated robot in ``dataset.simulator.world`` to a goal."""
+
+    start: tuple[float, float, float] | None = Field(
+        None, description="x, y (m), heading (rad); None: the start of the world's route (the office)"
+    )
+    goal: tuple[float, float] | tuple[float, float, float] | None = Field(
+        None, description="x, y (m)[, heading (rad)]; --goal x,y on the command line"
+    )
+    planner: Literal["dwa", "fsm"] = Field("dwa", description="local planner: dynamic window or the 2016 state machine")
+    slam: bool = Field(True, description="pose and map from online SLAM; false: the true pose and the world's map")
+    people: int = Field(0, ge=0, description="people wandering at random (discs the map does not hold)")
+    people_speed: float = Field(0.5, gt=0, description="m/s")
+    animation: bool = Field(True, description="an animated GIF of the run in the results folder")
+    options: dict[str, Any] = Field(
+        default_factory=dict, description="navigator parameters (slam2d.navigation.NavigatorConfig)"
+    )
+
+
 class ExperimentConfig(Section):
     name: str = Field("sim", description="results folder name: no '/' or '\\', no leading '.'")
     seed: int = Field(0, ge=0, lt=2**63, description="one seed for every random choice")
@@ -172,6 +191,7 @@ class ExperimentConfig(Section):
     mapping: MappingConfig = MappingConfig()
     evaluation: EvaluationConfig = EvaluationConfig()
     output: OutputConfig = OutputConfig()
+    navigation: NavigationConfig = NavigationConfig()
 
     @field_validator("name")
     @classmethod

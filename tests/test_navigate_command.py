@@ -1,0 +1,52 @@
+"""`slam2d navigate`: a closed-loop run as an experiment — online SLAM, the navigator, a results folder."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from slam2d import config
+from slam2d.errors import InputError
+from slam2d.navigation.run import run_navigate
+
+
+def navigate(tmp_path, *overrides):
+    cfg = config.load(None, [f"output.root={tmp_path}", "navigation.goal=[10.0, 4.5]", *overrides])
+    folder = run_navigate(cfg)
+    return folder, json.loads((folder / "metrics.json").read_text())
+
+
+def test_slam_in_the_loop_reaches_the_goal_and_writes_the_run(tmp_path):
+    folder, m = navigate(tmp_path, "navigation.animation=true")
+    assert m["success"] and m["status"] == "reached" and m["slam"]
+    assert m["collisions"] == 0
+    assert m["goal_error"] <= 0.05  # the true pose at the stop
+    assert m["pose_rmse"] < 0.05  # the pose the navigator drove on was SLAM's, close to the truth
+    assert 0.9 < m["length_ratio"] < 1.3
+    for name in ("config.yaml", "trajectory.tum", "trajectory_true.tum", "map.png", "velocity.png", "run.gif"):
+        assert (folder / name).stat().st_size > 0, name
+    true = np.loadtxt(folder / "trajectory_true.tum")
+    est = np.loadtxt(folder / "trajectory.tum")
+    assert len(true) == len(est) + 1 or len(true) == len(est)
+
+
+def test_known_map_and_state_machine(tmp_path):
+    _, m = navigate(tmp_path, "navigation.slam=false", "navigation.planner=fsm", "navigation.animation=false",
+                    "output.figures=false")
+    assert m["success"] and not m["slam"] and m["planner"] == "fsm"
+    assert m["pose_rmse"] == 0.0  # the true pose
+
+
+def test_unreachable_goal_is_a_result_not_a_hang(tmp_path):
+    _, m = navigate(tmp_path, "navigation.goal=[30.0, 30.0]", "navigation.slam=false", "output.figures=false")
+    assert not m["success"] and m["status"] == "unreachable"
+
+
+def test_bad_navigation_input_is_a_one_line_error(tmp_path):
+    with pytest.raises(InputError, match="navigation.goal"):
+        run_navigate(config.load(None, [f"output.root={tmp_path}"]))
+    with pytest.raises(InputError, match="navigation.options"):
+        navigate(tmp_path, "navigation.options={max_time: -1}")
+    assert not [p for p in tmp_path.iterdir()]  # no folder left behind
