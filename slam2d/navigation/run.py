@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,7 @@ def run_navigate(cfg: ExperimentConfig) -> Path:
     from slam2d.experiment import results_folder
 
     goal = cfg.navigation.goal
-    if goal is None:
+    if goal is None:  # before any folder is made
         raise InputError("navigation.goal", "a goal is needed: --goal x,y or navigation.goal in the config")
     with results_folder(cfg.output.root, cfg.name) as (work, published):
         log.info("slam2d navigate '%s' to %s -> %s", cfg.name, goal, cfg.output.root)
@@ -47,6 +48,32 @@ def run_navigate(cfg: ExperimentConfig) -> Path:
 
 def _navigate_into(cfg: ExperimentConfig, out: Path) -> dict[str, Any]:
     from slam2d.experiment import _jsonable
+
+    (out / "config.yaml").write_text(config_mod.dump(cfg))
+    run = simulate(cfg)
+    _write_trajectories(out, run.result, run.estimate)
+    if cfg.output.figures:
+        _figures(out, run.world, run.result, run.estimate, run.grid, np.asarray(cfg.navigation.goal, float),
+                 run.recorder, cfg.navigation.animation)  # fmt: skip
+    (out / "metrics.json").write_text(json.dumps(_jsonable(run.metrics), indent=2))
+    return run.metrics
+
+
+@dataclass
+class NavigationRun:
+    """What :func:`simulate` returns: the world, the navigator's result, the pose it drove on
+    (``estimate``, (N, 3)), SLAM's final grid (or None), the recorder and the metrics."""
+
+    world: Any
+    result: Any
+    estimate: np.ndarray
+    grid: Any
+    recorder: Any
+    metrics: dict[str, Any]
+
+
+def simulate(cfg: ExperimentConfig) -> NavigationRun:
+    """One closed-loop run of ``cfg`` (no files written)."""
     from slam2d.navigation import Navigator, run_navigation, world_grid
     from slam2d.sim import Robot
     from slam2d.sim.obstacles import scatter_wanderers
@@ -55,7 +82,8 @@ def _navigate_into(cfg: ExperimentConfig, out: Path) -> dict[str, Any]:
 
     t0 = time.perf_counter()
     nav, sim = cfg.navigation, cfg.dataset.simulator
-    (out / "config.yaml").write_text(config_mod.dump(cfg))
+    if nav.goal is None:
+        raise InputError("navigation.goal", "a goal is needed: --goal x,y or navigation.goal in the config")
     world = load_world(sim.world, sim.resolution)
     start = np.asarray(nav.start if nav.start is not None else _route_start(sim.world), float)
     goal = np.asarray(nav.goal, float)
@@ -66,6 +94,7 @@ def _navigate_into(cfg: ExperimentConfig, out: Path) -> dict[str, Any]:
     robot = Robot(world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), obstacles=people, seed=cfg.seed)
     truth = world_grid(world)
     record = _Recorder(robot)
+    online = None
     if nav.slam:
         from slam2d.slam import OnlineSlam
 
@@ -90,12 +119,7 @@ def _navigate_into(cfg: ExperimentConfig, out: Path) -> dict[str, Any]:
         "real_time_factor": result.time / wall if wall > 0 else float("nan"),
         **_pose_errors(estimate, result.trajectory),
     }
-    _write_trajectories(out, result, estimate)
-    final_grid = online.grid if nav.slam else None
-    if cfg.output.figures:
-        _figures(out, world, result, estimate, final_grid, goal, record, nav.animation)
-    (out / "metrics.json").write_text(json.dumps(_jsonable(metrics), indent=2))
-    return metrics
+    return NavigationRun(world, result, estimate, online.grid if online else None, record, metrics)
 
 
 class _Recorder:

@@ -1,0 +1,114 @@
+"""Closed-loop navigation benchmark: random start/goal pairs per world, with and without people.
+
+Usage: .venv/bin/python benchmarks/navigation.py [--worlds office rooms] [--pairs N] [--planners dwa fsm]
+       [--people 0 5] [--slam on off] [--seed S]
+
+Each run is `slam2d navigate` without the results folder (``slam2d.navigation.run.simulate``):
+the simulated robot drives from a random free start to a random free goal at least
+4 m away (seeded), on online SLAM's pose and grid (``--slam on``) or on the true pose
+and the world's map (``off``). Worlds: the office, and the ten room maps of
+``$SLAM2D_DATA/rooms/`` with furniture as floor plans (0.05 m/px). One row per
+(worlds, planner, people, slam): success rate, runs with a collision, median time,
+median length / optimal grid path, median goal error (true pose at the stop),
+median pose error of the pose driven on, and the real-time factor.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from slam2d import config
+from slam2d.navigation.run import simulate
+from slam2d.sim.world import load_world
+
+MIN_DISTANCE = 4.0  # m between start and goal
+CLEARANCE = 0.45  # m from walls for a start or goal
+
+
+def worlds(names: list[str]) -> list[str]:
+    """World specs: 'office' and the furnished room plans."""
+    out = []
+    for name in names:
+        if name == "rooms":
+            data = Path(os.environ.get("SLAM2D_DATA", "../shared/datasets")) / "rooms"
+            out += sorted(str(p) for p in data.glob("*_furnitures.png"))
+        else:
+            out.append(name)
+    return out
+
+
+def pairs(world_spec: str, n: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``n`` (start pose, goal xy) pairs in the world's free space, at least MIN_DISTANCE apart."""
+    world = load_world(world_spec, 0.05)
+    lo, hi = np.asarray(world.bounds[0]), np.asarray(world.bounds[1])
+    out = []
+    while len(out) < n:
+        pts = rng.uniform(lo, hi, (200, 2))
+        pts = pts[world.free(pts, CLEARANCE)]
+        for a, b in zip(pts[0::2], pts[1::2]):
+            if np.linalg.norm(a - b) >= MIN_DISTANCE and len(out) < n:
+                out.append((np.array([*a, rng.uniform(-np.pi, np.pi)]), b))
+    return out
+
+
+def run_row(specs, n, planner, people, slam, seed) -> dict:
+    rng = np.random.default_rng(seed)
+    runs = []
+    for spec in specs:
+        for k, (start, goal) in enumerate(pairs(spec, n, rng)):
+            cfg = config.load(None, {
+                "seed": seed + k, "dataset.simulator.world": spec, "navigation.start": start.tolist(),
+                "navigation.goal": goal.tolist(), "navigation.planner": planner, "navigation.people": people,
+                "navigation.slam": slam,
+            })  # fmt: skip
+            m = simulate(cfg).metrics
+            runs.append(m)
+            print(f"  {Path(spec).stem} #{k}: {m['status']} {m['time']:.1f} s, collisions {m['collisions']}, "
+                  f"goal error {m['goal_error'] * 100:.1f} cm", file=sys.stderr, flush=True)
+    med = lambda key: statistics.median(r[key] for r in runs)  # noqa: E731
+    return {
+        "runs": len(runs),
+        "success": sum(r["success"] for r in runs) / len(runs),
+        "collided": sum(r["collisions"] > 0 for r in runs),
+        "time": med("time"),
+        "ratio": statistics.median(r["length_ratio"] for r in runs if r["success"]) if any(
+            r["success"] for r in runs) else float("nan"),  # fmt: skip
+        "goal_cm": 100 * med("goal_error"),
+        "pose_cm": 100 * med("pose_rmse"),
+        "rtf": med("real_time_factor"),
+        "hz": med("planner_hz"),
+    }
+
+
+def main(argv: list[str]) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--worlds", nargs="+", default=["office"], help="office, rooms, or PNG paths")
+    ap.add_argument("--pairs", type=int, default=20, help="start/goal pairs per world")
+    ap.add_argument("--planners", nargs="+", default=["dwa", "fsm"])
+    ap.add_argument("--people", nargs="+", type=int, default=[0, 5])
+    ap.add_argument("--slam", nargs="+", default=["on"], choices=["on", "off"])
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    specs = worlds(args.worlds)
+    print("| worlds | planner | people | pose from | runs | success | runs with a collision | median time (s) "
+          "| median length / optimal | median goal error (cm) | median pose RMSE (cm) | real-time factor "
+          "| local planner (Hz) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for slam in args.slam:
+        for planner in args.planners:
+            for people in args.people:
+                r = run_row(specs, args.pairs, planner, people, slam == "on", args.seed)
+                print(f"| {' '.join(args.worlds)} | {planner} | {people} | {'SLAM' if slam == 'on' else 'truth'} "
+                      f"| {r['runs']} | {100 * r['success']:.0f} % | {r['collided']} | {r['time']:.1f} "
+                      f"| {r['ratio']:.2f} | {r['goal_cm']:.1f} | {r['pose_cm']:.1f} | {r['rtf']:.1f} "
+                      f"| {r['hz']:.0f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
