@@ -50,3 +50,19 @@ def test_bad_navigation_input_is_a_one_line_error(tmp_path):
     with pytest.raises(InputError, match="navigation.options"):
         navigate(tmp_path, "navigation.options={max_time: -1}")
     assert not [p for p in tmp_path.iterdir()]  # no folder left behind
+
+
+def test_a_goal_beyond_a_map_being_built_is_planned_through_unknown_space():
+    """The live map covers only what the robot has seen; with unknown cells free the goal beyond it
+    is planned to, not reported unreachable (it was, at the first step of SLAM runs)."""
+    from slam2d.mapping.occupancy import OccupancyGrid
+    from slam2d.navigation import Navigator, NavigatorConfig
+
+    seen = OccupancyGrid(np.full((40, 40), -1.0, dtype=np.float32), 0.05, (0.0, 0.0))  # 2 m x 2 m, all free
+    nav = Navigator([6.0, 5.0], config=NavigatorConfig(unknown_free=True))
+    nav.update_map(seen)
+    assert nav.plan(np.array([1.0, 1.0, 0.0])) == ""
+    assert np.hypot(*(np.asarray(nav.path)[-1, :2] - [6.0, 5.0])) < 0.1
+    blocked = Navigator([6.0, 5.0], config=NavigatorConfig(unknown_free=False))
+    blocked.update_map(seen)
+    assert blocked.plan(np.array([1.0, 1.0, 0.0])) != ""  # unknown is blocked: no way there

@@ -54,6 +54,7 @@ _SNAP = 0.5  # m, farthest a start cell inside the inflation is moved to a free 
 _AHEAD = 40  # path points searched ahead of the last nearest one
 _EXPLAINED_CELLS = 2  # a laser point this many cells from a blocked map cell is the map's
 _FINAL_GAP = 0.01  # m kept between the robot's disc and any point on the final approach
+GOAL_PADDING = 1.0  # m of free cells kept around a goal beyond a map whose unknown cells are free
 
 
 class NavigatorConfig(Section):
@@ -120,6 +121,8 @@ class Navigator:
         The free mask is compared at every call, so a map updated in place counts as changed.
         """
         free, res, origin = free_mask(map_grid, self.cfg.unknown_free)
+        if self.cfg.unknown_free:  # a map being built may not reach the goal yet: beyond it is unknown, so free
+            free, origin = _reaching(free, res, origin, self.goal[:2], GOAL_PADDING)
         same_frame = self._raw is not None and (res, tuple(origin)) == (self._raw.resolution, self._raw.origin)
         if same_frame and self._raw.free.shape == free.shape and np.array_equal(self._raw.free, free):
             return False
@@ -392,6 +395,20 @@ def _nearest_free(grid: PlanningGrid, xy, within: float):
 
 
 # --------------------------------------------------------------------------- the simulated run
+
+
+def _reaching(free: np.ndarray, res: float, origin, point, margin: float):
+    """``free`` (H, W) padded with free cells so that ``point`` (x, y) m and ``margin`` m around it
+    lie inside; the new origin (x, y) m of cell (0, 0)."""
+    origin = np.asarray(origin, dtype=np.float64)
+    lo = np.floor((np.asarray(point) - margin - origin) / res).astype(int)  # (col, row) of the corner
+    hi = np.floor((np.asarray(point) + margin - origin) / res).astype(int)
+    before = np.maximum(-lo, 0)[::-1]  # (rows, cols) to add before
+    after = np.maximum(hi - (np.array(free.shape[::-1]) - 1), 0)[::-1]
+    if not (before.any() or after.any()):
+        return free, tuple(origin)
+    padded = np.pad(free, ((before[0], after[0]), (before[1], after[1])), constant_values=True)
+    return padded, tuple(origin - res * before[::-1])
 
 
 @dataclass(eq=False)
