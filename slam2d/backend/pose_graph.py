@@ -566,8 +566,9 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     GNC ("gnc" = TLS, "gnc_gm") with the odometry edges as known inliers. ``init``:
     "chordal", "spanning_tree" or "file"; default ``G2O_INIT``, ``G2O_ROBUST_INIT`` under an
     M-estimator, each of ``G2O_GNC_INITS`` under GNC. ``verify``: also optimise from the other starts
-    (chordal, spanning tree, isotropic chordal). Of several runs the lowest (robust) cost
-    is kept, verified when another run agrees with it (VERIFY_REL); None: one run only."""
+    (chordal, spanning tree, isotropic chordal). Of several runs the first is kept unless
+    another reaches a lower (robust) cost beyond VERIFY_REL; verified when another run
+    agrees with the kept one; None: one run only."""
     loss = rb.gnc_loss(robust)
     kernel = "none" if loss is not None else robust
     plain = kernel == "none" and loss is None
@@ -577,7 +578,10 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
         names += [n for n in ("chordal", "spanning_tree", "chordal_isotropic") if n not in names]
     fg = _g2o_factors(graph, kernel, robust_param)
     runs = [_run(graph, fg, name, loss) for name in names]
-    best = min(runs, key=lambda r: r.cost)
+    best = runs[0]  # the first start's run unless another reaches a clearly lower cost
+    for r in runs[1:]:
+        if r.cost < best.cost and not _agree(r.cost, best.cost):
+            best = r
     verified = any(_agree(r.cost, best.cost) for r in runs if r is not best) if len(runs) > 1 else None
     for r in runs:
         log.info("g2o %s from %s: cost %.9g%s", robust, r.init, r.cost, " (kept)" if r is best else "")
