@@ -363,5 +363,23 @@ def frontends(plugin: list[str] = PLUGIN_OPT) -> None:
         typer.echo(name)
 
 
+def main() -> None:
+    """The ``slam2d`` command. A stopped command exits 130 at once (its clean-up is done): letting
+    the interpreter finish could end the process as by SIGINT instead, when the interrupt arrived
+    in code CPython itself ran (it then re-raises the signal at exit)."""
+    import os
+    import sys
+
+    try:
+        app()
+    except SystemExit as done:
+        if done.code != 130:
+            raise
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+
+
 if __name__ == "__main__":
-    app()
+    main()
