@@ -19,6 +19,7 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, help="2D laser SLA
 CONFIG_ARG = typer.Argument(None, help="experiment YAML; omitted: the built-in simulator default")
 SET_OPT = typer.Option([], "--set", "-s", help="override a config key, e.g. --set frontend.name=odometry")
 QUIET_OPT = typer.Option(False, "--quiet", "-q", help="no progress bars, warnings and errors only")
+OUT_OPT = typer.Option(Path("results"), "--out", "-o", help="results folders are created under this")
 PLUGIN_OPT = typer.Option([], "--plugin", "-p", help="Python file or module to import first (its frontends)")
 
 
@@ -125,7 +126,7 @@ def segment(
     method: str = typer.Option("spectral", help="spectral, morphological, distance or voronoi"),
     similarity: str = typer.Option("visibility", help="hausdorff, nearest_neighbor, feature_points or visibility"),
     ground_truth: Optional[Path] = typer.Option(None, help="GT room image (default: <stem>_gt_segmentation.png)"),
-    root: Path = typer.Option(Path("results"), "--out", "-o", help="results folders are created under this"),
+    root: Path = OUT_OPT,
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Split a map into rooms: colour image, topological graph, metrics."""
@@ -160,7 +161,7 @@ def plan(
     hierarchical: Optional[str] = typer.Option(None, help="hpa (square clusters) or rooms (needs --labels)"),
     labels: Optional[Path] = typer.Option(None, help="room label image (labels.png of slam2d segment)"),
     robot_radius: float = typer.Option(0.2, help="obstacle inflation, m"),
-    root: Path = typer.Option(Path("results"), "--out", "-o", help="results folders are created under this"),
+    root: Path = OUT_OPT,
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Plan a path (A* or hierarchical), smooth it, time it with toppra; write figures."""
@@ -194,7 +195,7 @@ def map_layers(
     map_path: Path = typer.Argument(..., help="map.yaml (map_server), or a floor-plan image (0.05 m/px)"),
     layers: str = typer.Option("sparse,quadtree,lines,mesh", help="comma-separated: sparse, quadtree, lines, mesh"),
     wall_height: Optional[float] = typer.Option(None, help="wall height of the mesh, m (default 2.5)"),
-    root: Path = typer.Option(Path("results"), "--out", "-o", help="results folders are created under this"),
+    root: Path = OUT_OPT,
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Make mapping layers (sparse, quadtree, line map, wall mesh) of an existing map."""
@@ -240,7 +241,7 @@ def optimize(
     seed: int = typer.Option(0, help="seed of the outlier injection"),
     reference: Optional[Path] = typer.Option(None, help="g2o whose poses are the reference for the RMSE"),
     verify: bool = typer.Option(True, help="also optimise from two other starts and check they agree"),
-    root: Path = typer.Option(Path("results"), "--out", "-o", help="results folders are created under this"),
+    root: Path = OUT_OPT,
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Optimise a pose graph in one batch: optimised g2o, overlay figure, metrics."""

@@ -31,7 +31,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
-from scipy.spatial import cKDTree
 
 from slam2d import geometry
 from slam2d.backend.correlative import ProbabilityGrid, angular_step, match, voxel_filter
