@@ -1,0 +1,83 @@
+"""Parameters of Monte Carlo localisation: slam2d's defaults and ROS amcl's (ROS 1, as shipped
+and with the recovery its documentation suggests), so that both run through one filter."""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import Field
+
+from slam2d.config import Section
+
+__all__ = ["MclConfig", "amcl_config", "PRESETS", "preset"]
+
+
+class MclConfig(Section):
+    """A particle filter over SE(2) on a known map (slam2d.localization.mcl)."""
+
+    # particle set and KLD sampling (Fox 2003)
+    min_particles: int = Field(100, gt=0, description="KLD's lower bound")
+    max_particles: int = Field(20000, gt=0, description="KLD's upper bound; the global set")
+    kld_err: float = Field(0.02, gt=0, description="epsilon: KL distance bound between sample and true posterior")
+    kld_delta: float = Field(0.01, gt=0, lt=1, description="delta: the bound holds with probability 1 - delta")
+    kld_bin_xy: float = Field(0.5, gt=0, description="m, histogram bin of KLD sampling and of the clusters")
+    kld_bin_theta: float = Field(math.radians(10.0), gt=0, description="rad")
+    kld_single_bin: Literal["min", "max"] = Field("min", description="particles when all fall in one bin "
+                                                  "(amcl: max)")
+    # update and resampling triggers
+    update_min_d: float = Field(0.1, ge=0, description="m travelled (odometry) before a filter update")
+    update_min_a: float = Field(0.1, ge=0, description="rad turned (odometry) before a filter update")
+    resample_ess: float = Field(0.5, ge=0, le=1, description="resample when N_eff < this x N (0: use the interval)")
+    resample_interval: int = Field(1, gt=0, description="with resample_ess 0: resample every n-th update")
+    # augmented MCL (Thrun et al. 2005, Table 8.3)
+    alpha_slow: float = Field(0.001, ge=0, le=1, description="long-term average likelihood decay (0: off)")
+    alpha_fast: float = Field(0.1, ge=0, le=1, description="short-term average likelihood decay (0: off)")
+    free_clearance: float = Field(0.1, ge=0, description="m from walls of random and global particles")
+    # odometry motion model (sample_motion_model_odometry)
+    alpha1: float = Field(0.05, ge=0, description="rotation noise from rotation")
+    alpha2: float = Field(0.01, ge=0, description="rotation noise from translation, rad^2/m^2")
+    alpha3: float = Field(0.05, ge=0, description="translation noise from translation")
+    alpha4: float = Field(0.01, ge=0, description="translation noise from rotation, m^2/rad^2")
+    # sensor model
+    model: Literal["likelihood_field", "beam"] = "likelihood_field"
+    beams: int = Field(60, gt=0, description="beams used per scan, evenly spread over the valid ones")
+    z_hit: float = Field(0.95, ge=0)
+    z_rand: float = Field(0.05, ge=0)
+    z_short: float = Field(0.1, ge=0, description="beam model only")
+    z_max: float = Field(0.05, ge=0, description="beam model only")
+    lambda_short: float = Field(0.1, gt=0, description="beam model only, 1/m")
+    sigma_hit: float = Field(0.1, gt=0, description="m")
+    max_dist: float = Field(2.0, gt=0, description="m, distance transform cap of the likelihood field")
+    combine: Literal["product", "amcl"] = Field("product", description="beam likelihoods multiplied (each raised "
+                                                "to beam_weight), or amcl's 1 + sum of cubes")
+    beam_weight: float = Field(0.2, gt=0, le=1, description="exponent of each beam's likelihood (beams are "
+                                "correlated: 1 overstates the evidence)")
+    # initial pose of tracking
+    initial_sd_xy: float = Field(0.5, ge=0, description="m, standard deviation around an initial pose")
+    initial_sd_theta: float = Field(math.pi / 12, ge=0, description="rad")
+
+
+def amcl_config(recovery: bool = False) -> MclConfig:
+    """ROS 1 amcl's defaults (``recovery_alpha_slow`` / ``_fast`` 0 as shipped, or 0.001 / 0.1 suggested)."""
+    return MclConfig(
+        min_particles=100, max_particles=5000, kld_err=0.01, kld_delta=_delta_of_z(0.99), kld_bin_xy=0.5,
+        kld_bin_theta=math.radians(10.0), kld_single_bin="max", update_min_d=0.2, update_min_a=math.pi / 6,
+        resample_ess=0.0, resample_interval=2, alpha_slow=0.001 if recovery else 0.0,
+        alpha_fast=0.1 if recovery else 0.0, free_clearance=0.0, alpha1=0.2, alpha2=0.2, alpha3=0.2, alpha4=0.2,
+        model="likelihood_field", beams=30, z_hit=0.95, z_rand=0.05, sigma_hit=0.2, max_dist=2.0, combine="amcl",
+        beam_weight=1.0, initial_sd_xy=0.5, initial_sd_theta=math.pi / 12,
+    )  # fmt: skip
+
+
+def _delta_of_z(z: float) -> float:
+    """delta whose upper (1 - delta) normal quantile is ``z`` (amcl passes kld_z = 0.99 as that quantile)."""
+    return 0.5 * math.erfc(z / math.sqrt(2.0))
+
+
+PRESETS = {"slam2d": lambda: MclConfig(), "amcl": lambda: amcl_config(False), "amcl_recovery": lambda: amcl_config(True)}
+
+
+def preset(name: str) -> MclConfig:
+    """The parameters named ``name``: slam2d, amcl (shipped) or amcl_recovery."""
+    return PRESETS[name]()

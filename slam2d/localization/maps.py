@@ -1,0 +1,97 @@
+"""The known map of localisation: occupied and free cells of any map slam2d reads.
+
+``KnownMap.load`` takes a ``map.yaml`` (a slam2d run or any map_server map),
+a floor-plan image (0.05 m/px unless told) or the built-in ``office``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from slam2d.errors import InputError
+from slam2d.types import GridFrame
+
+__all__ = ["KnownMap"]
+
+
+@dataclass(eq=False)
+class KnownMap(GridFrame):
+    """Occupied and free masks (H, W) bool; ``origin`` (x, y) m of cell (0, 0)'s corner,
+    ``resolution`` m per cell, rows along y. Cells neither occupied nor free are unknown."""
+
+    occupied: np.ndarray
+    free: np.ndarray
+    resolution: float
+    origin: tuple[float, float]
+    name: str = "map"
+
+    def __post_init__(self):
+        self.occupied = np.ascontiguousarray(self.occupied, dtype=bool)
+        self.free = np.ascontiguousarray(self.free, dtype=bool) & ~self.occupied
+        if self.occupied.ndim != 2 or self.occupied.shape != self.free.shape or min(self.occupied.shape) < 1:
+            raise InputError(self.name, f"a map needs equal 2D occupied and free masks, got {self.occupied.shape}")
+        if not self.occupied.any():
+            raise InputError(self.name, "the map has no occupied cell: nothing to localise against")
+        if not self.free.any():
+            raise InputError(self.name, "the map has no free cell")
+        self.resolution = float(self.resolution)
+        self.origin = (float(self.origin[0]), float(self.origin[1]))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.occupied.shape
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(xmin, xmax, ymin, ymax) in metres."""
+        h, w = self.shape
+        x0, y0 = self.origin
+        return x0, x0 + w * self.resolution, y0, y0 + h * self.resolution
+
+    def distance(self) -> np.ndarray:
+        """Exact Euclidean distance (H, W) in metres from every cell centre to the nearest occupied cell centre."""
+        return ndimage.distance_transform_edt(~self.occupied) * self.resolution
+
+    def free_cells(self, clearance: float = 0.0) -> np.ndarray:
+        """Flat indices of free cells at least ``clearance`` m from every occupied cell (all free cells
+        if none is that far)."""
+        free = self.free
+        if clearance > 0:
+            far = free & (self.distance() >= clearance)
+            free = far if far.any() else free
+        return np.flatnonzero(free)
+
+    @classmethod
+    def from_occupancy(cls, grid, occupied_thresh: float = 0.65, free_thresh: float = 0.196, name: str = "map"):
+        """From an :class:`~slam2d.mapping.occupancy.OccupancyGrid` by its probabilities."""
+        return cls(grid.occupied_mask(occupied_thresh), grid.free_mask(free_thresh), grid.resolution,
+                   grid.origin, name)  # fmt: skip
+
+    @classmethod
+    def from_world(cls, world, resolution: float = 0.05) -> KnownMap:
+        """From a :class:`~slam2d.sim.World`: its planning grid, blocked cells occupied."""
+        from slam2d.navigation.maps import world_grid
+
+        grid = world_grid(world, resolution)
+        return cls(~grid.free, grid.free, grid.resolution, grid.origin, world.name)
+
+    @classmethod
+    def load(cls, path, resolution: float = 0.05) -> KnownMap:
+        """``office``, a map_server ``map.yaml`` or a floor-plan image (``resolution`` m/px)."""
+        if str(path) == "office":
+            from slam2d.sim.world import World
+
+            return cls.from_world(World.office(), resolution)
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(path, "map not found (a map.yaml, a floor-plan image or 'office')")
+        from slam2d.mapping.layers import load_grid
+
+        if path.suffix.lower() not in (".yaml", ".yml", ".png", ".pgm", ".jpg", ".jpeg", ".bmp"):
+            raise InputError(path, "a map is a map.yaml or an image (png, pgm)")
+        grid = load_grid(path, resolution)
+        return cls.from_occupancy(grid, name=path.stem)

@@ -1,0 +1,290 @@
+"""Monte Carlo localisation on a known map: augmented MCL with KLD sampling.
+
+One :class:`ParticleFilter` covers global localisation (:meth:`~ParticleFilter.init_global`),
+tracking from a rough pose (:meth:`~ParticleFilter.init_pose`) and recovery after a
+kidnapping (random particles, Thrun et al. 2005 Table 8.3). Every scan goes to
+:meth:`~ParticleFilter.add`; the filter updates only after ``update_min_d`` m or
+``update_min_a`` rad of odometry (as amcl): odometry motion model (four alphas),
+sensor model (likelihood field or beams), then low-variance resampling when the
+effective sample size drops, drawing random free-space poses with probability
+max(0, 1 - w_fast / w_slow) and keeping as many particles as KLD sampling
+(Fox 2003) asks. The pose is the weighted mean of the heaviest cluster of
+particles (connected histogram bins), with its covariance; between updates it
+follows the odometry. Everything is vectorised over particles (numba for the
+sensor models); the same seed gives the same particles.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from scipy.special import logsumexp
+from scipy.stats import norm
+
+from slam2d import geometry
+from slam2d.errors import InputError
+from slam2d.localization.config import MclConfig
+from slam2d.localization.maps import KnownMap
+from slam2d.localization.sensor import sensor_model
+from slam2d.types import Scan
+
+__all__ = ["ParticleFilter", "Estimate", "kld_limit", "sample_motion", "low_variance_indices", "clusters"]
+
+_MIN_TRANS = 0.01  # m: below this a motion has no heading of its own (rot1 = 0), as in amcl
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The filter's pose (3,), its covariance (3, 3), the heaviest cluster's share of the weight,
+    the number of clusters and of particles."""
+
+    pose: np.ndarray
+    covariance: np.ndarray
+    share: float
+    clusters: int
+    particles: int
+
+    @property
+    def sd_xy(self) -> float:
+        """m, root of the larger position variance."""
+        return float(math.sqrt(max(self.covariance[0, 0], self.covariance[1, 1])))
+
+    @property
+    def sd_theta(self) -> float:
+        """rad."""
+        return float(math.sqrt(self.covariance[2, 2]))
+
+
+def kld_limit(k, err: float, z: float, n_min: int, n_max: int, single_bin: str = "min") -> np.ndarray:
+    """Particles KLD sampling asks for ``k`` occupied bins (Fox 2003, eq. 12), clipped to [n_min, n_max]:
+    n = (k - 1) / (2 err) (1 - 2 / (9 (k - 1)) + sqrt(2 / (9 (k - 1))) z)^3; one bin gives n_min or n_max."""
+    k = np.asarray(k, dtype=np.float64)
+    km1 = np.maximum(k - 1.0, 1.0)
+    a = 2.0 / (9.0 * km1)
+    n = np.ceil(km1 / (2.0 * err) * (1.0 - a + np.sqrt(a) * z) ** 3)
+    n = np.where(k <= 1, n_min if single_bin == "min" else n_max, n)
+    return np.clip(n, n_min, n_max).astype(np.int64)
+
+
+def sample_motion(particles: np.ndarray, before, after, cfg: MclConfig, rng: np.random.Generator) -> np.ndarray:
+    """Particles (P, 3) moved by the odometry ``before`` -> ``after`` (3,) with the four-alpha noise
+    (sample_motion_model_odometry; a backward step's turns count without their half turn, as amcl)."""
+    d = geometry.between(before, after)
+    trans = math.hypot(d[0], d[1])
+    rot1 = math.atan2(after[1] - before[1], after[0] - before[0]) - before[2] if trans >= _MIN_TRANS else 0.0
+    rot1 = float(geometry.wrap_angle(rot1))
+    rot2 = float(geometry.wrap_angle(d[2] - rot1))
+    turn1, turn2 = min(abs(rot1), math.pi - abs(rot1)), min(abs(rot2), math.pi - abs(rot2))
+    sd = np.sqrt([cfg.alpha1 * turn1**2 + cfg.alpha2 * trans**2,
+                  cfg.alpha3 * trans**2 + cfg.alpha4 * (turn1**2 + turn2**2),
+                  cfg.alpha1 * turn2**2 + cfg.alpha2 * trans**2])  # fmt: skip
+    e = rng.standard_normal((len(particles), 3)) * sd
+    r1, t, r2 = rot1 - e[:, 0], trans - e[:, 1], rot2 - e[:, 2]
+    heading = particles[:, 2] + r1
+    out = np.empty_like(particles)
+    out[:, 0] = particles[:, 0] + t * np.cos(heading)
+    out[:, 1] = particles[:, 1] + t * np.sin(heading)
+    out[:, 2] = geometry.wrap_angle(heading + r2)
+    return out
+
+
+def low_variance_indices(weights: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
+    """``count`` indices drawn with probability ``weights`` (normalised) by one random offset (systematic)."""
+    cdf = np.cumsum(weights)
+    cdf[-1] = 1.0
+    return np.minimum(np.searchsorted(cdf, (rng.random() + np.arange(count)) / count), len(weights) - 1)
+
+
+def _bins(poses: np.ndarray, bin_xy: float, bin_theta: float) -> np.ndarray:
+    """Integer histogram bins (P, 3) of poses."""
+    return np.column_stack([np.floor(poses[:, 0] / bin_xy), np.floor(poses[:, 1] / bin_xy),
+                            np.floor((poses[:, 2] + np.pi) / bin_theta)]).astype(np.int64)  # fmt: skip
+
+
+def _distinct_so_far(bins: np.ndarray) -> np.ndarray:
+    """k (P,): the number of distinct bins among the first 1..P rows of ``bins`` (P, 3)."""
+    _, first = np.unique(bins, axis=0, return_index=True)
+    new = np.zeros(len(bins), dtype=np.int64)
+    new[first] = 1
+    return np.cumsum(new)
+
+
+def clusters(poses: np.ndarray, bin_xy: float, bin_theta: float) -> np.ndarray:
+    """Cluster labels (P,) from 0: particles in histogram bins connected through their 26 neighbours
+    (heading wrapping round at the emptiest heading bin)."""
+    b = _bins(poses, bin_xy, bin_theta)
+    n_theta = int(math.ceil(2 * math.pi / bin_theta))
+    b[:, 2] = np.clip(b[:, 2], 0, n_theta - 1)
+    cut = int(np.argmin(np.bincount(b[:, 2], minlength=n_theta)))
+    b[:, 2] = (b[:, 2] - cut - 1) % n_theta  # the emptiest bin becomes the last one
+    b[:, :2] -= b[:, :2].min(axis=0)
+    occupied = np.zeros((*(b[:, :2].max(axis=0) + 1), n_theta), dtype=bool)
+    occupied[b[:, 0], b[:, 1], b[:, 2]] = True
+    labels, _ = ndimage.label(occupied, structure=np.ones((3, 3, 3), dtype=bool))
+    return labels[b[:, 0], b[:, 1], b[:, 2]] - 1
+
+
+def weighted_pose(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted mean pose (3,) (circular mean heading) and covariance (3, 3) of poses (P, 3)."""
+    w = weights / weights.sum()
+    theta = math.atan2(float(w @ np.sin(poses[:, 2])), float(w @ np.cos(poses[:, 2])))
+    mean = np.array([w @ poses[:, 0], w @ poses[:, 1], theta])
+    d = poses - mean
+    d[:, 2] = geometry.wrap_angle(d[:, 2])
+    return mean, (d * w[:, None]).T @ d
+
+
+class ParticleFilter:
+    """Augmented MCL with KLD sampling on ``known`` for a laser reaching ``range_max`` m."""
+
+    def __init__(self, known: KnownMap, cfg: MclConfig | None = None, range_max: float = 12.0, seed: int = 0):
+        self.map, self.cfg = known, cfg or MclConfig()
+        if self.cfg.min_particles > self.cfg.max_particles:
+            raise InputError("localization.min_particles", "must not exceed max_particles")
+        self.sensor = sensor_model(known, self.cfg, range_max)
+        self.rng = np.random.default_rng(seed)
+        self.kld_z = float(norm.ppf(1.0 - self.cfg.kld_delta))
+        self._free = known.free_cells(self.cfg.free_clearance)
+        self.particles = np.zeros((0, 3))
+        self.log_w = np.zeros(0)
+        self.w_slow = self.w_fast = 0.0
+        self.updates = self.resamples = self.injected = 0
+        self._odom: np.ndarray | None = None  # odometry at the last update
+        self._estimate: Estimate | None = None
+
+    # initialisation ------------------------------------------------------
+
+    def random_poses(self, count: int) -> np.ndarray:
+        """``count`` poses uniform over the free cells (kept ``free_clearance`` from walls), any heading."""
+        m = self.map
+        cells = self._free[self.rng.integers(0, len(self._free), count)]
+        row, col = np.divmod(cells, m.shape[1])
+        xy = np.column_stack([col, row]) + self.rng.random((count, 2))
+        theta = self.rng.uniform(-np.pi, np.pi, count)
+        return np.column_stack([m.origin[0] + xy[:, 0] * m.resolution, m.origin[1] + xy[:, 1] * m.resolution, theta])
+
+    def init_global(self) -> None:
+        """No initial pose: ``max_particles`` poses uniform over the free space."""
+        self._reset(self.random_poses(self.cfg.max_particles))
+
+    def init_pose(self, pose, sd_xy: float | None = None, sd_theta: float | None = None) -> None:
+        """A rough initial pose (3,): ``max_particles`` Gaussian poses around it (sd m, rad; config's by default)."""
+        pose = geometry.as_pose(pose).reshape(3)
+        if not np.isfinite(pose).all():
+            raise InputError("initial pose", f"must be finite, got {pose.tolist()}")
+        sd = np.array([self.cfg.initial_sd_xy if sd_xy is None else sd_xy] * 2
+                      + [self.cfg.initial_sd_theta if sd_theta is None else sd_theta])  # fmt: skip
+        poses = pose + self.rng.standard_normal((self.cfg.max_particles, 3)) * sd
+        poses[:, 2] = geometry.wrap_angle(poses[:, 2])
+        self._reset(poses)
+
+    def _reset(self, poses: np.ndarray) -> None:
+        self.particles = poses
+        self.log_w = np.full(len(poses), -math.log(len(poses)))
+        self.w_slow = self.w_fast = 0.0
+        self._estimate = None
+
+    # the filter ------------------------------------------------------------
+
+    def add(self, scan: Scan) -> bool:
+        """Feed one scan (its ``odom`` pose); True if the filter updated (moved far enough, or first scan)."""
+        if len(self.particles) == 0:
+            raise RuntimeError("initialise the filter first (init_global or init_pose)")
+        odom = np.asarray(scan.odom, dtype=np.float64)
+        if not np.isfinite(odom).all():
+            raise InputError(f"scan {scan.index}", "odometry pose is not finite")
+        if self._odom is not None:
+            d = geometry.between(self._odom, odom)
+            if math.hypot(d[0], d[1]) < self.cfg.update_min_d and abs(d[2]) < self.cfg.update_min_a:
+                return False
+            self.particles = sample_motion(self.particles, self._odom, odom, self.cfg, self.rng)
+        self._odom = odom.copy()
+        self._measure(scan)
+        return True
+
+    def _measure(self, scan: Scan) -> None:
+        """Weigh by the scan, track the likelihood averages, resample when due, estimate."""
+        loglik, beams = self.sensor.log_likelihood(self.particles, scan)
+        self.updates += 1
+        if beams > 0:
+            joint = self.log_w + loglik
+            total = logsumexp(joint)
+            self.log_w = joint - total
+            self._average(float(total), beams)
+        if self._resample_due():
+            self._resample()
+        self._estimate = self._cluster_estimate()
+
+    def _average(self, log_total: float, beams: int) -> None:
+        """Update w_slow and w_fast from the weighted mean likelihood (per beam for the product model)."""
+        cfg = self.cfg
+        w_avg = math.exp(log_total / (beams * cfg.beam_weight)) if cfg.combine == "product" else math.exp(log_total)
+        for name, alpha in (("w_slow", cfg.alpha_slow), ("w_fast", cfg.alpha_fast)):
+            old = getattr(self, name)
+            setattr(self, name, w_avg if old == 0.0 else old + alpha * (w_avg - old))
+
+    def _resample_due(self) -> bool:
+        if self.cfg.resample_ess > 0:
+            ess = 1.0 / float(np.sum(np.exp(2 * self.log_w)))
+            return ess < self.cfg.resample_ess * len(self.log_w)
+        return self.updates % self.cfg.resample_interval == 0
+
+    def random_share(self) -> float:
+        """Probability max(0, 1 - w_fast / w_slow) of a random particle at resampling (0 with recovery off)."""
+        cfg = self.cfg
+        if cfg.alpha_slow <= 0 or cfg.alpha_fast <= 0 or self.w_slow <= 0:
+            return 0.0
+        return max(0.0, 1.0 - self.w_fast / self.w_slow)
+
+    def _resample(self) -> None:
+        """Low-variance resampling with random free-space poses, cut to KLD's count."""
+        cfg, n_max = self.cfg, self.cfg.max_particles
+        drawn = self.particles[low_variance_indices(np.exp(self.log_w), n_max, self.rng)]
+        drawn = drawn[self.rng.permutation(n_max)]  # KLD counts bins along a random order
+        share = self.random_share()
+        if share > 0:
+            rand = np.flatnonzero(self.rng.random(n_max) < share)
+            drawn[rand] = self.random_poses(len(rand))
+            self.injected += len(rand)
+            if cfg.alpha_slow > 0 and cfg.combine == "amcl":  # amcl restarts its averages after injecting
+                self.w_slow = self.w_fast = 0.0
+        n = self.kld_count(drawn)
+        self.particles = drawn[:n]
+        self.log_w = np.full(n, -math.log(n))
+        self.resamples += 1
+
+    def kld_count(self, poses: np.ndarray) -> int:
+        """The first n such that the n leading ``poses`` reach KLD's count for their bins (max if none)."""
+        cfg = self.cfg
+        k = _distinct_so_far(_bins(poses, cfg.kld_bin_xy, cfg.kld_bin_theta))
+        limit = kld_limit(k, cfg.kld_err, self.kld_z, cfg.min_particles, cfg.max_particles, cfg.kld_single_bin)
+        enough = np.flatnonzero(np.arange(1, len(poses) + 1) >= limit)
+        return int(enough[0]) + 1 if len(enough) else len(poses)
+
+    # estimate -----------------------------------------------------------------
+
+    def _cluster_estimate(self) -> Estimate:
+        cfg, w = self.cfg, np.exp(self.log_w)
+        labels = clusters(self.particles, cfg.kld_bin_xy, cfg.kld_bin_theta)
+        mass = np.bincount(labels, weights=w)
+        best = int(np.argmax(mass))
+        inside = labels == best
+        mean, cov = weighted_pose(self.particles[inside], w[inside])
+        return Estimate(mean, cov, float(mass[best] / mass.sum()), len(mass), len(self.particles))
+
+    @property
+    def estimate(self) -> Estimate:
+        """The last update's estimate (computed now if there was none)."""
+        if self._estimate is None:
+            self._estimate = self._cluster_estimate()
+        return self._estimate
+
+    def pose(self, odom=None) -> np.ndarray:
+        """The pose (3,): the last update's estimate, moved by the odometry since then to ``odom`` (3,)."""
+        est = self.estimate.pose
+        if odom is None or self._odom is None:
+            return est.copy()
+        return geometry.compose(est, geometry.between(self._odom, np.asarray(odom, dtype=np.float64)))

@@ -1,0 +1,172 @@
+"""Simulated localisation runs: a robot wandering a world (optionally kidnapped), its scan
+stream replayed through particle filters, and the measures of convergence and recovery.
+
+The stream is recorded once and replayed through every filter, so that all of them
+see the same scans, odometry and truth. The wanderer steers by its own laser
+only (forwards towards open space, turning in place before walls), so the stream
+does not depend on any filter.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from slam2d import geometry
+from slam2d.localization.maps import KnownMap
+from slam2d.localization.mcl import ParticleFilter
+from slam2d.types import Scan
+
+__all__ = ["Stream", "wander", "replay", "Track", "converged_at", "false_convergence", "random_free_pose"]
+
+SPEED = 0.5  # m/s, the wanderer's cruise speed
+PERIOD = 0.1  # s between scans
+_CLEARANCE = 0.4  # m, starts and kidnap targets this far from walls
+_LANE = 0.3  # m, half-width of the lane ahead the wanderer keeps clear
+_STOP = 0.7  # m, obstacle distance ahead that makes it turn in place
+
+
+@dataclass
+class Stream:
+    """Scans (with odometry and ground truth), true poses (N, 3), distance travelled (N,) m, and the
+    scan index of each kidnapping."""
+
+    scans: list[Scan]
+    truth: np.ndarray
+    travelled: np.ndarray
+    kidnaps: list[int] = field(default_factory=list)
+
+    @property
+    def stamps(self) -> np.ndarray:
+        return np.array([s.stamp for s in self.scans])
+
+
+def random_free_pose(world, known: KnownMap, rng: np.random.Generator, away_from=None, min_jump: float = 0.0):
+    """A pose (3,) in the map's free space with room for the robot, at least ``min_jump`` m from ``away_from``."""
+    cells = known.free_cells(_CLEARANCE)
+    for _ in range(10_000):
+        c = cells[rng.integers(len(cells))]
+        row, col = divmod(int(c), known.shape[1])
+        xy = np.array(known.origin) + (np.array([col, row]) + 0.5) * known.resolution
+        if away_from is not None and math.hypot(*(xy - away_from[:2])) < min_jump:
+            continue
+        if world.free(xy, _CLEARANCE)[0]:
+            return np.array([xy[0], xy[1], rng.uniform(-math.pi, math.pi)])
+    raise RuntimeError(f"no free pose found in {known.name}")
+
+
+def wander_command(scan: Scan, turning: float) -> tuple[float, float, float]:
+    """(v m/s, w rad/s, turning direction) steering by the laser: towards open space, turning in
+    place when the lane ahead (the robot's width plus a margin) is blocked within _STOP m, in one
+    direction until 0.5 m more is clear."""
+    r = np.where(np.isfinite(scan.ranges), scan.ranges, scan.range_max)
+    a = scan.angles
+    x, y = r * np.cos(a), r * np.sin(a)
+    reach = _STOP + 0.5 if turning else _STOP
+    if np.any((x > 0) & (x < reach) & (np.abs(y) < _LANE)):
+        if turning == 0.0:
+            turning = 1.0 if r[(a > 0) & (a < 2.0)].mean() >= r[(a < 0) & (a > -2.0)].mean() else -1.0
+        return 0.0, 1.0 * turning, turning
+    wide = np.abs(a) < 1.0
+    smooth = np.convolve(r, np.ones(15) / 15, mode="same")
+    target = a[wide][np.argmax(smooth[wide])]
+    return SPEED, float(np.clip(1.5 * target, -1.0, 1.0)), 0.0
+
+
+def wander(world, known: KnownMap, seconds: float, seed: int, kidnap_at=(), min_jump: float = 5.0,
+           start=None, robot_config=None) -> Stream:  # fmt: skip
+    """Drive a wandering robot for ``seconds`` s from ``start`` (a random free pose by default);
+    at each time in ``kidnap_at`` (s) teleport it to a random free pose at least ``min_jump`` m away."""
+    from slam2d.sim import Robot
+
+    rng = np.random.default_rng(seed)
+    start = random_free_pose(world, known, rng) if start is None else np.asarray(start, dtype=np.float64)
+    robot = Robot(world, start, robot_config, seed=seed)
+    step = robot.step(0.0, 0.0, 0.0)
+    scans, truth, kidnaps, turning = [step.scan], [step.pose], [], 0.0
+    pending = sorted(kidnap_at)
+    for k in range(1, int(round(seconds / PERIOD)) + 1):
+        if pending and k * PERIOD >= pending[0]:
+            pending.pop(0)
+            robot.pose = random_free_pose(world, known, rng, robot.pose, min_jump)
+            robot.velocity = np.zeros(2)
+            kidnaps.append(k)
+        v, w, turning = wander_command(step.scan, turning)
+        step = robot.step(v, w, PERIOD)
+        scans.append(step.scan)
+        truth.append(step.pose)
+    truth = np.array(truth)
+    moved = np.hypot(*np.diff(truth[:, :2], axis=0).T)
+    moved[np.array(kidnaps, dtype=np.int64) - 1] = 0.0  # a teleport is no travel
+    return Stream(scans, truth, np.concatenate([[0.0], np.cumsum(moved)]), kidnaps)
+
+
+@dataclass
+class Track:
+    """A filter's replay of a stream: estimates (N, 3), their errors (N,) m and (N,) rad, particle
+    counts (N,), the heaviest cluster's share (N,) and position sd (N,) m, ms per update."""
+
+    estimates: np.ndarray
+    position_error: np.ndarray
+    heading_error: np.ndarray
+    particles: np.ndarray
+    share: np.ndarray
+    sd_xy: np.ndarray
+    update_ms: np.ndarray
+    snapshots: dict = field(default_factory=dict)
+
+
+def replay(pf: ParticleFilter, stream: Stream, snapshot_at=()) -> Track:
+    """Feed every scan of ``stream`` to ``pf`` (initialised); keep a copy of the particles at the scan
+    indices ``snapshot_at``."""
+    import time
+
+    n = len(stream.scans)
+    est, count, share, sd, ms = np.zeros((n, 3)), np.zeros(n, int), np.zeros(n), np.zeros(n), []
+    snaps = {}
+    for i, scan in enumerate(stream.scans):
+        t0 = time.perf_counter()
+        if pf.add(scan):
+            ms.append((time.perf_counter() - t0) * 1000)
+        e = pf.estimate
+        est[i], count[i], share[i], sd[i] = pf.pose(scan.odom), e.particles, e.share, e.sd_xy
+        if i in snapshot_at:
+            snaps[i] = (pf.particles.copy(), np.exp(pf.log_w), est[i].copy())
+    err = np.hypot(*(est[:, :2] - stream.truth[:, :2]).T)
+    head = np.abs(geometry.wrap_angle(est[:, 2] - stream.truth[:, 2]))
+    return Track(est, err, head, count, share, sd, np.array(ms), snaps)
+
+
+def _held(ok: np.ndarray, from_index: int, steps: int) -> int | None:
+    """First index >= from_index where ``ok`` holds for ``steps`` scans in a row (to the end if shorter)."""
+    run = 0
+    for i in range(from_index, len(ok)):
+        run = run + 1 if ok[i] else 0
+        if run >= steps:
+            return i - steps + 1
+    return None
+
+
+POSITION_OK = 0.2  # m
+HEADING_OK = math.radians(5.0)
+HOLD = 5.0  # s
+
+
+def converged_at(track: Track, from_index: int = 0) -> int | None:
+    """First scan (>= from_index) from which the error stays below 0.2 m and 5 degrees for 5 s."""
+    ok = (track.position_error < POSITION_OK) & (track.heading_error < HEADING_OK)
+    return _held(ok, from_index, int(round(HOLD / PERIOD)))
+
+
+CONFIDENT_SHARE = 0.9
+CONFIDENT_SD = 0.2  # m
+WRONG = 1.0  # m
+
+
+def false_convergence(track: Track, from_index: int = 0) -> bool:
+    """Whether the filter was confident (heaviest cluster >= 90 % of the weight, sd < 0.2 m) while
+    more than 1 m wrong, for 5 s, after ``from_index``."""
+    ok = (track.share >= CONFIDENT_SHARE) & (track.sd_xy < CONFIDENT_SD) & (track.position_error > WRONG)
+    return _held(ok, from_index, int(round(HOLD / PERIOD))) is not None
