@@ -340,6 +340,29 @@ def navigate(
     typer.echo(f"results: {folder}")
 
 
+@app.command()
+def explore(
+    config: Optional[Path] = CONFIG_ARG,
+    strategy: Optional[str] = typer.Option(
+        None, help="nearest_frontier, explore_lite, nearest_candidate, farthest_candidate or utility"
+    ),
+    set_: list[str] = SET_OPT,
+    quiet: bool = QUIET_OPT,
+) -> None:
+    """Explore the simulated world with SLAM in the loop until no goal is left; print the results folder."""
+    from slam2d.exploration import config as explore_config
+    from slam2d.exploration.run import run_explore
+
+    _setup_logging(quiet)
+    with _stoppable("no results folder written"):
+        try:
+            extra = [f"exploration.strategy={strategy}"] if strategy else []
+            folder = run_explore(explore_config.load(config, [*set_, *extra]))
+        except InputError as err:
+            _fail(err)
+    typer.echo(f"results: {folder}")
+
+
 def _load(config, set_: list[str], plugins: list[str]):
     """The config file (or defaults) with ``--set`` overrides and ``--plugin`` files or modules added."""
     from slam2d import config as config_mod

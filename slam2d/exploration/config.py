@@ -1,0 +1,73 @@
+"""``slam2d explore`` config: the experiment config plus an ``exploration`` section."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, ValidationError
+
+from slam2d import config as config_mod
+from slam2d.config import ExperimentConfig, Section
+
+STRATEGIES = ("nearest_frontier", "explore_lite", "nearest_candidate", "farthest_candidate", "utility")
+
+
+class ExplorationConfig(Section):
+    """Where the robot explores, how it picks goals, and the limits of a run."""
+
+    strategy: Literal["nearest_frontier", "explore_lite", "nearest_candidate", "farthest_candidate", "utility"] = (
+        Field("utility", description="goal choice: Yamauchi's nearest frontier, explore_lite's cost, Li et al.'s "
+                                     "candidates (nearest, farthest, utility)")  # fmt: skip
+    )
+    start: tuple[float, float, float] | None = Field(
+        None, description="x, y (m), heading (rad); None: the office route's start, or a seeded open cell of a PNG world"
+    )
+    bounds: list[tuple[float, float]] | None = Field(None, description="bounding polygon (x, y) m; None: no bound")
+    max_time: float = Field(1800.0, gt=0, description="s of simulated time at most")
+    max_distance: float = Field(1000.0, gt=0, description="m driven at most")
+    check_period: float = Field(1.0, gt=0, description="s between checks that the current goal is still worth it")
+    goal_timeout: float = Field(20.0, gt=0, description="s without 0.3 m of progress: the goal is inaccessible")
+    goal_reached: float = Field(0.3, gt=0, description="m from the goal that counts as reached")
+    avoid_radius: float = Field(0.5, gt=0, description="m: goals this close to a visited or inaccessible one are skipped")
+    min_frontier: float | None = Field(None, gt=0, description="m, shortest frontier region; None: the robot's width")
+    # Li et al.
+    node_step: float = Field(0.9, gt=0, description="m of travel between topological nodes (S_tep)")
+    box_width: float = Field(0.6, gt=0, description="m, width of the three-ray box (> the robot's width)")
+    delta: float = Field(0.1, gt=0, description="m, A-type goals this far short of the range limit")
+    safe_margin: float = Field(0.05, ge=0, description="m: safe_d = safe_dis = half the robot's width + this")
+    d_tho: float = Field(0.5, gt=0, description="m, nearest A-type goal from the sensor")
+    k1: float = Field(0.3, ge=0, description="1/m, distance weight of the utility")
+    k2: float = Field(0.5, ge=0, description="1/rad, heading weight of the utility")
+    distance: Literal["path", "euclidean"] = Field("path", description="L of the utility: grid path or straight line")
+    gain_range: float = Field(6.0, gt=0, description="m, reach of the rays counting unknown cells (information gain)")
+    gain_rays: int = Field(120, gt=3, description="rays cast for the information gain")
+    min_gain: float = Field(0.5, ge=0, description="m² of unknown area a candidate must still see to stay open")
+    backtrack: Literal["graph", "grid"] = Field("graph", description="to an old candidate: over the topological graph "
+                                                                     "(the paper) or the grid path alone")  # fmt: skip
+    fallback_frontiers: bool = Field(True, description="candidate strategies: when no candidate is left, take the "
+                                                       "nearest frontier (else stop)")  # fmt: skip
+    # explore_lite
+    potential_scale: float = Field(3.0, ge=0, description="explore_lite: weight of the distance")
+    gain_scale: float = Field(1.0, ge=0, description="explore_lite: weight of the frontier size")
+    animation: bool = Field(True, description="an animated GIF of the exploration in the results folder")
+    snapshot_period: float = Field(5.0, gt=0, description="s between map snapshots kept for the animation")
+    options: dict[str, Any] = Field(default_factory=dict, description="navigator parameters (NavigatorConfig)")
+
+
+class ExploreConfig(ExperimentConfig):
+    """An experiment config with the ``exploration`` section."""
+
+    exploration: ExplorationConfig = ExplorationConfig()
+
+
+def load(path: str | Path | None = None, overrides: list[str] | dict[str, Any] = ()) -> ExploreConfig:
+    """The explore config in ``path`` (defaults when None) with ``overrides`` (``a.b=value`` or a dict)."""
+    data = config_mod.load_dict(path) if path else {}
+    items = overrides.items() if isinstance(overrides, dict) else map(config_mod.parse_override, overrides)
+    for key, value in items:
+        config_mod.set_key(data, key, value)
+    try:
+        return ExploreConfig.model_validate(data)
+    except ValidationError as err:
+        raise config_mod._format_error(err, str(path) if path else "config") from None

@@ -1,0 +1,252 @@
+"""Goal choice for exploration: frontiers (nearest, explore_lite's cost) or Li et al.'s candidates
+(nearest, farthest, utility), with visited and inaccessible lists and the hybrid map.
+
+The utility of a candidate p (eq. 6): F(p) = A(p) · exp(−(k1·L + k2·γ)), with A the
+unknown cells visible from p (information gain, rays cast on the grid), L the grid path
+length (or the Euclidean distance, as the paper) and γ the absolute angle between the
+robot's heading and the direction to p. explore_lite's cost of a frontier:
+potential_scale · min_distance · resolution − gain_scale · size · resolution (the
+lowest wins), goal at the reachable cell nearest the frontier's centroid.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from slam2d import geometry
+from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candidates
+from slam2d.exploration.config import ExplorationConfig
+from slam2d.exploration.frontiers import find_frontiers, frontier_mask
+from slam2d.exploration.gridops import OCCUPIED, GridView, geodesic, information_gain, inside_polygon
+from slam2d.exploration.hybrid import FINAL, HybridMap
+from slam2d.segmentation.observations import raycast_grid
+
+FRONTIER_STRATEGIES = ("nearest_frontier", "explore_lite")
+
+
+@dataclass(eq=False)
+class Goal:
+    """A chosen goal: ``position`` (x, y) m, ``kind`` ("frontier" / "candidate"), the candidate if any,
+    ``waypoints`` (x, y) m to pass first (backtracking over the graph), ``score`` of the choice."""
+
+    position: np.ndarray
+    kind: str
+    candidate: Candidate | None = None
+    waypoints: list = field(default_factory=list)
+    score: float = float("nan")
+
+
+class Explorer:
+    """Chooses goals with ``decide``; ``observe`` makes topological nodes (with their candidates)
+    from the scans; ``spent`` says when the current goal is no longer worth reaching."""
+
+    def __init__(self, cfg: ExplorationConfig, robot_radius: float, inflation: float, range_max: float):
+        self.cfg, self.radius, self.inflation, self.range_max = cfg, robot_radius, inflation, range_max
+        width = 2 * robot_radius
+        safe = robot_radius + cfg.safe_margin
+        self.params = CandidateParams(width=width, delta=cfg.delta, safe_d=safe, safe_dis=safe, d_tho=cfg.d_tho)
+        self.min_frontier = cfg.min_frontier or width
+        self.hybrid = HybridMap(cfg.node_step, cfg.box_width)
+        self.visited: list[np.ndarray] = []
+        self.inaccessible: list[np.ndarray] = []
+        self.decision_seconds: list[float] = []
+        self.fallbacks = 0
+
+    # -- nodes and candidates --------------------------------------------------------------
+
+    def observe(self, pose, scan, view: GridView, force: bool = False) -> bool:
+        """Make a node at ``pose`` when ``node_step`` m have been travelled (or ``force``): its
+        candidates from ``scan``, the older candidates it sees superseded; True if a node was made."""
+        if not (self.hybrid.due(pose) or force):
+            return False
+        sensor = geometry.compose(np.asarray(pose, dtype=np.float64), scan.sensor_pose)
+        found = scan_candidates(scan.ranges, scan.angles, scan.range_max, sensor, self.params)
+        blocked = view.state == OCCUPIED
+        self._supersede(sensor, view, blocked)
+        found = [c for c in found if self._open(c.position)]
+        self.hybrid.add(pose, found, blocked, view.resolution, view.origin)
+        return True
+
+    def _supersede(self, sensor, view: GridView, blocked) -> None:
+        """Older candidates the new node sees (line of sight on the grid, within range − delta) are
+        closed: the new scan holds the frontier there now."""
+        old = self.hybrid.candidates()
+        if not old:
+            return
+        pts = np.array([c.position for c in old])
+        d = np.hypot(*(pts - sensor[:2]).T)
+        bearing = np.arctan2(pts[:, 1] - sensor[1], pts[:, 0] - sensor[0])
+        t, _ = raycast_grid(~blocked, view.resolution, np.repeat(sensor[None, :2], len(old), 0), bearing[:, None],
+                            self.range_max, view.origin)  # fmt: skip
+        seen = (t[:, 0] >= d - view.resolution) & (d < self.range_max - self.cfg.delta)
+        for c, s in zip(old, seen):
+            c.alive = c.alive and not s
+
+    def _open(self, xy) -> bool:
+        """Not within half a node step of a node made so far, nor near an inaccessible goal, inside the bounds."""
+        if len(self.hybrid.nodes) and np.hypot(*(self.hybrid.positions() - xy).T).min() < self.cfg.node_step / 2:
+            return False
+        if self.inaccessible and np.hypot(*(np.array(self.inaccessible) - xy).T).min() < self.cfg.avoid_radius:
+            return False
+        return self.cfg.bounds is None or bool(inside_polygon(xy[None], self.cfg.bounds)[0])
+
+    def maintain(self, view: GridView) -> list[Candidate]:
+        """Global dynamic maintenance: candidates whose gain fell below ``min_gain`` (explored space)
+        are closed; the open ones returned with their gain (cells)."""
+        live = self.hybrid.candidates()
+        if not live:
+            return []
+        gain = information_gain(view, np.array([c.position for c in live]), self.cfg.gain_range, self.cfg.gain_rays)
+        floor = self.cfg.min_gain / view.resolution**2
+        out = []
+        for c, g in zip(live, gain):
+            c.gain = float(g)
+            c.alive = g >= floor and self._open_goal(c.position)
+            if c.alive:
+                out.append(c)
+        return out
+
+    def _open_goal(self, xy) -> bool:
+        return not self.inaccessible or np.hypot(*(np.array(self.inaccessible) - xy).T).min() >= self.cfg.avoid_radius
+
+    # -- decisions -------------------------------------------------------------------------------
+
+    def decide(self, pose, view: GridView) -> Goal | None:
+        """The next goal from ``pose`` on ``view``, or None when nothing is left to explore."""
+        t0 = time.perf_counter()
+        pose = np.asarray(pose, dtype=np.float64)
+        distance = geodesic(view.traversable(self.radius + self.inflation), view.to_cell(pose[:2]), view.resolution)
+        if self.cfg.strategy in FRONTIER_STRATEGIES:
+            goal = self._frontier_goal(pose, view, distance, self.cfg.strategy)
+        else:
+            goal = self._candidate_goal(pose, view, distance)
+            if goal is None and self.cfg.fallback_frontiers:
+                goal = self._frontier_goal(pose, view, distance, "nearest_frontier")
+                self.fallbacks += goal is not None
+        self.decision_seconds.append(time.perf_counter() - t0)
+        return goal
+
+    def _frontier_goal(self, pose, view, distance, strategy) -> Goal | None:
+        avoid = self.visited + self.inaccessible
+        found = find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
+                               self.cfg.avoid_radius)  # fmt: skip
+        if not found:
+            return None
+        if strategy == "explore_lite":
+            res = view.resolution
+            cost = [self.cfg.potential_scale * f.min_distance * res - self.cfg.gain_scale * f.size * res for f in found]
+        else:
+            cost = [f.path for f in found]
+        best = found[int(np.argmin(cost))]
+        return Goal(best.goal, "frontier", score=float(min(cost)))
+
+    def _candidate_goal(self, pose, view, distance) -> Goal | None:
+        live = self.maintain(view)
+        if not live:
+            return None
+        pts = np.array([c.position for c in live])
+        path, target = _path_lengths(view, distance, pts, self.radius + 0.3)
+        ok = np.isfinite(path)
+        if not ok.any():
+            return None
+        live, pts, path, target = [c for c, k in zip(live, ok) if k], pts[ok], path[ok], target[ok]
+        strategy = self.cfg.strategy
+        if strategy == "nearest_candidate":
+            score = -path
+        elif strategy == "farthest_candidate":
+            score = path
+        else:
+            score = self.utility(pose, pts, np.array([c.gain for c in live]), path)
+        for c, s in zip(live, score):
+            c.utility = float(s)
+        k = int(np.argmax(score))
+        chosen = live[k]
+        return Goal(target[k].copy(), "candidate", chosen, self._route(pose, view, chosen), float(score[k]))
+
+    def utility(self, pose, points, gain, path) -> np.ndarray:
+        """F(p) = A(p)·exp(−(k1·L + k2·γ)) for points (P, 2) m with gains (P,) cells and grid path lengths (P,) m."""
+        if self.cfg.distance == "euclidean":
+            length = np.hypot(*(points - pose[:2]).T)
+        else:
+            length = path
+        gamma = np.abs(geometry.wrap_angle(np.arctan2(points[:, 1] - pose[1], points[:, 0] - pose[0]) - pose[2]))
+        return gain * np.exp(-(self.cfg.k1 * length + self.cfg.k2 * gamma))
+
+    def _route(self, pose, view, chosen: Candidate) -> list:
+        """Waypoints over the topological graph to a candidate of an old final node (``backtrack: graph``)."""
+        node = self.hybrid.nodes.get(chosen.node)
+        if self.cfg.backtrack != "graph" or node is None or node.role != FINAL:
+            return []
+        from slam2d.exploration.gridops import straight_reachable
+
+        blocked = view.state == OCCUPIED
+        width = self.cfg.box_width
+
+        def clear(a, b):
+            return straight_reachable(blocked, view.resolution, view.origin, a, b, width)
+
+        way = self.hybrid.route(pose[:2], node.id)
+        while way and clear(pose[:2], way[0]) and (len(way) == 1 or clear(pose[:2], way[1])):
+            way.pop(0)
+        while way and clear(way[-1] if len(way) == 1 else way[-2], chosen.position):
+            way.pop()
+        return way
+
+    # -- goal bookkeeping ---------------------------------------------------------------------
+
+    def spent(self, goal: Goal, view: GridView) -> bool:
+        """Whether the goal is no longer worth reaching: a frontier goal with no frontier cell left
+        within the goal reach; a candidate whose gain fell below ``min_gain``."""
+        if goal.kind == "candidate":
+            g = information_gain(view, goal.candidate.position[None], self.cfg.gain_range, self.cfg.gain_rays)[0]
+            if g < self.cfg.min_gain / view.resolution**2:
+                goal.candidate.alive = False
+                return True
+            return False
+        cell = view.to_cell(goal.position)
+        k = int(np.ceil((self.radius + 0.3) / view.resolution)) + 1
+        h, w = view.shape
+        r0, r1 = max(cell[0] - k, 0), min(cell[0] + k + 1, h)
+        c0, c1 = max(cell[1] - k, 0), min(cell[1] + k + 1, w)
+        if r0 >= r1 or c0 >= c1:
+            return False
+        return not frontier_mask(view.state[max(r0 - 1, 0) : r1 + 1, max(c0 - 1, 0) : c1 + 1])[1:-1, 1:-1].any()
+
+    def reached(self, goal: Goal) -> None:
+        self.visited.append(goal.position.copy())
+        if goal.candidate is not None:
+            goal.candidate.alive = False
+
+    def give_up(self, goal: Goal) -> None:
+        self.inaccessible.append(goal.position.copy())
+        if goal.candidate is not None:
+            goal.candidate.alive = False
+
+
+def _path_lengths(view: GridView, distance: np.ndarray, points, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """Path length (P,) m to each point and where to drive (P, 2) m: the point's cell, else the nearest
+    reachable cell within ``reach`` m (the gap added); inf if none."""
+    cells = view.to_cell(points)
+    inside = view.inside(cells)
+    out = np.full(len(points), np.inf)
+    target = np.array(points, dtype=np.float64).reshape(-1, 2)
+    k = int(np.ceil(reach / view.resolution))
+    h, w = view.shape
+    for i in np.nonzero(inside)[0]:
+        r, c = cells[i]
+        if np.isfinite(distance[r, c]):
+            out[i] = distance[r, c]
+            continue
+        r0, r1, c0, c1 = max(r - k, 0), min(r + k + 1, h), max(c - k, 0), min(c + k + 1, w)
+        win = distance[r0:r1, c0:c1]
+        rr, cc = np.nonzero(np.isfinite(win))
+        if len(rr):
+            gap = np.hypot(rr + r0 - r, cc + c0 - c) * view.resolution
+            j = int(np.argmin(gap))
+            if gap[j] <= reach:
+                out[i] = win[rr[j], cc[j]] + gap[j]
+                target[i] = view.to_world(np.array([rr[j] + r0, cc[j] + c0]))
+    return out, target

@@ -1,0 +1,111 @@
+"""Frontiers on the occupancy grid (Yamauchi 1997; the 2018 thesis, summary §4).
+
+A frontier cell is a known-free cell with an unknown 4-neighbour; 8-connected frontier
+cells form a region; a region shorter than the robot's width is no frontier. The
+region's goal is its centre, or the reachable cell nearest to it (the region's own
+cells first, then cells within the robot's reach of the region). Goals near a visited
+or inaccessible goal, and regions outside an optional bounding polygon, are left out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from slam2d.exploration.gridops import FREE, UNKNOWN, GridView, inside_polygon
+
+_EIGHT = np.ones((3, 3), dtype=int)
+
+
+@dataclass(eq=False)
+class Frontier:
+    """A frontier region: ``cells`` (K, 2) (row, col), ``centre`` (x, y) m, ``goal`` (x, y) m
+    (reachable), ``size`` cells, ``path`` m from the robot to the goal, ``min_distance`` m
+    (Euclidean, robot to the region's nearest cell)."""
+
+    cells: np.ndarray
+    centre: np.ndarray
+    goal: np.ndarray
+    size: int
+    path: float
+    min_distance: float
+
+
+def frontier_mask(state: np.ndarray) -> np.ndarray:
+    """Frontier cells (H, W) bool: free cells with an unknown 4-neighbour (the grid's edge counts as unknown)."""
+    unknown = np.pad(state == UNKNOWN, 1, constant_values=True)
+    near = unknown[:-2, 1:-1] | unknown[2:, 1:-1] | unknown[1:-1, :-2] | unknown[1:-1, 2:]
+    return (state == FREE) & near
+
+
+def frontier_regions(mask: np.ndarray, min_cells: int) -> list[np.ndarray]:
+    """8-connected regions of ``mask`` with at least ``min_cells`` cells, each (K, 2) (row, col)."""
+    labels, n = ndimage.label(mask, structure=_EIGHT)
+    if n == 0:
+        return []
+    order = np.argsort(labels.ravel(), kind="stable")
+    sizes = np.bincount(labels.ravel(), minlength=n + 1)
+    ends = np.cumsum(sizes)
+    out = []
+    for k in range(1, n + 1):
+        if sizes[k] >= min_cells:
+            idx = order[ends[k - 1] : ends[k]]
+            out.append(np.column_stack(np.unravel_index(idx, mask.shape)))
+    return out
+
+
+def find_frontiers(view: GridView, robot_xy, distance: np.ndarray, min_size: float, reach: float,
+                   polygon=None, avoid=(), avoid_radius: float = 0.5) -> list[Frontier]:  # fmt: skip
+    """Reachable frontier regions of ``view``.
+
+    ``distance`` (H, W) m: path length from the robot over traversable cells (inf: unreachable);
+    ``min_size`` m: shortest region (cells × resolution); ``reach`` m: how far from the region a
+    goal cell may lie; ``polygon`` (K, 2) m: frontier cells outside are ignored; goals within
+    ``avoid_radius`` of an ``avoid`` point (visited, inaccessible) are left out.
+    """
+    mask = frontier_mask(view.state)
+    if polygon is not None:
+        rows, cols = np.nonzero(mask)
+        keep = inside_polygon(view.to_world(np.column_stack([rows, cols])), polygon)
+        mask[rows[~keep], cols[~keep]] = False
+    min_cells = max(1, int(np.ceil(min_size / view.resolution)))
+    avoid = np.asarray(avoid, dtype=np.float64).reshape(-1, 2)
+    robot_xy = np.asarray(robot_xy, dtype=np.float64)[:2]
+    out = []
+    for cells in frontier_regions(mask, min_cells):
+        goal_cell = _goal_cell(cells, distance, reach / view.resolution)
+        if goal_cell is None:
+            continue
+        goal = view.to_world(goal_cell)
+        if len(avoid) and np.hypot(*(avoid - goal).T).min() < avoid_radius:
+            continue
+        xy = view.to_world(cells)
+        out.append(Frontier(cells, xy.mean(axis=0), goal, len(cells), float(distance[goal_cell[0], goal_cell[1]]),
+                            float(np.hypot(*(xy - robot_xy).T).min())))  # fmt: skip
+    return out
+
+
+def _goal_cell(cells: np.ndarray, distance: np.ndarray, reach_cells: float):
+    """The reachable cell nearest the region's centre: among its own cells, else among cells
+    within ``reach_cells`` of them; None if none is reachable."""
+    centre = cells.mean(axis=0)
+    d = distance[cells[:, 0], cells[:, 1]]
+    if np.isfinite(d).any():
+        own = cells[np.isfinite(d)]
+        return own[np.argmin(np.hypot(*(own - centre).T))]
+    k = int(np.ceil(reach_cells))
+    lo = np.maximum(cells.min(axis=0) - k, 0)
+    hi = np.minimum(cells.max(axis=0) + k + 1, distance.shape)
+    window = np.isfinite(distance[lo[0] : hi[0], lo[1] : hi[1]])
+    if not window.any():
+        return None
+    seed = np.zeros(window.shape, dtype=bool)
+    seed[cells[:, 0] - lo[0], cells[:, 1] - lo[1]] = True
+    near = ndimage.distance_transform_edt(~seed) <= reach_cells
+    rows, cols = np.nonzero(window & near)
+    if len(rows) == 0:
+        return None
+    found = np.column_stack([rows, cols]) + lo
+    return found[np.argmin(np.hypot(*(found - centre).T))]

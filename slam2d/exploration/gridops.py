@@ -1,0 +1,202 @@
+"""Grid operations shared by the explorers: cell states of an occupancy grid, geodesic distances,
+information gain by ray casting, the three-ray straight-line test and point-in-polygon.
+
+Cells are (row, col) with rows along y, as :class:`~slam2d.types.GridFrame`.
+"""
+
+from __future__ import annotations
+
+import heapq
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from slam2d.planning.grid import inflate
+from slam2d.segmentation.observations import raycast_grid
+
+FREE, OCCUPIED, UNKNOWN = 0, 1, 2
+
+
+@dataclass(eq=False)
+class GridView:
+    """One snapshot of a map for a decision: ``state`` (H, W) int8 (FREE / OCCUPIED / UNKNOWN),
+    ``resolution`` m/cell, ``origin`` (x, y) m of cell (0, 0)'s corner."""
+
+    state: np.ndarray
+    resolution: float
+    origin: tuple[float, float]
+
+    @classmethod
+    def of(cls, grid, free_thresh: float = 0.196, occupied_thresh: float = 0.65) -> GridView:
+        """The view of an :class:`~slam2d.mapping.occupancy.OccupancyGrid`."""
+        state = np.full(grid.shape, UNKNOWN, dtype=np.int8)
+        state[grid.free_mask(free_thresh)] = FREE
+        state[grid.occupied_mask(occupied_thresh)] = OCCUPIED
+        return cls(state, grid.resolution, grid.origin)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.state.shape
+
+    def to_cell(self, xy) -> np.ndarray:
+        """Integer (row, col) cells (..., 2) of points (..., 2) m."""
+        xy = np.asarray(xy, dtype=np.float64)
+        o = np.asarray(self.origin)
+        return np.floor((xy[..., ::-1] - o[::-1]) / self.resolution).astype(np.int64)
+
+    def to_world(self, cells) -> np.ndarray:
+        """Centres (x, y) m (..., 2) of (row, col) cells (..., 2)."""
+        rc = np.asarray(cells, dtype=np.float64)
+        return (rc[..., ::-1] + 0.5) * self.resolution + np.asarray(self.origin)
+
+    def inside(self, cells) -> np.ndarray:
+        rc = np.asarray(cells)
+        h, w = self.shape
+        return (rc[..., 0] >= 0) & (rc[..., 0] < h) & (rc[..., 1] >= 0) & (rc[..., 1] < w)
+
+    def traversable(self, radius: float) -> np.ndarray:
+        """Known-free cells farther than ``radius`` m from every occupied cell (H, W) bool."""
+        clear = inflate(self.state != OCCUPIED, radius / self.resolution)
+        return clear & (self.state == FREE)
+
+
+# --------------------------------------------------------------------------- geodesic distance
+
+
+@njit(cache=True)
+def _dijkstra(passable, r0, c0, out):
+    h, w = passable.shape
+    out[r0, c0] = 0.0
+    heap = [(0.0, r0, c0)]
+    while len(heap) > 0:
+        d, r, c = heapq.heappop(heap)
+        if d > out[r, c]:
+            continue
+        for dr in range(-1, 2):
+            for dc in range(-1, 2):
+                if dr == 0 and dc == 0:
+                    continue
+                rr, cc = r + dr, c + dc
+                if rr < 0 or cc < 0 or rr >= h or cc >= w or not passable[rr, cc]:
+                    continue
+                if dr != 0 and dc != 0 and not (passable[r + dr, c] and passable[r, c + dc]):
+                    continue
+                nd = d + (1.4142135623730951 if dr != 0 and dc != 0 else 1.0)
+                if nd < out[rr, cc]:
+                    out[rr, cc] = nd
+                    heapq.heappush(heap, (nd, rr, cc))
+
+
+def geodesic(passable: np.ndarray, start_cell, resolution: float, snap_cells: int = 10) -> np.ndarray:
+    """Shortest 8-connected path length (m) from ``start_cell`` to every cell over ``passable`` (H, W)
+    (no corner cutting); inf where unreachable. A start outside ``passable`` is moved to the nearest
+    passable cell within ``snap_cells`` (the rest of that distance added)."""
+    passable = np.ascontiguousarray(passable, dtype=np.bool_)
+    out = np.full(passable.shape, np.inf)
+    start = _snap(passable, np.asarray(start_cell, dtype=np.int64), snap_cells)
+    if start is None:
+        return out
+    cell, extra = start
+    _dijkstra(passable, int(cell[0]), int(cell[1]), out)
+    return (out + extra) * resolution
+
+
+def _snap(passable, cell, within: int):
+    h, w = passable.shape
+    r0, r1 = max(cell[0] - within, 0), min(cell[0] + within + 1, h)
+    c0, c1 = max(cell[1] - within, 0), min(cell[1] + within + 1, w)
+    rows, cols = np.nonzero(passable[r0:r1, c0:c1])
+    if len(rows) == 0:
+        return None
+    d = np.hypot(rows + r0 - cell[0], cols + c0 - cell[1])
+    k = int(np.argmin(d))
+    return np.array([rows[k] + r0, cols[k] + c0]), float(d[k])
+
+
+# --------------------------------------------------------------------------- information gain
+
+
+@njit(cache=True)
+def _gain(state, gxy, n_rays, max_t, mark):
+    h, w = state.shape
+    out = np.zeros(gxy.shape[0], dtype=np.int64)
+    for p in range(gxy.shape[0]):
+        token = p + 1
+        gx, gy = gxy[p, 0], gxy[p, 1]
+        count = 0
+        for b in range(n_rays):
+            a = 2.0 * np.pi * b / n_rays
+            dx, dy = np.cos(a), np.sin(a)
+            c, r = int(np.floor(gx)), int(np.floor(gy))
+            step_c = 1 if dx > 0 else -1
+            step_r = 1 if dy > 0 else -1
+            inv_x = 1.0 / abs(dx) if dx != 0 else np.inf
+            inv_y = 1.0 / abs(dy) if dy != 0 else np.inf
+            tmx = ((c + 1 - gx) if dx > 0 else (gx - c)) * inv_x
+            tmy = ((r + 1 - gy) if dy > 0 else (gy - r)) * inv_y
+            t = 0.0
+            while t < max_t:
+                if r < 0 or c < 0 or r >= h or c >= w:
+                    count += 1  # beyond the map: unknown (counted per step, not per cell)
+                else:
+                    s = state[r, c]
+                    if s == 1:
+                        break
+                    if s == 2 and mark[r, c] != token:
+                        mark[r, c] = token
+                        count += 1
+                if tmx < tmy:
+                    t = tmx
+                    tmx += inv_x
+                    c += step_c
+                else:
+                    t = tmy
+                    tmy += inv_y
+                    r += step_r
+        out[p] = count
+    return out
+
+
+def information_gain(view: GridView, points, max_range: float, rays: int = 180) -> np.ndarray:
+    """Unknown cells (P,) visible from each point (P, 2) m within ``max_range`` m: ``rays`` rays cast
+    (Amanatides–Woo) through free and unknown cells until an occupied one."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    gxy = np.ascontiguousarray((points - np.asarray(view.origin)) / view.resolution)
+    mark = np.zeros(view.shape, dtype=np.int64)
+    return _gain(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution, mark)
+
+
+# --------------------------------------------------------------------------- straight-line reachability
+
+
+def straight_reachable(blocked: np.ndarray, resolution: float, origin, a, b, width: float) -> bool:
+    """Whether ``b`` (x, y) m is straight-line reachable from ``a``: three rays — the two long sides
+    and the midline of a box of ``width`` m from ``a`` to ``b`` — cast on the grid (Amanatides–Woo,
+    ``raycast_grid``) reach ``b``'s end of the box without meeting a ``blocked`` (H, W) cell."""
+    a, b = np.asarray(a, dtype=np.float64)[:2], np.asarray(b, dtype=np.float64)[:2]
+    d = b - a
+    length = float(np.hypot(*d))
+    if length < 1e-9:
+        return True
+    normal = np.array([-d[1], d[0]]) / length
+    starts = a + np.outer([-0.5, 0.0, 0.5], normal * width)
+    angle = np.full((3, 1), np.arctan2(d[1], d[0]))
+    _, hit = raycast_grid(~np.asarray(blocked, dtype=bool), resolution, starts, angle, length, origin)
+    return not bool(hit.any())
+
+
+# --------------------------------------------------------------------------- polygons
+
+
+def inside_polygon(points, polygon) -> np.ndarray:
+    """Even-odd test: which points (P, 2) lie inside ``polygon`` (K, 2) (m)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    poly = np.asarray(polygon, dtype=np.float64)
+    x, y = pts[:, :1], pts[:, 1:]
+    x0, y0 = poly[:, 0], poly[:, 1]
+    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+    crosses = (y0 > y) != (y1 > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xc = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+    return (crosses & (x < xc)).sum(axis=1) % 2 == 1

@@ -1,0 +1,494 @@
+"""``slam2d explore``: autonomous exploration with SLAM in the loop — a config in, a results folder out.
+
+The simulated robot starts in ``dataset.simulator.world`` knowing nothing. Online SLAM
+(the ICP frontend and pose graph of ``slam2d run``, fed one scan at a time) gives the
+pose and the grid; the explorer picks a goal on them (``exploration.strategy``) and a
+:class:`~slam2d.navigation.Navigator` drives there, until no goal is left or a limit is
+reached. The true pose is used only to score the run. The folder holds the resolved
+config, the final map (PGM + YAML, PNG with the path and the hybrid graph), the hybrid
+map (``hybrid.json``), the true and estimated trajectories, coverage against time and
+distance (``coverage.csv``, ``coverage.png``), ``explore.gif`` and ``metrics.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from slam2d import config as config_mod
+from slam2d.errors import InputError
+from slam2d.exploration.config import ExploreConfig
+from slam2d.exploration.explorer import Explorer, Goal
+from slam2d.exploration.gridops import GridView
+
+log = logging.getLogger(__name__)
+
+GIF_FRAMES = 80
+WARMUP = 2.0  # s the robot stands still at the start while the grid's first cells become free
+START_CLEARANCE = 0.5  # m from walls for a seeded start
+REPEAT_RADIUS = 0.5  # m: path within this of earlier path is repeated
+REPEAT_GAP = 2.0  # m of travel before a piece of path counts as "earlier"
+SAMPLE_STEP = 0.1  # m between path samples for the repetition metric
+
+
+@dataclass(eq=False)
+class ExplorationRun:
+    """What :func:`explore` returns (no files written)."""
+
+    world: Any
+    grid: Any
+    truth: np.ndarray  # (N, 3) true poses
+    estimate: np.ndarray  # (N, 3) SLAM poses
+    stamps: np.ndarray
+    explorer: Explorer
+    curve: np.ndarray  # (K, 3): time s, distance m, coverage
+    snapshots: list = field(default_factory=list)
+    goals: list = field(default_factory=list)
+    metrics: dict = field(default_factory=dict)
+
+
+def run_explore(cfg: ExploreConfig) -> Path:
+    """Run ``cfg``'s exploration; return the results folder."""
+    from slam2d.experiment import _jsonable, results_folder
+
+    cfg = resolved(cfg)
+    with results_folder(cfg.output.root, cfg.name) as (work, published):
+        log.info("slam2d explore '%s' (%s) -> %s", cfg.name, cfg.exploration.strategy, cfg.output.root)
+        (work / "config.yaml").write_text(config_mod.dump(cfg))
+        run = explore(cfg)
+        _write(work, cfg, run)
+        (work / "metrics.json").write_text(json.dumps(_jsonable(run.metrics), indent=2))
+        m = run.metrics
+        log.info("%s: coverage %.1f %% in %.0f s, %.1f m (%.0f s wall)", m["stop_reason"], 100 * m["coverage"],
+                 m["time"], m["distance"], m["wall_s"])  # fmt: skip
+    return published[0]
+
+
+def resolved(cfg: ExploreConfig) -> ExploreConfig:
+    """``cfg`` with ``mapping.max_range`` at the laser's range limit when unset: a simulated laser's
+    no-return is open space up to the limit, which A-type candidates stand on."""
+    if cfg.mapping.max_range is None:
+        mapping = cfg.mapping.model_copy(update={"max_range": cfg.dataset.simulator.laser.range_max})
+        cfg = cfg.model_copy(update={"mapping": mapping})
+    return cfg
+
+
+# --------------------------------------------------------------------------- the loop
+
+
+class _Loop:
+    """State of one exploration run: robot, SLAM, explorer, the current goal and its navigator."""
+
+    def __init__(self, cfg: ExploreConfig):
+        from slam2d.navigation.run import _navigator_options
+        from slam2d.sim import Robot
+        from slam2d.sim.robot import RobotConfig
+        from slam2d.sim.world import load_world
+        from slam2d.slam import OnlineSlam
+
+        self.cfg, self.ecfg, sim = cfg, cfg.exploration, cfg.dataset.simulator
+        self.world = load_world(sim.world, sim.resolution)
+        self.truth_free, self.truth_frame = truth_map(self.world)
+        start = np.asarray(self.ecfg.start, float) if self.ecfg.start is not None else seeded_start(
+            self.world, sim.world, self.truth_free, self.truth_frame, cfg.seed)  # fmt: skip
+        if not self.world.free(start[None, :2], 0.2)[0]:
+            raise InputError("exploration.start", f"({start[0]:.2f}, {start[1]:.2f}) is not free for the robot")
+        self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2])
+        self.robot = Robot(self.world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), seed=cfg.seed)
+        self.options = _navigator_options({"max_time": 120.0, **self.ecfg.options}, True)
+        self.slam = OnlineSlam(cfg)
+        self.explorer = Explorer(self.ecfg, self.robot.cfg.radius, self.options.inflation_margin,
+                                 sim.laser.range_max)  # fmt: skip
+        self.nav = None
+        self.goal: Goal | None = None
+        self.legs: list[np.ndarray] = []
+        self.goals: list[dict] = []
+        self.replans = self.recoveries = 0
+
+    def view(self) -> GridView:
+        m = self.cfg.mapping
+        return GridView.of(self.slam.grid, m.free_thresh, m.occupied_thresh)
+
+    def set_goal(self, goal: Goal | None, now: float) -> None:
+        from slam2d.navigation import Navigator
+
+        self.goal = goal
+        if goal is None:
+            self.nav = None
+            return
+        self.legs = [np.asarray(w, float) for w in goal.waypoints] + [goal.position]
+        self.nav = Navigator(self.legs[0], self.robot.cfg, self.options)
+        self.goal_t0, self.best = now, (np.inf, now)
+        self.goals.append({"time": now, "position": goal.position.tolist(), "kind": goal.kind,
+                           "waypoints": len(goal.waypoints), "outcome": "active"})  # fmt: skip
+
+    def next_leg(self, now: float) -> None:
+        from slam2d.navigation import Navigator
+
+        self._count(self.nav)
+        self.legs.pop(0)
+        self.nav = Navigator(self.legs[0], self.robot.cfg, self.options)
+        self.goal_t0, self.best = now, (np.inf, now)
+
+    def close_goal(self, outcome: str) -> None:
+        self._count(self.nav)
+        self.goals[-1]["outcome"] = outcome
+        if outcome == "reached":
+            self.explorer.reached(self.goal)
+        elif outcome == "inaccessible":
+            self.explorer.give_up(self.goal)
+        self.goal = self.nav = None
+
+    def _count(self, nav) -> None:
+        if nav is not None:
+            self.replans += nav.replans
+            self.recoveries += nav.recoveries
+
+    def no_progress(self, pose, now: float) -> bool:
+        """True when the distance to the current leg has not shrunk by 0.3 m within ``goal_timeout``."""
+        d = float(np.hypot(*(pose[:2] - self.legs[0])))
+        if d < self.best[0] - 0.3:
+            self.best = (d, now)
+        return now - self.best[1] > self.ecfg.goal_timeout
+
+
+def explore(cfg: ExploreConfig, progress=None) -> ExplorationRun:
+    """One exploration run of ``cfg`` (no files written); ``progress(now, coverage)`` is told every second."""
+    from slam2d.navigation.navigator import ACTIVE, REACHED, clearance
+
+    t_wall = time.perf_counter()
+    cfg = resolved(cfg)
+    loop, ecfg = _Loop(cfg), cfg.exploration
+    period = loop.options.period
+    cover = Coverage(loop.reachable, loop.truth_frame, cfg.mapping)
+    step = loop.robot.step(0.0, 0.0, 0.0)
+    t0 = step.scan.stamp
+    loop.slam.add(step.scan)
+    truth, est, stamps = [step.pose], [loop.slam.pose.copy()], [t0]
+    loop.explorer.observe(est[-1], step.scan, loop.view(), force=True)
+    curve, snaps = [], []
+    driven, collisions, in_contact, min_clear = 0.0, 0, False, clearance(loop.world, loop.robot)
+    next_check = next_sample = next_snap = 0.0
+    idle, stop = 0, ""
+    while not stop:
+        now = step.scan.stamp - t0
+        pose = loop.slam.pose
+        if now >= next_sample:
+            curve.append((now, driven, cover(loop.slam.grid)))
+            next_sample += 1.0
+            if progress:
+                progress(now, curve[-1][2])
+        if ecfg.animation and now >= next_snap:
+            snaps.append(_snapshot(loop, len(truth)))
+            next_snap += ecfg.snapshot_period
+        if now > ecfg.max_time or driven > ecfg.max_distance:
+            stop = "limit"
+            break
+        if loop.goal is not None and now >= next_check:
+            next_check = now + ecfg.check_period
+            if loop.explorer.spent(loop.goal, loop.view()):
+                loop.close_goal("spent")
+        if loop.goal is None:
+            loop.set_goal(loop.explorer.decide(pose, loop.view()), now)
+            if loop.goal is None and now >= WARMUP:
+                stop = "done"
+                break
+        if loop.goal is None:  # the first scans: no cell is free yet (log-odds need a few misses)
+            step = _wait(loop, step, period, truth, est, stamps)
+            continue
+        d_leg = float(np.hypot(*(pose[:2] - loop.legs[0])))
+        if d_leg < ecfg.goal_reached:
+            if len(loop.legs) > 1:
+                loop.next_leg(now)
+                continue
+            loop.close_goal("reached")
+            loop.explorer.observe(pose, step.scan, loop.view(), force=True)
+            idle += 1
+            if idle < 20:
+                continue
+        cmd = None
+        if loop.nav is not None:
+            cmd = loop.nav.step(pose, step.velocity, step.scan.points_in_base(), loop.slam.grid, now - loop.goal_t0)
+            if loop.nav.status == REACHED:
+                loop.close_goal("reached")
+            elif loop.nav.status != ACTIVE or loop.no_progress(pose, now):
+                loop.close_goal("inaccessible")
+            if loop.nav is None and idle < 20:  # a new goal at once, the robot waits at most 20 decisions
+                idle += 1
+                continue
+        idle = 0
+        v, w = (cmd.v, cmd.w) if cmd is not None and loop.nav is not None else (0.0, 0.0)
+        before = step.pose[:2].copy()
+        step = loop.robot.step(v, w, period)
+        driven += float(np.hypot(*(step.pose[:2] - before)))
+        collisions += int(step.collision and not in_contact)
+        in_contact = step.collision
+        min_clear = min(min_clear, clearance(loop.world, loop.robot))
+        loop.slam.add(step.scan)
+        truth.append(step.pose)
+        est.append(loop.slam.pose.copy())
+        stamps.append(step.scan.stamp)
+        loop.explorer.observe(est[-1], step.scan, _Lazy(loop))
+    if loop.nav is not None:
+        loop.close_goal("stopped")
+    loop.explorer.hybrid.finish()
+    grid = loop.slam.grid
+    now = step.scan.stamp - t0
+    curve.append((now, driven, cover(grid)))
+    if ecfg.animation:
+        snaps.append(_snapshot(loop, len(truth)))
+    run = ExplorationRun(loop.world, grid, np.array(truth), np.array(est), np.array(stamps), loop.explorer,
+                         np.array(curve), snaps, loop.goals)  # fmt: skip
+    run.metrics = _metrics(run, loop, cover, stop, collisions, min_clear, time.perf_counter() - t_wall)
+    return run
+
+
+def _wait(loop: _Loop, step, period: float, truth, est, stamps):
+    """One control period standing still (scan into SLAM, poses recorded)."""
+    step = loop.robot.step(0.0, 0.0, period)
+    loop.slam.add(step.scan)
+    truth.append(step.pose)
+    est.append(loop.slam.pose.copy())
+    stamps.append(step.scan.stamp)
+    return step
+
+
+class _Lazy:
+    """A grid view made only when a node is due (``observe`` asks for it then)."""
+
+    def __init__(self, loop):
+        self.loop, self._view = loop, None
+
+    def __getattr__(self, name):
+        if self._view is None:
+            self._view = self.loop.view()
+        return getattr(self._view, name)
+
+
+# --------------------------------------------------------------------------- ground truth and scores
+
+
+def truth_map(world, resolution: float = 0.05):
+    """The world's free mask (H, W) and its grid frame (a PlanningGrid)."""
+    from slam2d.navigation.maps import world_grid
+
+    grid = world_grid(world, resolution)
+    return grid.free, grid
+
+
+def reachable_free(free: np.ndarray, frame, start_xy) -> np.ndarray:
+    """Free cells 4-connected to the start's cell: the area an explorer can be asked to map."""
+    labels, _ = ndimage.label(free)
+    cell = frame.world_to_cell(np.asarray(start_xy, float))
+    if not frame.in_bounds(cell) or labels[cell[0], cell[1]] == 0:
+        raise InputError("exploration.start", "the start is not in the world's free space")
+    return labels == labels[cell[0], cell[1]]
+
+
+def seeded_start(world, name: str, free: np.ndarray, frame, seed: int) -> np.ndarray:
+    """A start pose: the office route's start for the office; else a seeded cell at least
+    START_CLEARANCE from walls in the largest open component that does not touch the map's edge
+    (the building, not the area around it), heading seeded too."""
+    if name == "office":
+        from slam2d.navigation.run import _route_start
+
+        return _route_start("office")
+    clear = ndimage.distance_transform_edt(free) * frame.resolution > START_CLEARANCE
+    labels, n = ndimage.label(clear)
+    if n == 0:
+        raise InputError("dataset.simulator.world", f"{name}: no free place {START_CLEARANCE} m from every wall")
+    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    sizes = np.bincount(labels.ravel(), minlength=n + 1)
+    sizes[0] = 0
+    inner = sizes.copy()
+    inner[edge] = 0
+    pick = int(np.argmax(inner)) if inner.max() > 0 else int(np.argmax(sizes))
+    rows, cols = np.nonzero(labels == pick)
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(len(rows)))
+    xy = frame.cell_to_world(np.array([rows[k], cols[k]]))
+    return np.array([xy[0], xy[1], rng.uniform(-np.pi, np.pi)])
+
+
+class Coverage:
+    """Explored fraction of the reachable free area: a reachable true-free cell counts as explored
+    when the SLAM grid knows (free or occupied) a cell within one cell of it."""
+
+    def __init__(self, reachable: np.ndarray, frame, mapping):
+        rows, cols = np.nonzero(reachable)
+        self.points = frame.cell_to_world(np.column_stack([rows, cols]))
+        self.reachable, self.frame, self.mapping = reachable, frame, mapping
+
+    def __call__(self, grid) -> float:
+        known = grid.free_mask(self.mapping.free_thresh) | grid.occupied_mask(self.mapping.occupied_thresh)
+        known = ndimage.binary_dilation(known, np.ones((3, 3), bool))
+        return float(_lookup(grid, known, self.points).mean()) if len(self.points) else 1.0
+
+    def iou(self, grid) -> float:
+        """IoU of SLAM's free cells and the reachable true free space, on the world's cells."""
+        h, w = self.reachable.shape
+        rows, cols = np.indices((h, w))
+        centres = self.frame.cell_to_world(np.column_stack([rows.ravel(), cols.ravel()]))
+        free = _lookup(grid, grid.free_mask(self.mapping.free_thresh), centres).reshape(h, w)
+        union = (free | self.reachable).sum()
+        return float((free & self.reachable).sum() / union) if union else 1.0
+
+
+def _lookup(grid, mask: np.ndarray, points) -> np.ndarray:
+    cells = grid.world_to_cell(points)
+    ok = grid.in_bounds(cells)
+    out = np.zeros(len(points), dtype=bool)
+    out[ok] = mask[cells[ok, 0], cells[ok, 1]]
+    return out
+
+
+def path_repetition(xy: np.ndarray) -> float:
+    """Fraction of the path (resampled every SAMPLE_STEP m) within REPEAT_RADIUS of path driven more than
+    REPEAT_GAP m earlier."""
+    from scipy.spatial import cKDTree
+
+    seg = np.hypot(*np.diff(xy, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] < REPEAT_GAP:
+        return 0.0
+    at = np.arange(0.0, s[-1], SAMPLE_STEP)
+    pts = np.column_stack([np.interp(at, s, xy[:, 0]), np.interp(at, s, xy[:, 1])])
+    near = cKDTree(pts).query_ball_point(pts, REPEAT_RADIUS)
+    gap = int(round(REPEAT_GAP / SAMPLE_STEP))
+    repeated = [bool(js) and min(js) < i - gap for i, js in enumerate(near)]
+    return float(np.mean(repeated))
+
+
+def _at_coverage(curve: np.ndarray, level: float) -> tuple[float, float]:
+    """(time s, distance m) when coverage first reached ``level``; nan if never."""
+    k = np.nonzero(curve[:, 2] >= level)[0]
+    return (float(curve[k[0], 0]), float(curve[k[0], 1])) if len(k) else (float("nan"), float("nan"))
+
+
+def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, collisions: int, min_clear: float,
+             wall: float) -> dict:  # fmt: skip
+    from slam2d.evaluation.trajectory import ate
+
+    curve, ex = run.curve, run.explorer
+    t90, d90 = _at_coverage(curve, 0.90)
+    t99, d99 = _at_coverage(curve, 0.99)
+    dec = np.array(ex.decision_seconds) * 1000 if ex.decision_seconds else np.array([np.nan])
+    sim_time = float(curve[-1, 0])
+    outcomes = [g["outcome"] for g in run.goals]
+    return {
+        "world": loop.world.name, "strategy": loop.ecfg.strategy, "seed": loop.cfg.seed,
+        "stop_reason": stop, "coverage": float(curve[-1, 2]), "time": sim_time, "distance": float(curve[-1, 1]),
+        "time_to_90": t90, "distance_to_90": d90, "time_to_99": t99, "distance_to_99": d99,
+        "premature_stop": stop == "done" and curve[-1, 2] < 0.99,
+        "collisions": collisions, "min_clearance": float(min_clear),
+        "goals": len(run.goals), "goals_reached": outcomes.count("reached"), "goals_spent": outcomes.count("spent"),
+        "goals_inaccessible": outcomes.count("inaccessible"), "frontier_fallbacks": ex.fallbacks,
+        "replans": loop.replans, "recoveries": loop.recoveries,
+        "path_repetition": path_repetition(run.truth[:, :2]),
+        "map_iou": cover.iou(run.grid),
+        "ate_rmse": ate(run.estimate, run.truth, align=False)["rmse"],
+        "decisions": len(ex.decision_seconds), "decision_ms_median": float(np.median(dec)),
+        "decision_ms_p95": float(np.percentile(dec, 95)),
+        **ex.hybrid.counts(),
+        "reachable_area_m2": float(loop.reachable.sum() * loop.truth_frame.resolution**2),
+        "wall_s": wall, "real_time_factor": sim_time / wall if wall > 0 else float("nan"),
+    }  # fmt: skip
+
+
+# --------------------------------------------------------------------------- files
+
+
+def _snapshot(loop: _Loop, n_poses: int) -> dict:
+    """The map (downsampled ×2, uint8 grey) and the counts needed to draw one animation frame."""
+    grid = loop.slam.grid
+    p = grid.probability()[::2, ::2]
+    return {"image": (255 * (1.0 - p)).astype(np.uint8), "extent": grid.extent, "n": n_poses,
+            "nodes": loop.explorer.hybrid.positions().copy(),
+            "goal": None if loop.goal is None else loop.goal.position.copy()}  # fmt: skip
+
+
+def _write(out: Path, cfg: ExploreConfig, run: ExplorationRun) -> None:
+    from slam2d.evaluation.trajectory import write_tum
+    from slam2d.mapping.export import save_map_server
+    from slam2d.types import Trajectory
+
+    save_map_server(run.grid, out / "map", cfg.mapping)
+    write_tum(out / "trajectory_true.tum", Trajectory(run.stamps, run.truth))
+    write_tum(out / "trajectory.tum", Trajectory(run.stamps, run.estimate))
+    run.explorer.hybrid.save(out / "hybrid.json")
+    (out / "goals.json").write_text(json.dumps(run.goals, indent=1))
+    np.savetxt(out / "coverage.csv", run.curve, delimiter=",", header="time_s,distance_m,coverage", comments="",
+               fmt="%.4f")  # fmt: skip
+    if cfg.output.figures:
+        _figures(out, run)
+        if cfg.exploration.animation and run.snapshots:
+            _animation(out, run)
+
+
+def _figures(out: Path, run: ExplorationRun) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    m = run.metrics
+    fig, ax = plt.subplots(figsize=(9, 6))
+    x0, x1, y0, y1 = run.grid.extent
+    ax.imshow(1.0 - run.grid.probability(), cmap="gray", origin="lower", extent=(x0, x1, y0, y1), vmin=0, vmax=1)
+    ax.plot(*run.truth[:, :2].T, color="tab:blue", lw=0.9, label="path (true)")
+    run.explorer.hybrid.draw(ax)
+    ax.plot(*run.truth[0, :2], "g^", ms=9, label="start")
+    ax.set_aspect("equal")
+    ax.set_title(f"{m['world']} · {m['strategy']}: coverage {100 * m['coverage']:.1f} %, {m['distance']:.0f} m, "
+                 f"{m['time']:.0f} s, IoU {m['map_iou']:.3f}", fontsize=9)  # fmt: skip
+    ax.legend(loc="upper right", fontsize=7)
+    fig.savefig(out / "map.png", dpi=130, bbox_inches="tight")
+    plt.close(fig)
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.2), sharey=True)
+    a1.plot(run.curve[:, 0], 100 * run.curve[:, 2])
+    a1.set_xlabel("time (s)")
+    a1.set_ylabel("coverage (%)")
+    a2.plot(run.curve[:, 1], 100 * run.curve[:, 2])
+    a2.set_xlabel("distance (m)")
+    for a in (a1, a2):
+        a.axhline(99, color="0.6", lw=0.7, ls="--")
+        a.grid(alpha=0.3)
+    fig.savefig(out / "coverage.png", dpi=120, bbox_inches="tight")
+    plt.close(fig)
+
+
+def _animation(out: Path, run: ExplorationRun) -> None:
+    """explore.gif: the map being built, the path, the nodes and the goal."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    snaps = run.snapshots
+    frames = np.unique(np.linspace(0, len(snaps) - 1, min(GIF_FRAMES, len(snaps))).astype(int))
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    x0, x1, y0, y1 = run.grid.extent
+
+    def draw(k):
+        s = snaps[k]
+        ax.clear()
+        ax.imshow(s["image"], cmap="gray", origin="lower", extent=s["extent"], vmin=0, vmax=255)
+        ax.plot(*run.truth[: s["n"], :2].T, color="tab:blue", lw=0.9)
+        ax.plot(*s["nodes"].T, ".", color="tab:purple", ms=3)
+        if s["goal"] is not None:
+            ax.plot(*s["goal"], "r*", ms=9)
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
+        ax.set_aspect("equal")
+        ax.set_title(f"t = {run.stamps[s['n'] - 1] - run.stamps[0]:.0f} s", fontsize=9)
+
+    FuncAnimation(fig, draw, frames=frames, blit=False).save(out / "explore.gif", writer=PillowWriter(fps=8))
+    plt.close(fig)
