@@ -51,6 +51,7 @@ WINDOW_STEP = 0.5  # m; grown windows are rounded up to this step (each window s
 WIDE_COARSENING = 2  # a wide search runs on a grid this many times coarser than ``resolution``
 WIDE_TOP_BLOCKS = 8  # ... with enough pooled levels for about this many top blocks across the window
 WIDE_MAX_DEPTH = 7  # ... but no more levels than this
+VIEW_PERCENTILE = 95  # a wide match is verified on the keyframes within this percentile of the scan's ranges
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,8 +91,8 @@ class LoopCloser:
         self._travelled: list[float] = []
         self._points: dict[int, np.ndarray] = {}
         self._submaps: OrderedDict[int, _Submap] = OrderedDict()
-        self._loop_edges: list[tuple[int, int]] = []  # positions of accepted loops' keyframes
-        self._path: tuple[int, np.ndarray] | None = None  # (key, graph path length to every keyframe)
+        self._loops: list[LoopClosure] = []  # accepted closures that pin their pair
+        self._path: tuple[tuple, np.ndarray] | None = None  # (cache key, graph path length to every keyframe)
 
     def __len__(self) -> int:
         return len(self._keys)
@@ -118,21 +119,35 @@ class LoopCloser:
         except KeyError:
             raise KeyError(f"keyframe {key} was never added") from None
 
-    def path_lengths(self, key: int) -> np.ndarray:
+    def path_lengths(self, key: int, poses) -> np.ndarray:
         """Shortest path (m) from keyframe ``key`` to every keyframe (in insertion order) through
         the graph: along the trajectory (the distance travelled between consecutive keyframes)
-        and across accepted loops (free). What a search must allow for grows with it."""
-        if self._path is not None and self._path[0] == key:
-            return self._path[1]
+        and across accepted loops. What a search must allow for grows with it.
+
+        A loop the estimate ``poses`` (K, 3) satisfies is a free shortcut; one it does not
+        yet follow (a robust kernel holds back a single large correction until others
+        confirm it) costs the path its residual divided by ``drift``, so the windows
+        still cover the error it reports."""
         n = len(self._keys)
+        loops = self._loops
+        pairs = np.array([(self._position(c.i), self._position(c.j)) for c in loops], dtype=np.int64).reshape(-1, 2)
+        lengths = np.zeros(len(loops))
+        if loops and self.cfg.drift > 0:
+            poses = geometry.as_pose(poses).reshape(-1, 3)
+            ij = np.array([(c.i, c.j) for c in loops])
+            measured = np.array([c.delta for c in loops])
+            residual = geometry.between(geometry.between(poses[ij[:, 0]], poses[ij[:, 1]]), measured)
+            lengths = np.hypot(residual[:, 0], residual[:, 1]) / self.cfg.drift
+        cache = (key, n, lengths.tobytes())
+        if self._path is not None and self._path[0] == cache:
+            return self._path[1]
         trav = np.asarray(self._travelled)
-        loops = np.array(self._loop_edges, dtype=np.int64).reshape(-1, 2)
-        i = np.concatenate([np.arange(n - 1), loops[:, 0]])
-        j = np.concatenate([np.arange(1, n), loops[:, 1]])
-        w = np.concatenate([np.diff(trav), np.zeros(len(loops))]) + 1e-9  # 0 would drop the edge
+        i = np.concatenate([np.arange(n - 1), pairs[:, 0]])
+        j = np.concatenate([np.arange(1, n), pairs[:, 1]])
+        w = np.concatenate([np.diff(trav), lengths]) + 1e-9  # 0 would drop the edge
         graph = coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
         path = dijkstra(graph, directed=False, indices=self._position(key))
-        self._path = (key, path)
+        self._path = (cache, path)
         return path
 
     def window(self, path_length) -> np.ndarray:
@@ -183,7 +198,7 @@ class LoopCloser:
         dist = np.hypot(*(poses[keys[positions], :2] - poses[key, :2]).T)
         window = np.full(len(positions), cfg.window_xy)
         if cfg.drift > 0 and len(positions):
-            window = self.window(self.path_lengths(key)[positions])
+            window = self.window(self.path_lengths(key, poses)[positions])
         near = dist <= cfg.search_radius + window - cfg.window_xy
         return positions[near], dist[near], window[near]
 
@@ -222,11 +237,7 @@ class LoopCloser:
             log.debug("wide search -> %d rejected: coarse score %.3f over %d keyframes within %.1f m",
                       key, found.search_score, len(members), window_xy)  # fmt: skip
             return None
-        nearest = members[int(np.argmin(np.hypot(*(poses[members, :2] - found.pose[:2]).T)))]
-        anchor = self._anchor(nearest)
-        submap = self._submap(key, anchor, poses)
-        if submap is None:
-            return None
+        submap, anchor = self._view_submap(members, found.pose, points, poses)
         step = angular_step(voxel_filter(points, coarse.resolution), coarse.resolution)
         fine = match(submap.grid, points, geometry.between(poses[anchor], found.pose), 2 * coarse.resolution, step,
                      min_score=prune, prior_window=[window_xy, window_xy, window_theta])  # fmt: skip
@@ -258,7 +269,7 @@ class LoopCloser:
         guess = geometry.between(poses[anchor], poses[key])
         window_xy = cfg.window_xy
         if cfg.drift > 0:
-            window_xy = float(self.window(self.path_lengths(key)[self._position(anchor)]))
+            window_xy = float(self.window(self.path_lengths(key, poses)[self._position(anchor)]))
             window_xy = min(window_xy, self._local_window_cap)
         window_theta = np.deg2rad(cfg.window_theta_deg)
         result = match(
@@ -286,11 +297,6 @@ class LoopCloser:
             self.stats["accepted_wide"] += 1
         elif window_xy > cfg.window_xy:
             self.stats["accepted_grown_window"] += 1
-        if aliased:
-            self.stats["accepted_along_degenerate_direction"] += 1
-        else:  # pins the pair: the drift between them is gone
-            self._loop_edges.append((self._position(anchor), self._position(key)))
-            self._path = None
         guess = geometry.between(poses[anchor], poses[key])
         moved = geometry.between(guess, result.pose)
         log.debug(
@@ -298,7 +304,12 @@ class LoopCloser:
             anchor, key, result.score, np.hypot(moved[0], moved[1]), np.rad2deg(moved[2]), window_xy,
         )  # fmt: skip
         info = np.linalg.inv(result.covariance)
-        return LoopClosure(int(anchor), int(key), result.pose, 0.5 * (info + info.T), result.score)
+        closure = LoopClosure(int(anchor), int(key), result.pose, 0.5 * (info + info.T), result.score)
+        if aliased:
+            self.stats["accepted_along_degenerate_direction"] += 1
+        else:  # pins the pair once the estimate follows it (see path_lengths)
+            self._loops.append(closure)
+        return closure
 
     @staticmethod
     def _rival_within_uncertainty(result) -> bool:
@@ -341,6 +352,20 @@ class LoopCloser:
         if len(self._submaps) > SUBMAP_CACHE:
             self._submaps.popitem(last=False)
         return submap
+
+    def _view_submap(self, members: list[int], pose: np.ndarray, points: np.ndarray, poses: np.ndarray):
+        """The grid of the ``members`` within the scan's view of ``pose`` (the 95th percentile of its
+        ``points``' ranges, m) in the frame of the nearest of them (its anchor), and that anchor.
+
+        A revisit in the opposite direction sees what keyframes far behind the
+        nearest one saw, not what the nearest one saw."""
+        dist = np.hypot(*(poses[members, :2] - pose[:2]).T)
+        reach = float(np.percentile(np.hypot(points[:, 0], points[:, 1]), VIEW_PERCENTILE))
+        anchor = members[int(np.argmin(dist))]
+        near = [k for k, d in zip(members, dist) if d <= reach]
+        relative = geometry.between(poses[anchor], poses[near])
+        pts = np.vstack([geometry.transform_points(p, self._points[k]) for k, p in zip(near, relative)])
+        return _Submap(tuple(near), relative, ProbabilityGrid(pts, self.cfg.resolution)), anchor
 
     def _unmoved(self, old: np.ndarray, new: np.ndarray) -> bool:
         """Whether relative member poses changed less than the reuse tolerances."""
