@@ -270,3 +270,28 @@ def test_wide_search_closes_a_revisit_far_beyond_the_local_window(office, keyfra
             assert dxy < 0.05 and dth < 1.0, (closure.i, closure.j, dxy, dth)
     assert len(found) >= 3
     assert lc.stats["accepted_wide"] == len(found)
+
+
+def test_a_closure_the_estimate_does_not_follow_keeps_the_window_open(office, keyframes):
+    """A closure pins its pair in the path lengths (windows) only once the estimate agrees with it:
+    while the estimate still holds the 6.4 m drift (a robust kernel holding back one large
+    correction), the path across it costs the residual divided by ``drift``."""
+    gt, points = office
+    kf, travelled = keyframes
+    cfg = LoopClosureConfig(drift=0.15)
+    lc = LoopCloser(cfg)
+    for k, (i, t) in enumerate(zip(kf, travelled)):
+        lc.add_keyframe(k, points[i], t)
+    poses = drifted(gt[kf], travelled, 40.0, 55.0, [5.0, -4.0, np.deg2rad(4.0)])
+    closure = None
+    for key in np.flatnonzero(travelled > 58.0)[:40:8]:
+        closure = lc.wide_search(key, poses[: key + 1])
+        if closure is not None:
+            break
+    assert closure is not None
+    online = poses[: closure.j + 1].copy()
+    residual = geometry.between(geometry.between(online[closure.i], online[closure.j]), closure.delta)
+    across = lc.path_lengths(closure.j, online)[closure.i]
+    assert across >= 0.99 * np.hypot(residual[0], residual[1]) / cfg.drift > 30.0
+    online[closure.j] = geometry.compose(online[closure.i], closure.delta)  # the estimate follows the closure
+    assert lc.path_lengths(closure.j, online)[closure.i] < 1e-3
