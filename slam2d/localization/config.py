@@ -25,6 +25,8 @@ class MclConfig(Section):
     kld_bin_theta: float = Field(math.radians(10.0), gt=0, description="rad")
     kld_single_bin: Literal["min", "max"] = Field("min", description="particles when all fall in one bin "
                                                   "(amcl: max)")
+    global_candidates: int = Field(5, gt=0, description="global localisation: uniform poses weighed by the "
+                                   "first scan, in multiples of max_particles, of which max_particles are kept")
     # update and resampling triggers
     update_min_d: float = Field(0.1, ge=0, description="m travelled (odometry) before a filter update")
     update_min_a: float = Field(0.1, ge=0, description="rad turned (odometry) before a filter update")
@@ -48,6 +50,9 @@ class MclConfig(Section):
     z_max: float = Field(0.05, ge=0, description="beam model only")
     lambda_short: float = Field(0.1, gt=0, description="beam model only, 1/m")
     sigma_hit: float = Field(0.1, gt=0, description="m")
+    sigma_hit_uncertain: float = Field(0.3, gt=0, description="m, likelihood field's sigma while the pose is "
+                                       "uncertain (no cluster holding 90 % of the weight within converged_sd)")
+    converged_sd: float = Field(0.3, gt=0, description="m")
     max_dist: float = Field(2.0, gt=0, description="m, distance transform cap of the likelihood field")
     combine: Literal["product", "amcl"] = Field("product", description="beam likelihoods multiplied (each raised "
                                                 "to beam_weight), or amcl's 1 + sum of cubes")
@@ -65,8 +70,9 @@ def amcl_config(recovery: bool = False) -> MclConfig:
         kld_bin_theta=math.radians(10.0), kld_single_bin="max", update_min_d=0.2, update_min_a=math.pi / 6,
         resample_ess=0.0, resample_interval=2, alpha_slow=0.001 if recovery else 0.0,
         alpha_fast=0.1 if recovery else 0.0, free_clearance=0.0, alpha1=0.2, alpha2=0.2, alpha3=0.2, alpha4=0.2,
-        model="likelihood_field", beams=30, z_hit=0.95, z_rand=0.05, sigma_hit=0.2, max_dist=2.0, combine="amcl",
-        beam_weight=1.0, initial_sd_xy=0.5, initial_sd_theta=math.pi / 12,
+        model="likelihood_field", beams=30, z_hit=0.95, z_rand=0.05, sigma_hit=0.2, sigma_hit_uncertain=0.2,
+        max_dist=2.0, combine="amcl",
+        beam_weight=1.0, global_candidates=1, initial_sd_xy=0.5, initial_sd_theta=math.pi / 12,
     )  # fmt: skip
 
 

@@ -28,7 +28,7 @@ from slam2d import geometry
 from slam2d.errors import InputError
 from slam2d.localization.config import MclConfig
 from slam2d.localization.maps import KnownMap
-from slam2d.localization.sensor import sensor_model
+from slam2d.localization.sensor import LikelihoodField, sensor_model
 from slam2d.types import Scan
 
 __all__ = ["ParticleFilter", "Estimate", "kld_limit", "sample_motion", "low_variance_indices", "clusters"]
@@ -145,6 +145,9 @@ class ParticleFilter:
         if self.cfg.min_particles > self.cfg.max_particles:
             raise InputError("localization.min_particles", "must not exceed max_particles")
         self.sensor = sensor_model(known, self.cfg, range_max)
+        self.coarse = self.sensor  # the smoother likelihood field used while the pose is uncertain
+        if self.cfg.model == "likelihood_field" and self.cfg.sigma_hit_uncertain != self.cfg.sigma_hit:
+            self.coarse = LikelihoodField(known, self.cfg, range_max, self.cfg.sigma_hit_uncertain)
         self.rng = np.random.default_rng(seed)
         self.kld_z = float(norm.ppf(1.0 - self.cfg.kld_delta))
         self._free = known.free_cells(self.cfg.free_clearance)
@@ -167,8 +170,10 @@ class ParticleFilter:
         return np.column_stack([m.origin[0] + xy[:, 0] * m.resolution, m.origin[1] + xy[:, 1] * m.resolution, theta])
 
     def init_global(self) -> None:
-        """No initial pose: ``max_particles`` poses uniform over the free space."""
+        """No initial pose: ``max_particles`` poses uniform over the free space (``global_candidates``
+        times as many when the first scan comes, of which it keeps ``max_particles``)."""
         self._reset(self.random_poses(self.cfg.max_particles))
+        self._candidates = self.cfg.global_candidates > 1
 
     def init_pose(self, pose, sd_xy: float | None = None, sd_theta: float | None = None) -> None:
         """A rough initial pose (3,): ``max_particles`` Gaussian poses around it (sd m, rad; config's by default)."""
@@ -202,18 +207,42 @@ class ParticleFilter:
                 return False
             self.particles = sample_motion(self.particles, self._odom, odom, self.cfg, self.rng)
         self._odom = odom.copy()
-        self._measure(scan)
+        if getattr(self, "_candidates", False):
+            self._first_from_candidates(scan)
+        else:
+            self._measure(scan)
         return True
 
+    def _first_from_candidates(self, scan: Scan) -> None:
+        """Weigh ``global_candidates`` x ``max_particles`` uniform poses by the first scan, in batches, and
+        keep ``max_particles`` drawn by weight."""
+        self._candidates = False
+        cfg, n = self.cfg, self.cfg.max_particles
+        best_poses, best_ll = self.particles, self.coarse.log_likelihood(self.particles, scan)[0]
+        for _ in range(cfg.global_candidates - 1):
+            poses = self.random_poses(n)
+            ll = self.coarse.log_likelihood(poses, scan)[0]
+            pool, pool_ll = np.concatenate([best_poses, poses]), np.concatenate([best_ll, ll])
+            w = np.exp(pool_ll - logsumexp(pool_ll))
+            keep = low_variance_indices(w, n, self.rng)
+            best_poses, best_ll = pool[keep], pool_ll[keep]
+        self.particles = best_poses
+        self.log_w = np.full(n, -math.log(n))
+        self._measure(scan)
+
     def _measure(self, scan: Scan) -> None:
-        """Weigh by the scan, track the likelihood averages, resample when due, estimate."""
-        loglik, beams = self.sensor.log_likelihood(self.particles, scan)
+        """Weigh by the scan, track the likelihood averages, resample when due, estimate.
+
+        While the pose is uncertain the weights come from the smoother field; the likelihood
+        averages always do, so that they stay comparable."""
+        coarse, beams = self.coarse.log_likelihood(self.particles, scan)
+        fine = self.sensor.log_likelihood(self.particles, scan)[0] if self.confident() and (
+            self.coarse is not self.sensor) else coarse
         self.updates += 1
         if beams > 0:
-            joint = self.log_w + loglik
-            total = logsumexp(joint)
-            self.log_w = joint - total
-            self._average(float(total), beams)
+            self._average(float(logsumexp(self.log_w + coarse)), beams)
+            joint = self.log_w + fine
+            self.log_w = joint - logsumexp(joint)
         if self._resample_due():
             self._resample()
         self._estimate = self._cluster_estimate()
@@ -274,6 +303,11 @@ class ParticleFilter:
         inside = labels == best
         mean, cov = weighted_pose(self.particles[inside], w[inside])
         return Estimate(mean, cov, float(mass[best] / mass.sum()), len(mass), len(self.particles))
+
+    def confident(self) -> bool:
+        """Whether the last estimate's cluster holds 90 % of the weight within ``converged_sd`` m."""
+        e = self._estimate
+        return e is not None and e.share >= 0.9 and e.sd_xy < self.cfg.converged_sd
 
     @property
     def estimate(self) -> Estimate:

@@ -40,17 +40,19 @@ def select_beams(scan: Scan, count: int, skip_max: bool = True) -> tuple[np.ndar
 
 
 class LikelihoodField:
-    """Per-cell beam scores of the likelihood field: log p (product) or p^3 (amcl), float64 (H, W)."""
+    """Per-cell beam scores of the likelihood field: log p (product) or p^3 (amcl), float64 (H, W);
+    ``sigma_hit`` (m) overrides the config's."""
 
-    def __init__(self, known: KnownMap, cfg: MclConfig, range_max: float):
+    def __init__(self, known: KnownMap, cfg: MclConfig, range_max: float, sigma_hit: float | None = None):
         self.map, self.cfg = known, cfg
+        self.sigma_hit = cfg.sigma_hit if sigma_hit is None else sigma_hit
         d = np.minimum(known.distance(), cfg.max_dist)
         self.table = np.ascontiguousarray(self._score(d, range_max))
         self.outside = float(self._score(np.array(cfg.max_dist), range_max))
 
     def _score(self, d: np.ndarray, range_max: float) -> np.ndarray:
         cfg = self.cfg
-        p = cfg.z_hit * np.exp(-(d**2) / (2 * cfg.sigma_hit**2)) + cfg.z_rand / range_max
+        p = cfg.z_hit * np.exp(-(d**2) / (2 * self.sigma_hit**2)) + cfg.z_rand / range_max
         return p**3 if cfg.combine == "amcl" else cfg.beam_weight * np.log(p)
 
     def log_likelihood(self, particles: np.ndarray, scan: Scan) -> tuple[np.ndarray, int]:
