@@ -363,6 +363,30 @@ def explore(
     typer.echo(f"results: {folder}")
 
 
+@app.command()
+def localize(
+    map_path: str = typer.Argument(..., help="map.yaml (a slam2d run or map_server), floor-plan PNG, or 'office'"),
+    dataset: Optional[Path] = typer.Option(None, help="experiment YAML whose dataset is the scan log "
+                                           "(default: the simulated robot wandering the map's world)"),
+    config: Optional[Path] = typer.Option(None, "--config", "-c", help="localize YAML (mode, preset, mcl, ...)"),
+    set_: list[str] = SET_OPT,
+    root: Path = OUT_OPT,
+    quiet: bool = QUIET_OPT,
+) -> None:
+    """Monte Carlo localisation on a known map: estimate vs truth, errors, particle clouds, metrics."""
+    from slam2d.localization.run import load_localize_config, run_localize
+
+    _setup_logging(quiet)
+    with _stoppable("no results folder written"):
+        try:
+            cfg = load_localize_config(config, set_)
+            experiment = _load(dataset, [], []) if dataset else None
+            folder = run_localize(map_path, cfg, experiment, root)
+        except InputError as err:
+            _fail(err)
+    typer.echo(f"results: {folder}")
+
+
 def _load(config, set_: list[str], plugins: list[str]):
     """The config file (or defaults) with ``--set`` overrides and ``--plugin`` files or modules added."""
     from slam2d import config as config_mod

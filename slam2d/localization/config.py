@@ -87,3 +87,40 @@ PRESETS = {"slam2d": lambda: MclConfig(), "amcl": lambda: amcl_config(False), "a
 def preset(name: str) -> MclConfig:
     """The parameters named ``name``: slam2d, amcl (shipped) or amcl_recovery."""
     return PRESETS[name]()
+
+
+class LocalizeConfig(Section):
+    """``slam2d localize``: one localisation run on a known map — a config in, a results folder out."""
+
+    name: str = Field("localize", description="results folder name")
+    seed: int = Field(0, ge=0, lt=2**63, description="one seed for the drive and the filter")
+    mode: Literal["global", "tracking"] = Field("global", description="no initial pose, or a rough one")
+    initial_pose: tuple[float, float, float] | None = Field(
+        None, description="tracking: x, y (m), heading (rad); None: the first true (or reference) pose")
+    preset: Literal["slam2d", "amcl", "amcl_recovery"] = Field(
+        "slam2d", description="parameters the 'mcl' keys start from: slam2d's, or ROS amcl's (recovery off / on)")
+    mcl: dict = Field(default_factory=dict, description="filter parameters over the preset (MclConfig keys)")
+    world: str | None = Field(None, description="simulated world: 'office' or a floor-plan PNG; None: the map")
+    seconds: float = Field(60.0, gt=0, description="s of simulated driving")
+    kidnap: list[float] = Field(default_factory=list, description="s: times the simulated robot is teleported")
+    min_jump: float = Field(5.0, ge=0, description="m, shortest teleport")
+    snapshots: list[float] = Field(default_factory=list, description="s from the start: particle-cloud figures "
+                                   "(empty: the first update, converging, converged, after each kidnap)")
+    reference: str | None = Field(None, description="log runs: TUM reference (default: trajectory.tum beside "
+                                  "the map)")
+    max_scans: int | None = Field(None, gt=0, description="log runs: stop after this many scans")
+    figures: bool = True
+
+    def filter_config(self) -> MclConfig:
+        """The preset with the ``mcl`` keys over it (unknown keys are an error)."""
+        from pydantic import ValidationError
+
+        from slam2d.errors import InputError
+
+        try:
+            return MclConfig.model_validate({**preset(self.preset).model_dump(), **self.mcl})
+        except ValidationError as err:
+            e = err.errors()[0]
+            key = ".".join(str(p) for p in e["loc"])
+            what = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
+            raise InputError(f"mcl.{key}", what) from None

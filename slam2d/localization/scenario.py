@@ -118,9 +118,13 @@ class Track:
     snapshots: dict = field(default_factory=dict)
 
 
+SNAPSHOT_PARTICLES = 400  # particles kept per snapshot (an even subset)
+
+
 def replay(pf: ParticleFilter, stream: Stream, snapshot_at=()) -> Track:
-    """Feed every scan of ``stream`` to ``pf`` (initialised); keep a copy of the particles at the scan
-    indices ``snapshot_at``."""
+    """Feed every scan of ``stream`` to ``pf`` (initialised). At the scan indices ``snapshot_at``
+    (or at every update for ``"updates"``) keep up to SNAPSHOT_PARTICLES particles, their weights
+    and the estimate."""
     import time
 
     n = len(stream.scans)
@@ -128,12 +132,14 @@ def replay(pf: ParticleFilter, stream: Stream, snapshot_at=()) -> Track:
     snaps = {}
     for i, scan in enumerate(stream.scans):
         t0 = time.perf_counter()
-        if pf.add(scan):
+        updated = pf.add(scan)
+        if updated:
             ms.append((time.perf_counter() - t0) * 1000)
         e = pf.estimate
         est[i], count[i], share[i], sd[i] = pf.pose(scan.odom), e.particles, e.share, e.sd_xy
-        if i in snapshot_at:
-            snaps[i] = (pf.particles.copy(), np.exp(pf.log_w), est[i].copy())
+        if (updated and snapshot_at == "updates") or (snapshot_at != "updates" and i in snapshot_at):
+            keep = np.linspace(0, len(pf.particles) - 1, min(SNAPSHOT_PARTICLES, len(pf.particles))).astype(int)
+            snaps[i] = (pf.particles[keep].copy(), np.exp(pf.log_w[keep]), est[i].copy())
     err = np.hypot(*(est[:, :2] - stream.truth[:, :2]).T)
     head = np.abs(geometry.wrap_angle(est[:, 2] - stream.truth[:, 2]))
     return Track(est, err, head, count, share, sd, np.array(ms), snaps)
