@@ -170,6 +170,10 @@ class NavigationConfig(Section):
     )
     planner: Literal["dwa", "fsm"] = Field("dwa", description="local planner: dynamic window or the 2016 state machine")
     slam: bool = Field(True, description="pose and map from online SLAM; false: the true pose and the world's map")
+    localization: Literal["none", "mcl"] = Field(
+        "none", description="without slam: 'mcl' drives on Monte Carlo localisation in the world's map "
+        "(tracking from a rough start pose, slam2d.localization) instead of the true pose"
+    )
     people: int = Field(0, ge=0, description="people wandering at random (discs the map does not hold)")
     people_speed: float = Field(0.5, gt=0, description="m/s")
     animation: bool = Field(True, description="an animated GIF of the run in the results folder")

@@ -1,1 +1,9 @@
-"""slam2d.localization."""
+"""slam2d.localization: Monte Carlo localisation on a known map (augmented MCL, KLD sampling)."""
+
+from slam2d.localization.config import LocalizeConfig, MclConfig, amcl_config, preset
+from slam2d.localization.maps import KnownMap
+from slam2d.localization.mcl import Estimate, ParticleFilter, kld_limit
+from slam2d.localization.navigation import MclPoseSource
+
+__all__ = ["MclConfig", "LocalizeConfig", "amcl_config", "preset", "KnownMap", "ParticleFilter", "Estimate",
+           "kld_limit", "MclPoseSource"]

@@ -84,6 +84,8 @@ def simulate(cfg: ExperimentConfig) -> NavigationRun:
     nav, sim = cfg.navigation, cfg.dataset.simulator
     if nav.goal is None:
         raise InputError("navigation.goal", "a goal is needed: --goal x,y or navigation.goal in the config")
+    if nav.slam and nav.localization != "none":
+        raise InputError("navigation.localization", "localises on the world's map: needs navigation.slam: false")
     world = load_world(sim.world, sim.resolution)
     start = np.asarray(nav.start if nav.start is not None else _route_start(sim.world), float)
     goal = np.asarray(nav.goal, float)
@@ -101,19 +103,21 @@ def simulate(cfg: ExperimentConfig) -> NavigationRun:
         online = OnlineSlam(cfg)
         map_grid, pose_source = record.wrap(online), lambda step: online.pose
     else:
-        map_grid, pose_source = record.wrap(None, truth), None
+        map_grid, pose_source = record.wrap(None, truth), _mcl_source(nav, world, start, robot, cfg.seed)
     result = run_navigation(world, robot, map_grid, goal, nav.planner, options, pose_source=pose_source)
     wall = time.perf_counter() - t0
     reference = Navigator(goal, robot.cfg, options)
     reference.update_map(truth)
     optimal = reference.optimal_length(start)
-    estimate = np.array(record.estimates) if nav.slam else result.trajectory
+    estimates = record.estimates if nav.slam else getattr(pose_source, "estimates", None)
+    estimate = np.array(estimates) if estimates is not None else result.trajectory
     metrics = {
         **result.metrics(),
         "optimal_length": optimal,
         "length_ratio": result.path_length / optimal if optimal > 0 else float("nan"),
         "planner": nav.planner,
         "slam": nav.slam,
+        "localization": nav.localization,
         "people": nav.people,
         "wall_s": wall,
         "real_time_factor": result.time / wall if wall > 0 else float("nan"),
@@ -142,6 +146,15 @@ class _Recorder:
             return online.grid
 
         return map_grid
+
+
+def _mcl_source(nav, world, start, robot, seed: int):
+    """The pose from Monte Carlo localisation in the world's map (``navigation.localization: mcl``), or None."""
+    if nav.localization != "mcl":
+        return None
+    from slam2d.localization import KnownMap, MclPoseSource
+
+    return MclPoseSource(KnownMap.from_world(world), start, range_max=robot.cfg.laser.range_max, seed=seed)
 
 
 def _route_start(world: str) -> np.ndarray:
