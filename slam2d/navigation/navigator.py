@@ -53,6 +53,7 @@ ACTIVE, REACHED, UNREACHABLE, TIMEOUT = "active", "reached", "unreachable", "tim
 _SNAP = 0.5  # m, farthest a start cell inside the inflation is moved to a free one
 _AHEAD = 40  # path points searched ahead of the last nearest one
 _EXPLAINED_CELLS = 2  # a laser point this many cells from a blocked map cell is the map's
+_SETTLED_S = 3.0  # s; ... if that cell has been blocked this long (a live map also holds people walking)
 _FINAL_GAP = 0.01  # m kept between the robot's disc and any point on the final approach
 GOAL_PADDING = 1.0  # m of free cells kept around a goal beyond a map whose unknown cells are free
 
@@ -107,6 +108,8 @@ class Navigator:
         self.planner_seconds: list[float] = []
         self.events: list[tuple[float, str, str]] = []  # (time s, "replan" / "recovery", why)
         self._raw = self._grid = None
+        self._cell_blocked_at = None  # (H, W) time (s) each cell of ``_raw`` became blocked; inf: free
+        self._now, self._mapped_at = 0.0, None
         self._index, self._level, self._arrived, self._last_distance = 0, 0, False, np.inf
         self._best = (np.inf, 0.0)  # (remaining path m, time)
         self._level_mark = np.inf  # remaining path m at the first recovery of a run of them
@@ -115,21 +118,46 @@ class Navigator:
 
     # map and plan --------------------------------------------------------
 
-    def update_map(self, map_grid) -> bool:
-        """Take the current map; True when it differs from the last one (re-inflated then).
+    def update_map(self, map_grid, now: float | None = None) -> bool:
+        """Take the current map at time ``now`` (s; default: the last step's); True when it
+        differs from the last one (re-inflated then).
 
         The free mask is compared at every call, so a map updated in place counts as changed.
+        The cells of the first map are settled; a cell blocked later counts as explaining laser
+        points only once it has stayed blocked ``_SETTLED_S`` (see :meth:`unmapped`).
         """
+        self._now = self._now if now is None else float(now)
         free, res, origin = free_mask(map_grid, self.cfg.unknown_free)
         if self.cfg.unknown_free:  # a map being built may not reach the goal yet: beyond it is unknown, so free
             free, origin = _reaching(free, res, origin, self.goal[:2], GOAL_PADDING)
         same_frame = self._raw is not None and (res, tuple(origin)) == (self._raw.resolution, self._raw.origin)
         if same_frame and self._raw.free.shape == free.shape and np.array_equal(self._raw.free, free):
             return False
-        self._raw = PlanningGrid(np.array(free, dtype=bool), res, origin)  # a copy: the source may change
-        self._grid = self._inflate(self._raw)
-        self._mapped = ndimage.binary_dilation(~free, iterations=_EXPLAINED_CELLS)
+        new = PlanningGrid(np.array(free, dtype=bool), res, origin)  # a copy: the source may change
+        self._cell_blocked_at = self._block_times(new)
+        self._raw, self._grid, self._mapped_at = new, self._inflate(new), None
         return True
+
+    def _block_times(self, new: PlanningGrid) -> np.ndarray:
+        """Time (s) each blocked cell of ``new`` became blocked (-inf for the first map's), inf where free."""
+        since = np.where(new.free, np.inf, -np.inf if self._raw is None else self._now)
+        if self._raw is None or self._raw.resolution != new.resolution:
+            return since
+        old = np.full(new.free.shape, np.inf)
+        shift = np.rint((np.subtract(self._raw.origin, new.origin)) / new.resolution).astype(int)[::-1]  # rows, cols
+        lo, hi = np.maximum(shift, 0), np.minimum(shift + self._raw.free.shape, new.free.shape)
+        if np.all(hi > lo):
+            old[lo[0]:hi[0], lo[1]:hi[1]] = self._cell_blocked_at[lo[0] - shift[0]:hi[0] - shift[0],
+                                                                lo[1] - shift[1]:hi[1] - shift[1]]
+        return np.where(new.free, np.inf, np.minimum(since, old))
+
+    def _mapped_mask(self) -> np.ndarray:
+        """Cells within ``_EXPLAINED_CELLS`` of a cell blocked for at least ``_SETTLED_S`` (recomputed as time passes)."""
+        settled_count = int(np.count_nonzero(self._cell_blocked_at <= self._now - _SETTLED_S))
+        if self._mapped_at is None or self._mapped_at[0] != settled_count:
+            settled = self._cell_blocked_at <= self._now - _SETTLED_S
+            self._mapped_at = (settled_count, ndimage.binary_dilation(settled, iterations=_EXPLAINED_CELLS))
+        return self._mapped_at[1]
 
     def unmapped(self, pose, points) -> np.ndarray:
         """Which laser ``points`` (M, 2) (robot frame) lie in no blocked cell of the map (within
@@ -137,7 +165,7 @@ class Navigator:
         cells = self._raw.world_to_cell(geometry.transform_points(pose, points))
         inside = self._raw.in_bounds(cells)
         out = np.zeros(len(points), dtype=bool)
-        out[inside] = ~self._mapped[cells[inside, 0], cells[inside, 1]]
+        out[inside] = ~self._mapped_mask()[cells[inside, 0], cells[inside, 1]]
         return out
 
     def _inflate(self, raw: PlanningGrid) -> PlanningGrid:
@@ -221,7 +249,7 @@ class Navigator:
             return Command(0.0, 0.0, state=self.status)
         if now > self.cfg.max_time:
             return self._finish(TIMEOUT, f"time budget of {self.cfg.max_time:g} s used up")
-        changed = self.update_map(map_grid)
+        changed = self.update_map(map_grid, now)
         if self.path is None or (changed and self._path_blocked()):
             if self.path is not None:
                 self._log(now, "replan", "the new map blocks the path")
