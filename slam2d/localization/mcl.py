@@ -106,7 +106,10 @@ def _bins(poses: np.ndarray, bin_xy: float, bin_theta: float) -> np.ndarray:
 
 def _distinct_so_far(bins: np.ndarray) -> np.ndarray:
     """k (P,): the number of distinct bins among the first 1..P rows of ``bins`` (P, 3)."""
-    _, first = np.unique(bins, axis=0, return_index=True)
+    b = bins - bins.min(axis=0)
+    span = b.max(axis=0) + 1
+    key = (b[:, 0] * span[1] + b[:, 1]) * span[2] + b[:, 2]  # one integer per bin (spans are small)
+    _, first = np.unique(key, return_index=True)
     new = np.zeros(len(bins), dtype=np.int64)
     new[first] = 1
     return np.cumsum(new)
@@ -129,12 +132,13 @@ def clusters(poses: np.ndarray, bin_xy: float, bin_theta: float) -> np.ndarray:
 
 def weighted_pose(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weighted mean pose (3,) (circular mean heading) and covariance (3, 3) of poses (P, 3)."""
-    w = weights / weights.sum()
-    theta = math.atan2(float(w @ np.sin(poses[:, 2])), float(w @ np.cos(poses[:, 2])))
-    mean = np.array([w @ poses[:, 0], w @ poses[:, 1], theta])
+    w = weights / weights.sum()  # sums, not BLAS: its threads contend with numba's
+    theta = math.atan2(float(np.sum(w * np.sin(poses[:, 2]))), float(np.sum(w * np.cos(poses[:, 2]))))
+    mean = np.array([np.sum(w * poses[:, 0]), np.sum(w * poses[:, 1]), theta])
     d = poses - mean
     d[:, 2] = geometry.wrap_angle(d[:, 2])
-    return mean, (d * w[:, None]).T @ d
+    wd = d * w[:, None]
+    return mean, np.array([[np.sum(wd[:, i] * d[:, j]) for j in range(3)] for i in range(3)])
 
 
 class ParticleFilter:
