@@ -218,19 +218,13 @@ class ParticleFilter:
         return True
 
     def _first_from_candidates(self, scan: Scan) -> None:
-        """Weigh ``global_candidates`` x ``max_particles`` uniform poses by the first scan, in batches, and
-        keep ``max_particles`` drawn by weight."""
+        """Weigh ``global_candidates`` x ``max_particles`` uniform poses by the first scan and keep
+        ``max_particles`` of them drawn by weight (low variance)."""
         self._candidates = False
-        cfg, n = self.cfg, self.cfg.max_particles
-        best_poses, best_ll = self.particles, self.coarse.log_likelihood(self.particles, scan)[0]
-        for _ in range(cfg.global_candidates - 1):
-            poses = self.random_poses(n)
-            ll = self.coarse.log_likelihood(poses, scan)[0]
-            pool, pool_ll = np.concatenate([best_poses, poses]), np.concatenate([best_ll, ll])
-            w = np.exp(pool_ll - logsumexp(pool_ll))
-            keep = low_variance_indices(w, n, self.rng)
-            best_poses, best_ll = pool[keep], pool_ll[keep]
-        self.particles = best_poses
+        n = self.cfg.max_particles
+        pool = np.concatenate([self.particles, self.random_poses(n * (self.cfg.global_candidates - 1))])
+        ll = self.coarse.log_likelihood(pool, scan)[0]
+        self.particles = pool[low_variance_indices(np.exp(ll - logsumexp(ll)), n, self.rng)]
         self.log_w = np.full(n, -math.log(n))
         self._measure(scan)
 
@@ -273,21 +267,26 @@ class ParticleFilter:
         return max(0.0, 1.0 - self.w_fast / self.w_slow)
 
     def _resample(self) -> None:
-        """Low-variance resampling with random free-space poses, cut to KLD's count."""
+        """Low-variance resampling with random free-space poses, as many as KLD sampling asks: the count
+        comes from the bins of a random-order draw of ``max_particles`` (random poses included), then
+        that many are drawn again with one offset, so that the hypotheses keep their shares."""
         cfg, n_max = self.cfg, self.cfg.max_particles
-        drawn = self.particles[low_variance_indices(np.exp(self.log_w), n_max, self.rng)]
+        weights = np.exp(self.log_w)
+        drawn = self.particles[low_variance_indices(weights, n_max, self.rng)]
         drawn = drawn[self.rng.permutation(n_max)]  # KLD counts bins along a random order
         share = self.random_share()
-        if share > 0:
-            rand = np.flatnonzero(self.rng.random(n_max) < share)
-            drawn[rand] = self.random_poses(len(rand))
-            self.injected += len(rand)
-            if cfg.alpha_slow > 0 and cfg.combine == "amcl":  # amcl restarts its averages after injecting
-                self.w_slow = self.w_fast = 0.0
+        is_random = self.rng.random(n_max) < share if share > 0 else np.zeros(n_max, dtype=bool)
+        drawn[is_random] = self.random_poses(int(is_random.sum()))
         n = self.kld_count(drawn)
-        self.particles = drawn[:n]
+        n_random = int(is_random[:n].sum())
+        kept = self.particles[low_variance_indices(weights, n - n_random, self.rng)]
+        self.particles = np.concatenate([kept, drawn[:n][is_random[:n]]])
         self.log_w = np.full(n, -math.log(n))
         self.resamples += 1
+        if n_random:
+            self.injected += n_random
+            if cfg.combine == "amcl":  # amcl restarts its averages after injecting
+                self.w_slow = self.w_fast = 0.0
 
     def kld_count(self, poses: np.ndarray) -> int:
         """The first n such that the n leading ``poses`` reach KLD's count for their bins (max if none)."""

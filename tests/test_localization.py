@@ -1,0 +1,277 @@
+"""Monte Carlo localisation: sensor models, KLD sampling, global localisation in a symmetric world,
+recovery from a kidnapping, determinism, bad input, the localize command and the navigation hook."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import ndimage
+from scipy.stats import chi2, norm
+
+from slam2d.config import LaserModel
+from slam2d.errors import InputError
+from slam2d.localization import KnownMap, LocalizeConfig, MclConfig, ParticleFilter, kld_limit
+from slam2d.localization.mcl import sample_motion
+from slam2d.localization.scenario import converged_at, replay, wander
+from slam2d.localization.sensor import BeamModel, LikelihoodField
+from slam2d.sim import Robot, RobotConfig, World
+from slam2d.types import Scan
+
+
+def _scan_at(points_in_sensor: np.ndarray, range_max: float = 12.0) -> Scan:
+    """A scan whose hits are ``points_in_sensor`` (M, 2)."""
+    r = np.hypot(points_in_sensor[:, 0], points_in_sensor[:, 1])
+    a = np.arctan2(points_in_sensor[:, 1], points_in_sensor[:, 0])
+    return Scan(stamp=0.0, ranges=r, angles=a, range_min=0.0, range_max=range_max)
+
+
+def test_likelihood_field_scores_end_points_by_scipy_exact_distance():
+    rng = np.random.default_rng(3)
+    occupied = rng.random((60, 80)) < 0.01
+    known = KnownMap(occupied, ~occupied, 0.05, (-1.0, 2.0))
+    cfg = MclConfig(beams=1, sigma_hit=0.1, max_dist=0.5, beam_weight=1.0)
+    field = LikelihoodField(known, cfg, range_max=12.0)
+    edt = ndimage.distance_transform_edt(~occupied) * 0.05
+    rows, cols = rng.integers(0, 60, 200), rng.integers(0, 80, 200)
+    pose = np.array([0.3, 2.5, 0.7])
+    centres = np.column_stack([-1.0 + (cols + 0.5) * 0.05, 2.0 + (rows + 0.5) * 0.05])
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    local = (centres - pose[:2]) @ np.array([[c, -s], [s, c]])  # world -> sensor frame
+    got = np.array([field.log_likelihood(pose[None], _scan_at(p[None]))[0][0] for p in local])
+    d = np.minimum(edt[rows, cols], 0.5)
+    want = np.log(0.95 * np.exp(-(d**2) / (2 * 0.1**2)) + 0.05 / 12.0)
+    assert np.allclose(got, want, atol=1e-9)
+    # a brute-force nearest occupied cell agrees with scipy's transform
+    occ = np.argwhere(occupied)
+    brute = np.sqrt(((occ[None] - np.column_stack([rows, cols])[:, None]) ** 2).sum(-1)).min(1) * 0.05
+    assert np.allclose(np.minimum(brute, 0.5), d)
+
+
+def test_likelihood_field_off_the_map_counts_as_max_distance():
+    occupied = np.zeros((20, 20), bool)
+    occupied[10, 10] = True
+    known = KnownMap(occupied, ~occupied, 0.1, (0.0, 0.0))
+    cfg = MclConfig(beams=1, sigma_hit=0.2, max_dist=1.0, beam_weight=1.0)
+    field = LikelihoodField(known, cfg, 10.0)
+    far = field.log_likelihood(np.array([[0.0, 0.0, 0.0]]), _scan_at(np.array([[-5.0, 0.0]]), 10.0))[0][0]
+    assert far == pytest.approx(math.log(0.95 * math.exp(-1.0 / (2 * 0.04)) + 0.05 / 10.0))
+
+
+@pytest.mark.parametrize("k", [2, 5, 20, 100, 1000])
+def test_kld_limit_is_fox_formula_and_near_the_chi_square_bound(k):
+    err, delta = 0.05, 0.01
+    z = norm.ppf(1 - delta)
+    a = 2.0 / (9.0 * (k - 1))
+    formula = math.ceil((k - 1) / (2 * err) * (1 - a + math.sqrt(a) * z) ** 3)
+    assert kld_limit(k, err, z, 1, 10**9) == formula
+    exact = chi2.ppf(1 - delta, k - 1) / (2 * err)  # Fox 2003, eq. 9 (Wilson-Hilferty approximates it)
+    assert abs(formula - exact) <= max(0.05 * exact, 2)
+    assert kld_limit(k, err, z, 300, 400) == min(max(formula, 300), 400)
+
+
+def test_kld_sampling_keeps_the_first_count_that_reaches_the_bound():
+    occupied = np.zeros((20, 20), bool)
+    occupied[0] = True
+    known = KnownMap(occupied, ~occupied, 0.05, (0.0, 0.0))  # 1 m x 1 m: 2 x 2 x 36 bins
+    cfg = MclConfig(min_particles=10, max_particles=5000, kld_err=0.2)
+    pf = ParticleFilter(known, cfg, seed=1)
+    poses = pf.random_poses(5000)
+    n = pf.kld_count(poses)
+    bins = np.column_stack([np.floor(poses[:, :2] / cfg.kld_bin_xy), np.floor((poses[:, 2] + np.pi) /
+                                                                               cfg.kld_bin_theta)])  # fmt: skip
+    k_n = len(np.unique(bins[:n], axis=0))
+    k_before = len(np.unique(bins[: n - 1], axis=0))
+    assert n >= kld_limit(k_n, cfg.kld_err, pf.kld_z, 10, 5000)
+    assert n - 1 < kld_limit(k_before, cfg.kld_err, pf.kld_z, 10, 5000)
+    assert 10 < n < 5000
+    # one tight cluster: the minimum
+    assert pf.kld_count(np.tile([[5.01, 5.01, 0.01]], (5000, 1))) == 10
+
+
+def test_motion_model_mean_follows_odometry_and_spread_grows_with_alpha():
+    rng = np.random.default_rng(0)
+    start = np.tile([1.0, 2.0, 0.3], (20000, 1))
+    before, after = np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.5])
+    moved = sample_motion(start, before, after, MclConfig(), rng)
+    want = np.array([1.0 + math.cos(0.3), 2.0 + math.sin(0.3), 0.8])
+    assert np.allclose(moved.mean(axis=0), want, atol=0.01)
+    tight = sample_motion(start, before, after, MclConfig(alpha1=0.001, alpha2=0.001, alpha3=0.001, alpha4=0.001),
+                          rng)  # fmt: skip
+    assert moved[:, :2].std(axis=0).sum() > 3 * tight[:, :2].std(axis=0).sum()
+
+
+def test_beam_model_expected_ranges_match_the_world_raycast():
+    world = World.office()
+    known = KnownMap.from_world(world)
+    poses = np.array([[5.5, 4.2, 0.0], [12.0, 7.8, 2.0], [8.0, 10.0, -1.0]])
+    angles = np.linspace(-np.pi, np.pi, 90, endpoint=False)
+    got = BeamModel(known, MclConfig(), 12.0).expected_ranges(poses, np.zeros(3), angles)
+    want = world.raycast_poses(poses, angles, 12.0)
+    assert np.median(np.abs(got - want)) < 0.06  # walls are whole cells in the grid
+    assert np.mean(np.abs(got - want) < 0.15) > 0.9  # the rest graze corners and door jambs
+
+
+def _symmetric_corridor(folder) -> str:
+    """A floor plan (0.05 m/px) of a 16 m x 2 m corridor whose cells are symmetric under a half
+    turn about (8.1, 1.5), boxes along its walls included, except an alcove at x 14.6-15.6."""
+    from PIL import Image
+
+    grey = np.full((60, 324), 205, np.uint8)  # unknown outside, rows up in y
+    grey[9:51, 1:323] = 0  # one-pixel walls round ...
+    grey[10:50, 2:322] = 255  # ... the free corridor
+    grey[10:18, 60:68] = 0  # a box on the lower wall at x 3.0-3.4 ...
+    grey[42:50, 120:128] = 0  # ... one on the upper wall at x 6.0-6.4
+    grey = np.minimum(grey, grey[::-1, ::-1])  # their half-turn copies
+    grey[4:10, 291:313] = 0  # the alcove, 0.25 m deep, through the lower wall
+    grey[5:10, 292:312] = 255
+    path = folder / "corridor.png"
+    Image.fromarray(grey[::-1]).save(path)
+    return str(path)
+
+
+def _mass_near(pf: ParticleFilter, pose, radius: float = 0.5) -> float:
+    w = np.exp(pf.log_w)
+    near = np.hypot(*(pf.particles[:, :2] - pose[:2]).T) < radius
+    near &= np.abs(np.angle(np.exp(1j * (pf.particles[:, 2] - pose[2])))) < 0.3
+    return float(w[near].sum())
+
+
+def test_global_localisation_keeps_both_symmetric_hypotheses_until_the_alcove_is_seen(tmp_path):
+    from slam2d.sim.world import load_world
+
+    plan = _symmetric_corridor(tmp_path)
+    world, known = load_world(plan), KnownMap.load(plan)
+    laser = LaserModel(beams=180, range_max=3.0)
+    robot = Robot(world, [5.0, 1.5, 0.0], RobotConfig(laser=laser), seed=4)  # alcove and both ends > 3 m away
+    pf = ParticleFilter(known, MclConfig(max_particles=8000), laser.range_max, seed=4)
+    pf.init_global()
+    step = robot.step(0.0, 0.0, 0.0)
+    pf.add(step.scan)
+    masses = []
+    while robot.pose[0] < 15.5:
+        step = robot.step(0.5, 0.0, 0.1)
+        pf.add(step.scan)
+        if 7.5 < robot.pose[0] < 11.0:  # settled; neither end nor the alcove within 3 m of either hypothesis
+            mirror = np.array([16.2 - robot.pose[0], 3.0 - robot.pose[1], robot.pose[2] + np.pi])
+            masses.append((_mass_near(pf, robot.pose), _mass_near(pf, mirror)))
+    masses = np.array(masses)
+    assert len(masses) > 20
+    assert (masses.min(axis=0) > 0.05).all(), f"a hypothesis was dropped: min masses {masses.min(axis=0)}"
+    assert masses.sum(axis=1).min() > 0.8
+    assert _mass_near(pf, robot.pose) > 0.9  # after the alcove: the true one only
+    assert np.hypot(*(pf.pose(step.scan.odom)[:2] - robot.pose[:2])) < 0.1
+
+
+def _office_kidnap_stream():
+    world = World.office()
+    known = KnownMap.from_world(world)
+    return known, wander(world, known, 22.0, seed=2, kidnap_at=[5.0])
+
+
+def test_augmented_mcl_recovers_from_a_kidnap_where_plain_mcl_does_not():
+    known, stream = _office_kidnap_stream()
+    k = stream.kidnaps[0]
+    assert np.hypot(*(stream.truth[k, :2] - stream.truth[k - 1, :2])) >= 5.0
+    outcomes = {}
+    for name, cfg in {"augmented": MclConfig(), "plain": MclConfig(alpha_slow=0.0, alpha_fast=0.0)}.items():
+        pf = ParticleFilter(known, cfg, 12.0, seed=2)
+        pf.init_pose(stream.truth[0], 0.1, 0.05)
+        track = replay(pf, stream)
+        assert converged_at(track) == 0, name  # tracking before the kidnap
+        back = converged_at(track, k)
+        outcomes[name] = None if back is None else (back - k) * 0.1
+        if name == "plain":
+            assert pf.injected == 0
+    assert outcomes["augmented"] is not None and outcomes["augmented"] <= 12.0
+    assert outcomes["plain"] is None
+
+
+def test_same_seed_same_particles_other_seed_other_particles():
+    known, stream = _office_kidnap_stream()
+    scans = stream.scans[:40]
+
+    def run(seed):
+        pf = ParticleFilter(known, MclConfig(max_particles=3000), 12.0, seed=seed)
+        pf.init_global()
+        for s in scans:
+            pf.add(s)
+        return pf.particles
+
+    a, b, c = run(7), run(7), run(8)
+    assert a.shape == b.shape and np.array_equal(a, b)
+    assert a.shape != c.shape or not np.array_equal(a, c)
+
+
+def test_tracking_in_the_office_is_accurate_with_few_particles():
+    world = World.office()
+    known = KnownMap.from_world(world)
+    stream = wander(world, known, 20.0, seed=5)
+    pf = ParticleFilter(known, MclConfig(), 12.0, seed=5)
+    pf.init_pose(stream.truth[0])
+    track = replay(pf, stream)
+    c = converged_at(track)
+    assert c is not None and c < 20
+    assert np.sqrt(np.mean(track.position_error[c:] ** 2)) < 0.05
+    assert np.degrees(np.sqrt(np.mean(track.heading_error[c:] ** 2))) < 1.0
+    assert np.median(track.particles[c:]) <= 300
+
+
+def test_bad_input_is_one_line_errors(tmp_path):
+    bad = tmp_path / "map.yaml"
+    bad.write_text("image: missing.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    with pytest.raises(InputError):
+        KnownMap.load(bad)
+    with pytest.raises(InputError, match="not found"):
+        KnownMap.load(tmp_path / "none.yaml")
+    with pytest.raises(InputError, match="mcl.bogus"):
+        LocalizeConfig(mcl={"bogus": 1}).filter_config()
+    with pytest.raises(InputError, match="sigma_hit"):
+        LocalizeConfig(mcl={"sigma_hit": -1}).filter_config()
+    known = KnownMap.from_world(World.office())
+    pf = ParticleFilter(known, MclConfig(max_particles=200))
+    with pytest.raises(InputError, match="finite"):
+        pf.init_pose([1.0, float("nan"), 0.0])
+    with pytest.raises(InputError, match="no occupied"):
+        KnownMap(np.zeros((5, 5), bool), np.ones((5, 5), bool), 0.1, (0, 0))
+
+
+def test_localize_command_writes_a_results_folder_and_none_on_bad_input(tmp_path):
+    from typer.testing import CliRunner
+
+    from slam2d.cli import app
+
+    runner = CliRunner()
+    ok = runner.invoke(app, ["localize", "office", "--set", "seconds=14", "--set", "kidnap=[6]", "--out",
+                             str(tmp_path / "ok"), "-q"])  # fmt: skip
+    assert ok.exit_code == 0, ok.output
+    (folder,) = (tmp_path / "ok").iterdir()
+    names = {p.name for p in folder.iterdir()}
+    assert {"config.yaml", "metrics.json", "trajectory.tum", "trajectory_true.tum", "error.csv",
+            "error_particles.png", "cloud_first_update.png", "cloud_kidnap1_after_1s.png"} <= names
+    import json
+
+    metrics = json.loads((folder / "metrics.json").read_text())
+    assert metrics["converged_s"] is not None and metrics["kidnaps"][0]["at_s"] == pytest.approx(6.0)
+    bad = runner.invoke(app, ["localize", "office", "--set", "mcl={bogus: 1}", "--out", str(tmp_path / "bad")])
+    assert bad.exit_code == 2 and "mcl.bogus" in bad.output
+    assert not (tmp_path / "bad").exists() or not any((tmp_path / "bad").iterdir())
+    yaml_map = tmp_path / "m.yaml"
+    yaml_map.write_text("image: m.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    nomap = runner.invoke(app, ["localize", str(yaml_map), "--out", str(tmp_path / "bad2")])
+    assert nomap.exit_code == 2 and len(nomap.output.strip().splitlines()) == 1
+
+
+def test_navigation_drives_on_the_mcl_pose():
+    from slam2d import config as config_mod
+    from slam2d.navigation.run import simulate
+
+    cfg = config_mod.load(None, ["navigation.slam=false", "navigation.localization=mcl", "navigation.goal=[10, 4.2]",
+                                 "navigation.animation=false"])  # fmt: skip
+    run = simulate(cfg)
+    assert run.metrics["success"] and run.metrics["localization"] == "mcl"
+    assert len(run.estimate) == run.metrics["steps"] + 1
+    assert 0 < run.metrics["pose_rmse"] < 0.1  # the estimate, not the truth
+    with pytest.raises(InputError, match="slam"):
+        simulate(config_mod.load(None, ["navigation.localization=mcl", "navigation.goal=[10, 4.2]"]))
