@@ -173,6 +173,16 @@ class ParticleFilter:
         theta = self.rng.uniform(-np.pi, np.pi, count)
         return np.column_stack([m.origin[0] + xy[:, 0] * m.resolution, m.origin[1] + xy[:, 1] * m.resolution, theta])
 
+    def guided_random_poses(self, count: int, scan: Scan) -> np.ndarray:
+        """``count`` free-space poses drawn by the scan's likelihood (the smoother field) from
+        ``recovery_candidates`` times as many uniform ones: sensor-guided random particles."""
+        k = self.cfg.recovery_candidates
+        if count == 0 or k <= 1:
+            return self.random_poses(count)
+        pool = self.random_poses(count * k)
+        ll = self.coarse.log_likelihood(pool, scan)[0]
+        return pool[low_variance_indices(np.exp(ll - logsumexp(ll)), count, self.rng)]
+
     def init_global(self) -> None:
         """No initial pose: ``max_particles`` poses uniform over the free space (``global_candidates``
         times as many when the first scan comes, of which it keeps ``max_particles``)."""
@@ -242,7 +252,7 @@ class ParticleFilter:
             joint = self.log_w + fine
             self.log_w = joint - logsumexp(joint)
         if self._resample_due():
-            self._resample()
+            self._resample(scan)
         self._estimate = self._cluster_estimate()
 
     def _average(self, log_total: float, beams: int) -> None:
@@ -266,27 +276,29 @@ class ParticleFilter:
             return 0.0
         return max(0.0, 1.0 - self.w_fast / self.w_slow)
 
-    def _resample(self) -> None:
-        """Low-variance resampling with random free-space poses, as many as KLD sampling asks: the count
-        comes from the bins of a random-order draw of ``max_particles`` (random poses included), then
-        that many are drawn again with one offset, so that the hypotheses keep their shares."""
+    def _resample(self, scan: Scan) -> None:
+        """Low-variance resampling to KLD's count, plus random free-space poses.
+
+        The count comes from the bins of a random-order draw of ``max_particles``; that many are
+        then drawn again with one offset, so that the hypotheses keep their shares. Each of the
+        ``max_particles`` slots is a random pose with probability :meth:`random_share` (the
+        resampled ones give way), drawn by the scan's likelihood when ``recovery_candidates`` > 1."""
         cfg, n_max = self.cfg, self.cfg.max_particles
         weights = np.exp(self.log_w)
         drawn = self.particles[low_variance_indices(weights, n_max, self.rng)]
-        drawn = drawn[self.rng.permutation(n_max)]  # KLD counts bins along a random order
+        n = self.kld_count(drawn[self.rng.permutation(n_max)])  # KLD counts bins along a random order
         share = self.random_share()
-        is_random = self.rng.random(n_max) < share if share > 0 else np.zeros(n_max, dtype=bool)
-        drawn[is_random] = self.random_poses(int(is_random.sum()))
-        n = self.kld_count(drawn)
-        n_random = int(is_random[:n].sum())
-        kept = self.particles[low_variance_indices(weights, n - n_random, self.rng)]
-        self.particles = np.concatenate([kept, drawn[:n][is_random[:n]]])
-        self.log_w = np.full(n, -math.log(n))
-        self.resamples += 1
+        n_random = int(self.rng.binomial(n_max, share)) if share > 0 else 0
+        n = min(n, n_max - n_random)
+        parts = [self.particles[low_variance_indices(weights, n, self.rng)]] if n else []
         if n_random:
+            parts.append(self.guided_random_poses(n_random, scan))
             self.injected += n_random
             if cfg.combine == "amcl":  # amcl restarts its averages after injecting
                 self.w_slow = self.w_fast = 0.0
+        self.particles = np.concatenate(parts)
+        self.log_w = np.full(len(self.particles), -math.log(len(self.particles)))
+        self.resamples += 1
 
     def kld_count(self, poses: np.ndarray) -> int:
         """The first n such that the n leading ``poses`` reach KLD's count for their bins (max if none)."""
