@@ -22,9 +22,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
 
 from slam2d import config
+from slam2d.navigation import world_grid
 from slam2d.navigation.run import simulate
+from slam2d.planning.grid import inflate
+from slam2d.sim.robot import RobotConfig
 from slam2d.sim.world import load_world
 
 MIN_DISTANCE = 4.0  # m between start and goal
@@ -44,17 +48,38 @@ def worlds(names: list[str]) -> list[str]:
 
 
 def pairs(world_spec: str, n: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray]]:
-    """``n`` (start pose, goal xy) pairs in the world's free space, at least MIN_DISTANCE apart."""
+    """``n`` (start pose, goal xy) pairs in the world's free space, at least MIN_DISTANCE apart and
+    connected for the robot (a floor plan's free space outside the building is not)."""
     world = load_world(world_spec, 0.05)
+    region = reachable_regions(world)
     lo, hi = np.asarray(world.bounds[0]), np.asarray(world.bounds[1])
     out = []
     while len(out) < n:
         pts = rng.uniform(lo, hi, (200, 2))
         pts = pts[world.free(pts, CLEARANCE)]
         for a, b in zip(pts[0::2], pts[1::2]):
-            if np.linalg.norm(a - b) >= MIN_DISTANCE and len(out) < n:
+            if np.linalg.norm(a - b) >= MIN_DISTANCE and len(out) < n and region(a) == region(b) > 0:
                 out.append((np.array([*a, rng.uniform(-np.pi, np.pi)]), b))
     return out
+
+
+def reachable_regions(world):
+    """``region(xy)``: the label of the connected free region of the world's map, inflated by the
+    robot's radius, that holds ``xy``; 0 for none, and for the space around a floor plan's
+    building (regions reaching the world's bounds, when others do not)."""
+    grid = world_grid(world)
+    labels, _ = ndimage.label(inflate(grid.free, RobotConfig().radius / grid.resolution), np.ones((3, 3)))
+    band = int(np.ceil(2 * RobotConfig().radius / grid.resolution)) + 1  # the world's bounds are walls
+    outside = np.unique(np.concatenate([labels[:band].ravel(), labels[-band:].ravel(),
+                                        labels[:, :band].ravel(), labels[:, -band:].ravel()]))
+    if np.setdiff1d(np.unique(labels), np.append(outside, 0)).size:  # a building inside: not its surroundings
+        labels[np.isin(labels, outside)] = 0
+
+    def region(xy) -> int:
+        cell = grid.world_to_cell(np.asarray(xy, dtype=np.float64))
+        return int(labels[cell[0], cell[1]]) if grid.in_bounds(cell) else 0
+
+    return region
 
 
 def run_row(specs, n, planner, people, slam, seed) -> dict:
