@@ -229,14 +229,17 @@ class ParticleFilter:
 
     def _first_from_candidates(self, scan: Scan) -> None:
         """Weigh ``global_candidates`` x ``max_particles`` uniform poses by the first scan and keep
-        ``max_particles`` of them drawn by weight (low variance)."""
+        ``max_particles`` of them drawn by weight (low variance): the first update."""
         self._candidates = False
         n = self.cfg.max_particles
         pool = np.concatenate([self.particles, self.random_poses(n * (self.cfg.global_candidates - 1))])
-        ll = self.coarse.log_likelihood(pool, scan)[0]
+        ll, beams = self.coarse.log_likelihood(pool, scan)
         self.particles = pool[low_variance_indices(np.exp(ll - logsumexp(ll)), n, self.rng)]
         self.log_w = np.full(n, -math.log(n))
-        self._measure(scan)
+        self.updates += 1
+        if beams > 0:
+            self._average(float(logsumexp(ll) - math.log(len(pool))), beams)
+        self._estimate = self._cluster_estimate()
 
     def _measure(self, scan: Scan) -> None:
         """Weigh by the scan, track the likelihood averages, resample when due, estimate.
