@@ -18,7 +18,8 @@ on the new extent + 200 % (the thesis's root region); the cell size is kept, so
 the depth grows and no stored cell is coarsened.
 
 :meth:`QuadTree.to_bytes` writes the tree breadth first, one 4-bit child mask
-per internal node (about half a byte a node).
+per internal node (about half a byte a node), or, when that is smaller, 2-bit
+child codes with blocks that are all occupied left unexpanded.
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ __all__ = ["Outcome", "QuadTree", "draw_tree", "GROWTH", "encode_trinary", "deco
 GROWTH = 3.0
 """Root side / side of the points' extent: the thesis's extent + 200 %."""
 
-_MAGIC = b"QT01"
+_MAGIC = b"QT01"  # 4-bit child masks
+_MAGIC_FULL = b"QT02"  # 2-bit child codes, all-occupied blocks pruned
 _HEADER = struct.Struct("<4sB3d2i2i")  # magic, depth, corner x, y, cell, grid offset (row, col), grid shape (H, W)
 _BX = np.array([1, 0, 0, 1], np.int64)  # x bit of quadrant 0..3 (UR, UL, LL, LR)
 _BY = np.array([1, 1, 0, 0], np.int64)  # y bit
@@ -225,32 +227,49 @@ class QuadTree:
     # serialisation -------------------------------------------------------------
 
     def to_bytes(self) -> bytes:
-        """Header (depth, corner, cell, grid offset and shape) + the breadth-first child masks, 2 a byte."""
+        """Header (format, depth, corner, cell, grid offset and shape) + the tree breadth first, in the
+        smaller of two forms: one 4-bit child mask per internal node (2 a byte), or, where blocks
+        of cells are all occupied (a floor plan's dark surroundings), 2-bit codes per child
+        (absent / all occupied / mixed, 4 a byte) with the all-occupied ones not expanded."""
         _, _, levels = self.cells()
-        nodes = np.concatenate(levels[:-1])
+        header = (self.depth, *self.corner, self.cell, *self.offset, *self.shape)
+        masks = np.concatenate([self._child_masks(nodes) for nodes in levels[:-1]])
+        codes = self._full_codes(levels)
+        if len(codes) < 2 * len(masks):
+            return _HEADER.pack(_MAGIC_FULL, *header) + _pack(codes, 2)
+        return _HEADER.pack(_MAGIC, *header) + _pack(masks, 4)
+
+    def _child_masks(self, nodes: np.ndarray) -> np.ndarray:
+        """4-bit masks (K,) of which children ``nodes`` (K,) have."""
         bits = (self.children[nodes] >= 0).astype(np.uint8) << np.arange(4, dtype=np.uint8)
-        masks = bits.sum(axis=1, dtype=np.uint8)
-        if len(masks) % 2:
-            masks = np.append(masks, np.uint8(0))
-        packed = masks[0::2] | (masks[1::2] << 4)
-        return _HEADER.pack(_MAGIC, self.depth, *self.corner, self.cell, *self.offset, *self.shape) + packed.tobytes()
+        return bits.sum(axis=1, dtype=np.uint8)
+
+    def _full_codes(self, levels: list[np.ndarray]) -> np.ndarray:
+        """The root's code, then each mixed node's four children's codes, breadth first
+        (0 absent, 1 all occupied below, 2 mixed)."""
+        full = np.zeros(len(self.children), bool)
+        full[levels[-1]] = True
+        for nodes in levels[-2::-1]:  # bottom-up: all four children there and full
+            kids = self.children[nodes]
+            full[nodes] = np.all(kids >= 0, axis=1) & np.all(full[np.maximum(kids, 0)], axis=1)
+        codes = [np.array([1 if full[0] else 2], np.uint8)]
+        frontier = np.zeros(0 if full[0] else 1, np.int64)
+        for _ in range(self.depth):
+            kids = self.children[frontier]
+            code = np.where(kids < 0, 0, np.where(full[np.maximum(kids, 0)], 1, 2)).astype(np.uint8)
+            codes.append(code.ravel())
+            frontier = kids[code == 2].astype(np.int64)
+        return np.concatenate(codes)
 
     @classmethod
     def from_bytes(cls, data: bytes) -> QuadTree:
         """The tree :meth:`to_bytes` wrote; ValueError on another format."""
         magic, depth, cx, cy, cell, oy, ox, h, w = _HEADER.unpack_from(data)
-        if magic != _MAGIC:
+        if magic not in (_MAGIC, _MAGIC_FULL):
             raise ValueError("not a slam2d quadtree (bad magic)")
         packed = np.frombuffer(data, np.uint8, offset=_HEADER.size)
-        masks = np.column_stack([packed & 15, packed >> 4]).ravel()
-        ix, iy, start = np.zeros(1, np.int64), np.zeros(1, np.int64), 0
-        for _ in range(depth):
-            level = masks[start : start + len(ix)]
-            if len(level) < len(ix):
-                raise ValueError("truncated quadtree stream")
-            start += len(ix)
-            parent, quad = np.nonzero((level[:, None] >> np.arange(4)) & 1)
-            ix, iy = 2 * ix[parent] + _BX[quad], 2 * iy[parent] + _BY[quad]
+        decode = _decode_masks if magic == _MAGIC else _decode_full
+        ix, iy = decode(packed, depth)
         return cls((cx, cy), cell, depth, ix, iy, offset=(oy, ox), shape=(h, w))
 
     def save(self, path) -> Path:
@@ -317,6 +336,62 @@ def _find_cells(ix, iy, depth, children, out):
 # --------------------------------------------------------------------------- free / occupied / unknown
 
 _TRI_MAGIC = b"QT3\x00"
+def _pack(values: np.ndarray, bits: int) -> bytes:
+    """``values`` (N,) of ``bits`` (2 or 4) bits each, packed low bits first."""
+    per = 8 // bits
+    v = np.append(values.astype(np.uint8), np.zeros(-len(values) % per, np.uint8))
+    return np.bitwise_or.reduce([v[k::per] << (bits * k) for k in range(per)]).astype(np.uint8).tobytes()
+
+
+def _unpack(packed: np.ndarray, bits: int) -> np.ndarray:
+    """The values :func:`_pack` wrote (with its padding)."""
+    return np.column_stack([(packed >> s) & (2**bits - 1) for s in range(0, 8, bits)]).ravel()
+
+
+def _decode_masks(packed: np.ndarray, depth: int) -> tuple[np.ndarray, np.ndarray]:
+    """Leaf cells (ix, iy) of a stream of 4-bit child masks."""
+    masks = _unpack(packed, 4)
+    ix, iy, start = np.zeros(1, np.int64), np.zeros(1, np.int64), 0
+    for _ in range(depth):
+        level = masks[start : start + len(ix)]
+        if len(level) < len(ix):
+            raise ValueError("truncated quadtree stream")
+        start += len(ix)
+        parent, quad = np.nonzero((level[:, None] >> np.arange(4)) & 1)
+        ix, iy = 2 * ix[parent] + _BX[quad], 2 * iy[parent] + _BY[quad]
+    return ix, iy
+
+
+def _decode_full(packed: np.ndarray, depth: int) -> tuple[np.ndarray, np.ndarray]:
+    """Leaf cells (ix, iy) of a stream of 2-bit child codes (all-occupied blocks expanded)."""
+    codes = _unpack(packed, 2)
+    if len(codes) == 0:
+        raise ValueError("truncated quadtree stream")
+    ix, iy, start = np.zeros(1, np.int64), np.zeros(1, np.int64), 1
+    full_x, full_y = [ix] if codes[0] == 1 else [], [iy] if codes[0] == 1 else []
+    full_level = [0] if codes[0] == 1 else []
+    if codes[0] != 2:
+        ix, iy = ix[:0], iy[:0]
+    for level in range(1, depth + 1):
+        code = codes[start : start + 4 * len(ix)]
+        if len(code) < 4 * len(ix):
+            raise ValueError("truncated quadtree stream")
+        start += 4 * len(ix)
+        cx = (2 * ix[:, None] + _BX).ravel()
+        cy = (2 * iy[:, None] + _BY).ravel()
+        full_x.append(cx[code == 1]), full_y.append(cy[code == 1]), full_level.append(level)
+        ix, iy = cx[code == 2], cy[code == 2]
+    out_x, out_y = [], []
+    for bx, by, level in zip(full_x, full_y, full_level):  # a full block at level l: 2^(depth - l) cells a side
+        n = 2 ** (depth - level)
+        dx, dy = np.meshgrid(np.arange(n), np.arange(n))
+        out_x.append((bx[:, None] * n + dx.ravel()).ravel())
+        out_y.append((by[:, None] * n + dy.ravel()).ravel())
+    if not out_x:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(out_x), np.concatenate(out_y)
+
+
 _TRI_HEADER = struct.Struct("<4sB2i")  # magic, depth, H, W
 MIXED = 3
 """Code of a node whose cells differ (it has four children); 0 free, 1 occupied, 2 unknown are uniform leaves."""
