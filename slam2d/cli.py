@@ -411,6 +411,38 @@ def frontends(plugin: list[str] = PLUGIN_OPT) -> None:
         typer.echo(name)
 
 
+datasets_app = typer.Typer(no_args_is_help=True, help="The public data files: list them, download them.")
+app.add_typer(datasets_app, name="datasets")
+
+
+@datasets_app.command("list")
+def datasets_list(
+    root: Optional[Path] = typer.Option(None, "--root", help="data folder to check (default: $SLAM2D_DATA)"),
+) -> None:
+    """List every data file: size, sha256, licence, source, purpose, and whether it is here and verified."""
+    from slam2d.datasets.download import print_catalogue
+
+    print_catalogue(root)
+
+
+@datasets_app.command("download")
+def datasets_download(
+    names: list[str] = typer.Argument(..., help="files (radish/intel.bag), folders (radish, rooms...) or all"),
+    to: Optional[Path] = typer.Option(None, "--to", help="download here (default: $SLAM2D_DATA)"),
+    quiet: bool = QUIET_OPT,
+) -> None:
+    """Download data files from their public sources, resuming partial ones and checking sha256."""
+    from slam2d.datasets.download import download
+    from slam2d.datasets.registry import data_root
+
+    with _stoppable("partial downloads kept as .part files, resumed next time"):
+        try:
+            paths = download(names, to, quiet=quiet)
+        except InputError as err:
+            _fail(err)
+    typer.echo(f"{len(paths)} files verified in {to or data_root()}")
+
+
 def main() -> None:
     """The ``slam2d`` command. A stopped command exits 130 at once (its clean-up is done): letting
     the interpreter finish could end the process as by SIGINT instead, when the interrupt arrived
