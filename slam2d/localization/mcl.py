@@ -161,6 +161,7 @@ class ParticleFilter:
         self.updates = self.resamples = self.injected = 0
         self._odom: np.ndarray | None = None  # odometry at the last update
         self._estimate: Estimate | None = None
+        self._candidates = False  # the next update weighs global candidates
 
     # initialisation ------------------------------------------------------
 
@@ -201,6 +202,7 @@ class ParticleFilter:
         self._reset(poses)
 
     def _reset(self, poses: np.ndarray) -> None:
+        self._candidates = False
         self.particles = poses
         self.log_w = np.full(len(poses), -math.log(len(poses)))
         self.w_slow = self.w_fast = 0.0
@@ -221,7 +223,7 @@ class ParticleFilter:
                 return False
             self.particles = sample_motion(self.particles, self._odom, odom, self.cfg, self.rng)
         self._odom = odom.copy()
-        if getattr(self, "_candidates", False):
+        if self._candidates:
             self._first_from_candidates(scan)
         else:
             self._measure(scan)
