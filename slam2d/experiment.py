@@ -503,10 +503,8 @@ def _write_sweep_table(root: Path, variants: list[Variant], outcomes: list) -> l
 
 
 def _execute(cfgs: list[ExperimentConfig], workers: int, executor: str, quiet: bool):
-    """Yield (index, (folder, metrics, error)) as variants finish."""
-    if executor == "ray":
-        yield from _execute_ray(cfgs)
-        return
+    """Yield (index, (folder, metrics, error)) as variants finish, with a progress bar unless ``quiet``."""
+    outcomes = _execute_ray(cfgs) if executor == "ray" else _execute_local(cfgs, workers)
     bar = nullcontext(None)
     if not quiet:
         from rich.progress import Progress
@@ -514,26 +512,78 @@ def _execute(cfgs: list[ExperimentConfig], workers: int, executor: str, quiet: b
         bar = Progress()
     with bar as progress:
         task = progress.add_task("variants", total=len(cfgs)) if progress else None
-        for item in _execute_local(cfgs, workers):
+        for item in outcomes:
             yield item
             if progress:
                 progress.advance(task)
 
 
 def _execute_ray(cfgs: list[ExperimentConfig]):
+    """Variants as Ray tasks on the cluster ``RAY_ADDRESS`` names (else on a new local Ray instance).
+
+    Every run folder ends up in the sweep's ``runs`` folder: a task writes it
+    there when that folder is reachable from its machine, else sends it back packed.
+    """
+    if not cfgs:
+        return
     try:
         import ray
     except ImportError:
         raise InputError("--executor ray", "ray is not installed: pip install 'slam2d[ray]'") from None
     ray.init(ignore_reinit_error=True, log_to_driver=False)
-    remote = ray.remote(_run_variant)
-    refs = [remote.remote(c) for c in cfgs]
+    runs = Path(cfgs[0].output.root)
+    runs.mkdir(parents=True, exist_ok=True)
+    task = ray.remote(_run_variant_anywhere)
+    pending = {task.remote(_with_root(c, str(runs.resolve()))): i for i, c in enumerate(cfgs)}
     try:
-        yield from enumerate(ray.get(refs))
-    except KeyboardInterrupt:
-        for ref in refs:
+        while pending:
+            (ref,), _ = ray.wait(list(pending), num_returns=1)
+            yield pending.pop(ref), _collect(runs, ray.get(ref))
+    except BaseException:
+        for ref in pending:
             ray.cancel(ref)
         raise
+
+
+def _with_root(cfg: ExperimentConfig, root: str) -> ExperimentConfig:
+    return cfg.model_copy(update={"output": cfg.output.model_copy(update={"root": root})})
+
+
+def _run_variant_anywhere(cfg: ExperimentConfig) -> tuple[str, dict[str, Any] | None, str | None, bytes | None]:
+    """Ray task: (folder, metrics, error, packed). Run in place if ``cfg.output.root`` exists on this
+    machine (packed is None), else in a temporary folder sent back as a tar archive."""
+    if Path(cfg.output.root).is_dir():
+        return (*_run_variant(cfg), None)
+    with tempfile.TemporaryDirectory(prefix="slam2d-variant-") as tmp:
+        folder, metrics, error = _run_variant(_with_root(cfg, tmp))
+        return folder, metrics, error, (_pack(Path(folder)) if folder else None)
+
+
+def _pack(folder: Path) -> bytes:
+    """The contents of ``folder`` as a gzipped tar archive."""
+    import io
+    import tarfile
+
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode="w:gz") as tar:
+        tar.add(folder, arcname=".")
+    return buffer.getvalue()
+
+
+def _collect(runs: Path, outcome) -> tuple[str, dict[str, Any] | None, str | None]:
+    """A Ray task's outcome as (folder under ``runs``, metrics, error); a packed folder is unpacked there."""
+    import io
+    import tarfile
+
+    folder, metrics, error, packed = outcome
+    if not folder:
+        return "", metrics, error
+    if packed is None:
+        return str(runs / Path(folder).name), metrics, error
+    dest = _new_folder(runs, Path(folder).name)
+    with tarfile.open(fileobj=io.BytesIO(packed), mode="r:gz") as tar:
+        tar.extractall(dest, filter="data")
+    return str(dest), metrics, error
 
 
 def _execute_local(cfgs: list[ExperimentConfig], workers: int):
