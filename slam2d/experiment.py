@@ -428,6 +428,8 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
     if executor not in EXECUTORS:
         raise InputError("--executor", f"unknown executor '{executor}' ({', '.join(EXECUTORS)})")
     base, variants, sweep_workers = load_sweep(path)
+    if executor == "ray":
+        _connect_ray()  # before the sweep folder: an unreachable cluster leaves none
     root = _sweep_folder(path, base, resume)
     cfgs = [variant_config(base, v, root / "runs") for v in variants]
     outcomes = [_finished(root / "runs", c.name) for c in cfgs]
@@ -526,11 +528,7 @@ def _execute_ray(cfgs: list[ExperimentConfig]):
     """
     if not cfgs:
         return
-    try:
-        import ray
-    except ImportError:
-        raise InputError("--executor ray", "ray is not installed: pip install 'slam2d[ray]'") from None
-    ray.init(ignore_reinit_error=True, log_to_driver=False)
+    ray = _connect_ray()
     runs = Path(cfgs[0].output.root)
     runs.mkdir(parents=True, exist_ok=True)
     task = ray.remote(_run_variant_anywhere)
@@ -543,6 +541,19 @@ def _execute_ray(cfgs: list[ExperimentConfig]):
         for ref in pending:
             ray.cancel(ref)
         raise
+
+
+def _connect_ray():
+    """The ``ray`` module, connected to the cluster ``RAY_ADDRESS`` names or to a new local instance."""
+    try:
+        import ray
+    except ImportError:
+        raise InputError("--executor ray", "ray is not installed: pip install 'slam2d[ray]'") from None
+    try:
+        ray.init(ignore_reinit_error=True, log_to_driver=False)
+    except ConnectionError as err:
+        raise InputError("RAY_ADDRESS", f"cannot reach the Ray cluster ({err})") from None
+    return ray
 
 
 def _with_root(cfg: ExperimentConfig, root: str) -> ExperimentConfig:
@@ -583,6 +594,9 @@ def _collect(runs: Path, outcome) -> tuple[str, dict[str, Any] | None, str | Non
     dest = _new_folder(runs, Path(folder).name)
     with tarfile.open(fileobj=io.BytesIO(packed), mode="r:gz") as tar:
         tar.extractall(dest, filter="data")
+    config = dest / "config.yaml"  # names the task's temporary folder: name the runs folder instead
+    cfg = config_mod.validate(config_mod.load_dict(config), str(config))
+    config.write_text(config_mod.dump(_with_root(cfg, str(runs))))
     return str(dest), metrics, error
 
 

@@ -11,6 +11,7 @@ import pytest
 import yaml
 
 from slam2d import config as config_mod
+from slam2d.errors import InputError
 from slam2d.experiment import _collect, _run_variant_anywhere, run_sweep
 
 try:
@@ -25,9 +26,9 @@ MEASURED = ("cpu_ms_per_scan", "runtime_s", "peak_rss_mb", "timings_s.")  # wall
 
 @pytest.fixture(scope="module")
 def local_ray():
-    """A local Ray instance on two CPUs, whatever RAY_ADDRESS says."""
+    """A new local Ray instance on two CPUs, whatever RAY_ADDRESS or a running `ray start` say."""
     address = os.environ.pop("RAY_ADDRESS", None)
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield
     ray.shutdown()
     if address is not None:
@@ -77,4 +78,16 @@ def test_task_on_another_machine_sends_its_folder_back(tmp_path):
     folder, metrics, error = _collect(runs, outcome)
     assert error is None and Path(folder).parent == runs
     assert json.loads((Path(folder) / "metrics.json").read_text()) == metrics
-    assert (Path(folder) / "config.yaml").is_file() and (Path(folder) / "trajectory.tum").is_file()
+    assert (Path(folder) / "trajectory.tum").is_file()
+    resolved = yaml.safe_load((Path(folder) / "config.yaml").read_text())
+    assert (resolved["name"], resolved["output"]["root"]) == ("far", str(runs))
+
+
+def test_unreachable_cluster_is_one_line_error_and_no_folder(tmp_path, monkeypatch):
+    def refuse(*args, **kwargs):
+        raise ConnectionError("Failed to connect to Ray cluster at 10.9.8.7:6379")
+
+    monkeypatch.setattr(ray, "init", refuse)
+    with pytest.raises(InputError, match=r"RAY_ADDRESS: cannot reach the Ray cluster \(Failed to connect"):
+        run_sweep(_sweep(tmp_path), executor="ray", quiet=True)
+    assert not (tmp_path / "res").exists()
