@@ -440,7 +440,7 @@ def datasets_download(
             paths = download(names, to, quiet=quiet)
         except InputError as err:
             _fail(err)
-    typer.echo(f"{len(paths)} files verified in {to or data_root()}")
+    typer.echo(f"verified: {len(paths)} file(s) in {to or data_root()}")
 
 
 def main() -> None:

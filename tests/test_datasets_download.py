@@ -138,7 +138,8 @@ def test_list_shows_names_and_status(served, tmp_path, monkeypatch):
     before = runner.invoke(app, ["datasets", "list", "--root", str(tmp_path)])
     assert before.exit_code == 0 and NAME in before.stdout and "missing" in before.stdout
     assert "CC0-1.0" in before.stdout and hashlib.sha256(PAYLOAD).hexdigest()[:16] in before.stdout
-    runner.invoke(app, ["datasets", "download", "all", "--to", str(tmp_path), "--quiet"])
+    fetched = runner.invoke(app, ["datasets", "download", "all", "--to", str(tmp_path)])  # with progress bar
+    assert fetched.exit_code == 0 and f"verified: 1 file(s) in {tmp_path}" in fetched.stdout
     after = runner.invoke(app, ["datasets", "list", "--root", str(tmp_path)])
     assert "verified" in after.stdout and "missing" not in after.stdout
 
