@@ -282,28 +282,29 @@ class ParticleFilter:
         return max(0.0, 1.0 - self.w_fast / self.w_slow)
 
     def _resample(self, scan: Scan) -> None:
-        """Low-variance resampling to KLD's count, plus random free-space poses.
+        """Low-variance resampling with random free-space poses, as many as KLD sampling asks.
 
-        The count comes from the bins of a random-order draw of ``max_particles``; that many are
-        then drawn again with one offset, so that the hypotheses keep their shares. Each of the
-        ``max_particles`` slots is a random pose with probability :meth:`random_share` (the
-        resampled ones give way), drawn by the scan's likelihood when ``recovery_candidates`` > 1."""
+        Each of ``max_particles`` slots of a random-order draw is a uniform random pose with
+        probability :meth:`random_share`; KLD's count n comes from the bins of these slots (so that
+        random poses raise it, as in amcl). The random slots among the first n are then drawn by
+        the scan's likelihood (``recovery_candidates``), the others again with one offset from the
+        weights, so that the hypotheses keep their shares."""
         cfg, n_max = self.cfg, self.cfg.max_particles
         weights = np.exp(self.log_w)
-        drawn = self.particles[low_variance_indices(weights, n_max, self.rng)]
-        n = self.kld_count(drawn[self.rng.permutation(n_max)])  # KLD counts bins along a random order
+        drawn = self.particles[low_variance_indices(weights, n_max, self.rng)][self.rng.permutation(n_max)]
         share = self.random_share()
-        n_random = int(self.rng.binomial(n_max, share)) if share > 0 else 0
-        n = min(n, n_max - n_random)
-        parts = [self.particles[low_variance_indices(weights, n, self.rng)]] if n else []
+        is_random = self.rng.random(n_max) < share if share > 0 else np.zeros(n_max, dtype=bool)
+        drawn[is_random] = self.random_poses(int(is_random.sum()))
+        n = self.kld_count(drawn)  # KLD counts bins along the random order
+        n_random = int(is_random[:n].sum())
+        kept = self.particles[low_variance_indices(weights, n - n_random, self.rng)]
+        self.particles = np.concatenate([kept, self.guided_random_poses(n_random, scan)])
+        self.log_w = np.full(n, -math.log(n))
+        self.resamples += 1
         if n_random:
-            parts.append(self.guided_random_poses(n_random, scan))
             self.injected += n_random
             if cfg.combine == "amcl":  # amcl restarts its averages after injecting
                 self.w_slow = self.w_fast = 0.0
-        self.particles = np.concatenate(parts)
-        self.log_w = np.full(len(self.particles), -math.log(len(self.particles)))
-        self.resamples += 1
 
     def kld_count(self, poses: np.ndarray) -> int:
         """The first n such that the n leading ``poses`` reach KLD's count for their bins (max if none)."""
