@@ -9,7 +9,7 @@ on the gap's side, the initial goal is where the ray from the sensor through Q m
 the circle through M.
 
 Adjustment (eq. 2–3): a ``section = {r, start_idx, end_idx}`` is the run of beams
-longer than r that contains the goal's beam; with β = (end − start)·Δθ and
+longer than r + safe_dis (free a little beyond the arc) that contains the goal's beam; with β = (end − start)·Δθ and
 θ = (idx − start)·Δθ the arcs are HJ = (β − θ)·r and JG = θ·r. A goal at (|OP|, idx)
 stands when HJ > safe_dis and JG > safe_dis on every section that OP crosses (radii
 every grid cell up to |OP|), and, for A-type, |OP| > d_tho. The goal's beam is moved
@@ -189,7 +189,8 @@ def _intervals(r, dtheta, circular, d, idx, params: CandidateParams):
     radii = np.arange(max(params.step, params.safe_dis), d + 1e-9, params.step)
     if len(radii) == 0 or radii[-1] < d - 1e-9:
         radii = np.append(radii, d)
-    start, end = sections(r, idx, radii, circular)
+    beyond = np.minimum(radii + params.safe_dis, r.max() - 1e-9)  # beams free safe_dis beyond the radius (or to the limit)
+    start, end = sections(r, idx, beyond, circular)
     margin = params.safe_dis / (radii * dtheta)  # beams spanning an arc of safe_dis
     with np.errstate(invalid="ignore"):
         lo = np.maximum.accumulate(np.where(start <= end, start + margin, np.inf))

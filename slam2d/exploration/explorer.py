@@ -66,7 +66,8 @@ class Explorer:
         found = scan_candidates(scan.ranges, scan.angles, scan.range_max, sensor, self.params)
         blocked = view.state == OCCUPIED
         self._supersede(sensor, view, blocked)
-        found = [c for c in found if self._open(c.position)]
+        here = np.asarray(pose, dtype=np.float64)[:2]
+        found = [c for c in found if np.hypot(*(c.position - here)) >= self.cfg.node_step / 2 and self._open(c.position)]
         self.hybrid.add(pose, found, blocked, view.resolution, view.origin)
         return True
 
@@ -119,6 +120,8 @@ class Explorer:
         t0 = time.perf_counter()
         pose = np.asarray(pose, dtype=np.float64)
         distance = geodesic(view.traversable(self.radius + self.inflation), view.to_cell(pose[:2]), view.resolution)
+        roomy = view.traversable(self.radius + self.cfg.goal_clearance)
+        distance = np.where(roomy, distance, np.inf)  # goals only where the robot has room
         if self.cfg.strategy in FRONTIER_STRATEGIES:
             goal = self._frontier_goal(pose, view, distance, self.cfg.strategy)
         else:
@@ -150,6 +153,13 @@ class Explorer:
         pts = np.array([c.position for c in live])
         path, target = _path_lengths(view, distance, pts, self.radius + 0.3)
         ok = np.isfinite(path)
+        if not ok.any():
+            return None
+        if self.visited:  # a candidate whose goal is where the robot has been is explored
+            near = np.hypot(*(target[:, None, :] - np.array(self.visited)[None]).transpose(2, 0, 1)).min(axis=1)
+            for c in np.array(live, dtype=object)[near < self.cfg.avoid_radius]:
+                c.alive = False
+            ok &= near >= self.cfg.avoid_radius
         if not ok.any():
             return None
         live, pts, path, target = [c for c, k in zip(live, ok) if k], pts[ok], path[ok], target[ok]

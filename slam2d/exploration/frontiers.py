@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from slam2d.exploration.gridops import FREE, UNKNOWN, GridView, inside_polygon
+from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, inside_polygon
 
 _EIGHT = np.ones((3, 3), dtype=int)
+WALL_GAP = 2  # cells: frontier cells this close to an occupied cell are left out
 
 
 @dataclass(eq=False)
@@ -33,11 +34,17 @@ class Frontier:
     min_distance: float
 
 
-def frontier_mask(state: np.ndarray) -> np.ndarray:
-    """Frontier cells (H, W) bool: free cells with an unknown 4-neighbour (the grid's edge counts as unknown)."""
+def frontier_mask(state: np.ndarray, wall_gap: int = WALL_GAP) -> np.ndarray:
+    """Frontier cells (H, W) bool: free cells with an unknown 4-neighbour (the grid's edge counts as
+    unknown) and no occupied cell within ``wall_gap`` cells (Chebyshev): unknown cells seen through
+    gaps in a wall's cells are not open space."""
     unknown = np.pad(state == UNKNOWN, 1, constant_values=True)
     near = unknown[:-2, 1:-1] | unknown[2:, 1:-1] | unknown[1:-1, :-2] | unknown[1:-1, 2:]
-    return (state == FREE) & near
+    mask = (state == FREE) & near
+    if wall_gap > 0:
+        size = 2 * wall_gap + 1
+        mask &= ~ndimage.maximum_filter(state == OCCUPIED, size=size, mode="constant", cval=False)
+    return mask
 
 
 def frontier_regions(mask: np.ndarray, min_cells: int) -> list[np.ndarray]:

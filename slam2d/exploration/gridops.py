@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from slam2d.planning.grid import inflate
+from scipy import ndimage
 from slam2d.segmentation.observations import raycast_grid
 
 FREE, OCCUPIED, UNKNOWN = 0, 1, 2
@@ -57,8 +57,10 @@ class GridView:
 
     def traversable(self, radius: float) -> np.ndarray:
         """Known-free cells farther than ``radius`` m from every occupied cell (H, W) bool."""
-        clear = inflate(self.state != OCCUPIED, radius / self.resolution)
-        return clear & (self.state == FREE)
+        if getattr(self, "_clearance", None) is None:
+            self._clearance = ndimage.distance_transform_edt(np.pad(self.state != OCCUPIED, 1,
+                                                                    constant_values=False))[1:-1, 1:-1]  # fmt: skip
+        return (self._clearance > radius / self.resolution) & (self.state == FREE)
 
 
 # --------------------------------------------------------------------------- geodesic distance
@@ -133,8 +135,8 @@ def _gain(state, gxy, n_rays, max_t, mark):
             step_r = 1 if dy > 0 else -1
             inv_x = 1.0 / abs(dx) if dx != 0 else np.inf
             inv_y = 1.0 / abs(dy) if dy != 0 else np.inf
-            tmx = ((c + 1 - gx) if dx > 0 else (gx - c)) * inv_x
-            tmy = ((r + 1 - gy) if dy > 0 else (gy - r)) * inv_y
+            tmx = ((c + 1 - gx) if dx > 0 else (gx - c)) * inv_x if dx != 0 else np.inf
+            tmy = ((r + 1 - gy) if dy > 0 else (gy - r)) * inv_y if dy != 0 else np.inf
             t = 0.0
             while t < max_t:
                 if r < 0 or c < 0 or r >= h or c >= w:
@@ -180,7 +182,7 @@ def straight_reachable(blocked: np.ndarray, resolution: float, origin, a, b, wid
     if length < 1e-9:
         return True
     normal = np.array([-d[1], d[0]]) / length
-    starts = a + np.outer([-0.5, 0.0, 0.5], normal * width)
+    starts = a + np.outer([-0.5, 0.0, 0.5], normal * width) + 1e-6 * resolution  # off cell edges: 0·inf in the traversal
     angle = np.full((3, 1), np.arctan2(d[1], d[0]))
     _, hit = raycast_grid(~np.asarray(blocked, dtype=bool), resolution, starts, angle, length, origin)
     return not bool(hit.any())
@@ -200,3 +202,43 @@ def inside_polygon(points, polygon) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         xc = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
     return (crosses & (x < xc)).sum(axis=1) % 2 == 1
+
+
+# --------------------------------------------------------------------------- visibility
+
+
+@njit(cache=True)
+def _mark_visible(free, gxy, n_rays, max_t, seen):
+    h, w = free.shape
+    for p in range(gxy.shape[0]):
+        gx, gy = gxy[p, 0], gxy[p, 1]
+        for b in range(n_rays):
+            a = 2.0 * np.pi * b / n_rays
+            dx, dy = np.cos(a), np.sin(a)
+            c, r = int(np.floor(gx)), int(np.floor(gy))
+            step_c = 1 if dx > 0 else -1
+            step_r = 1 if dy > 0 else -1
+            inv_x = 1.0 / abs(dx) if dx != 0 else np.inf
+            inv_y = 1.0 / abs(dy) if dy != 0 else np.inf
+            tmx = ((c + 1 - gx) if dx > 0 else (gx - c)) * inv_x if dx != 0 else np.inf
+            tmy = ((r + 1 - gy) if dy > 0 else (gy - r)) * inv_y if dy != 0 else np.inf
+            t = 0.0
+            while t < max_t and 0 <= r < h and 0 <= c < w and free[r, c]:
+                seen[r, c] = True
+                if tmx < tmy:
+                    t = tmx
+                    tmx += inv_x
+                    c += step_c
+                else:
+                    t = tmy
+                    tmy += inv_y
+                    r += step_r
+
+
+def visible_from(free: np.ndarray, resolution: float, origins, max_range: float, rays: int = 720) -> np.ndarray:
+    """Free cells (H, W) bool that a ray from one of ``origins`` (P, 2) (cells, continuous (x, y) = (col, row))
+    reaches within ``max_range`` m through free cells (Amanatides–Woo)."""
+    seen = np.zeros(free.shape, dtype=np.bool_)
+    gxy = np.ascontiguousarray(np.asarray(origins, dtype=np.float64).reshape(-1, 2))
+    _mark_visible(np.ascontiguousarray(free, dtype=np.bool_), gxy, int(rays), float(max_range) / resolution, seen)
+    return seen

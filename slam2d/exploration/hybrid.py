@@ -25,6 +25,7 @@ from slam2d.exploration.candidates import Candidate
 from slam2d.exploration.gridops import straight_reachable
 
 CURRENT, CACHE, FINAL, MARKED = "current", "cache", "final", "marked"
+LINK_RANGE = 4.0  # m: a new final node is linked to the final nodes this close it can reach in a straight line
 
 
 @dataclass(eq=False)
@@ -37,6 +38,7 @@ class TopoNode:
     parent: int | None = None
     children: list[int] = field(default_factory=list)
     role: str = CURRENT
+    links: list[int] = field(default_factory=list)  # final nodes straight-line reachable besides the parent
 
     def open_candidates(self) -> list[Candidate]:
         return [c for c in self.candidates if c.alive]
@@ -91,16 +93,29 @@ class HybridMap:
         nearest = self.nearest_final(current.pose[:2])
         reachable = straight_reachable(blocked, resolution, origin, nearest.pose, current.pose, self.box_width)
         if not reachable or cache.open_candidates():
-            self._make_final(cache)
+            self._make_final(cache, blocked, resolution, origin)
         else:
             cache.role = MARKED
             self.marked_ids.append(cache.id)
 
-    def _make_final(self, node: TopoNode) -> None:
+    def _make_final(self, node: TopoNode, blocked=None, resolution=None, origin=None) -> None:
+        """``node`` joins the graph: its parent is the nearest final node straight-line reachable from it
+        (the latest final node if none is), and it is linked to every final node within
+        ``LINK_RANGE`` m that is straight-line reachable."""
         if self.final_ids:
-            parent = self.nearest_final(node.pose[:2])
+            finals = [self.nodes[i] for i in self.final_ids]
+            d = np.array([np.hypot(*(n.pose[:2] - node.pose[:2])) for n in finals])
+            links = []
+            if blocked is not None:
+                for k in np.argsort(d):
+                    if d[k] > LINK_RANGE:
+                        break
+                    if straight_reachable(blocked, resolution, origin, node.pose, finals[k].pose, self.box_width):
+                        links.append(finals[k].id)
+            parent = self.nodes[links[0]] if links else finals[-1]
             node.parent = parent.id
             parent.children.append(node.id)
+            node.links = [i for i in links if i != parent.id]
         node.role = FINAL
         self.final_ids.append(node.id)
 
@@ -145,8 +160,8 @@ class HybridMap:
         for i in self.final_ids:
             n = self.nodes[i]
             g.add_node(i, pos=tuple(n.pose[:2]))
-            if n.parent is not None:
-                g.add_edge(i, n.parent, length=float(np.hypot(*(n.pose[:2] - self.nodes[n.parent].pose[:2]))))
+            for j in ([n.parent] if n.parent is not None else []) + n.links:
+                g.add_edge(i, j, length=float(np.hypot(*(n.pose[:2] - self.nodes[j].pose[:2]))))
         return g
 
     def counts(self) -> dict[str, int]:
@@ -161,19 +176,18 @@ class HybridMap:
             cands = [{"position": c.position.tolist(), "d": c.d, "idx": c.idx, "type": c.type, "alive": c.alive,
                       "utility": None if not np.isfinite(c.utility) else c.utility} for c in n.candidates]  # fmt: skip
             nodes.append({"id": n.id, "pose": n.pose.tolist(), "role": n.role, "parent": n.parent,
-                          "children": list(n.children), "candidates": cands})  # fmt: skip
+                          "children": list(n.children), "links": list(n.links), "candidates": cands})  # fmt: skip
         return {"step": self.step, "box_width": self.box_width, **self.counts(), "nodes": nodes}
 
     def save(self, path: Path) -> None:
         Path(path).write_text(json.dumps(self.to_json(), indent=1))
 
     def draw(self, ax) -> None:
-        """Final nodes and their edges, marked nodes as small dots, open candidates linked to their node."""
-        for i in self.final_ids:
-            n = self.nodes[i]
-            if n.parent is not None:
-                p = self.nodes[n.parent].pose
-                ax.plot([n.pose[0], p[0]], [n.pose[1], p[1]], color="tab:purple", lw=1.0)
+        """Final nodes and the graph's edges, marked nodes as small dots, open candidates linked to their node."""
+        g = self.graph()
+        for i, j in g.edges:
+            a, b = self.nodes[i].pose, self.nodes[j].pose
+            ax.plot([a[0], b[0]], [a[1], b[1]], color="tab:purple", lw=0.8)
         fin = np.array([self.nodes[i].pose[:2] for i in self.final_ids]).reshape(-1, 2)
         mk = np.array([self.nodes[i].pose[:2] for i in self.marked_ids]).reshape(-1, 2)
         ax.plot(*mk.T, ".", color="0.6", ms=3, label=f"marked ({len(mk)})")

@@ -33,6 +33,7 @@ log = logging.getLogger(__name__)
 GIF_FRAMES = 80
 WARMUP = 2.0  # s the robot stands still at the start while the grid's first cells become free
 START_CLEARANCE = 0.5  # m from walls for a seeded start
+VIEW_SPACING = 0.25  # m between the places the reachable area is seen from
 REPEAT_RADIUS = 0.5  # m: path within this of earlier path is repeated
 REPEAT_GAP = 2.0  # m of travel before a piece of path counts as "earlier"
 SAMPLE_STEP = 0.1  # m between path samples for the repetition metric
@@ -100,7 +101,8 @@ class _Loop:
             self.world, sim.world, self.truth_free, self.truth_frame, cfg.seed)  # fmt: skip
         if not self.world.free(start[None, :2], 0.2)[0]:
             raise InputError("exploration.start", f"({start[0]:.2f}, {start[1]:.2f}) is not free for the robot")
-        self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2])
+        self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2], RobotConfig().radius,
+                                        sim.laser.range_max)  # fmt: skip
         self.robot = Robot(self.world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), seed=cfg.seed)
         self.options = _navigator_options({"max_time": 120.0, **self.ecfg.options}, True)
         self.slam = OnlineSlam(cfg)
@@ -110,7 +112,9 @@ class _Loop:
         self.goal: Goal | None = None
         self.legs: list[np.ndarray] = []
         self.goals: list[dict] = []
-        self.replans = self.recoveries = 0
+        self.replans = self.recoveries = self.escapes = 0
+        self.contacts: list = []
+        self.escape = None  # (heading rad, start (x, y), start time) while backing out of a tight spot
 
     def view(self) -> GridView:
         m = self.cfg.mapping
@@ -126,6 +130,7 @@ class _Loop:
         self.legs = [np.asarray(w, float) for w in goal.waypoints] + [goal.position]
         self.nav = Navigator(self.legs[0], self.robot.cfg, self.options)
         self.goal_t0, self.best = now, (np.inf, now)
+        self.goal_from = self.robot.pose[:2].copy()
         self.goals.append({"time": now, "position": goal.position.tolist(), "kind": goal.kind,
                            "waypoints": len(goal.waypoints), "outcome": "active"})  # fmt: skip
 
@@ -140,6 +145,11 @@ class _Loop:
     def close_goal(self, outcome: str) -> None:
         self._count(self.nav)
         self.goals[-1]["outcome"] = outcome
+        if outcome == "inaccessible":
+            self.goals[-1]["reason"] = self.nav.reason or f"no progress for {self.ecfg.goal_timeout:g} s"
+            stuck = "recovery" in self.goals[-1]["reason"] or np.hypot(*(self.robot.pose[:2] - self.goal_from)) < 0.2
+            if stuck:  # back out of the tight spot before the next goal
+                self.escape = None, self.robot.pose[:2].copy(), None
         if outcome == "reached":
             self.explorer.reached(self.goal)
         elif outcome == "inaccessible":
@@ -214,7 +224,9 @@ def explore(cfg: ExploreConfig, progress=None) -> ExplorationRun:
             if idle < 20:
                 continue
         cmd = None
-        if loop.nav is not None:
+        if loop.escape is not None:
+            cmd = _escape(loop, step, now)
+        if cmd is None and loop.nav is not None:
             cmd = loop.nav.step(pose, step.velocity, step.scan.points_in_base(), loop.slam.grid, now - loop.goal_t0)
             if loop.nav.status == REACHED:
                 loop.close_goal("reached")
@@ -224,11 +236,13 @@ def explore(cfg: ExploreConfig, progress=None) -> ExplorationRun:
                 idle += 1
                 continue
         idle = 0
-        v, w = (cmd.v, cmd.w) if cmd is not None and loop.nav is not None else (0.0, 0.0)
+        v, w = (cmd.v, cmd.w) if cmd is not None else (0.0, 0.0)
         before = step.pose[:2].copy()
         step = loop.robot.step(v, w, period)
         driven += float(np.hypot(*(step.pose[:2] - before)))
         collisions += int(step.collision and not in_contact)
+        if step.collision and not in_contact:
+            loop.contacts.append((now, *np.round(step.pose, 2), step.contact, cmd.state if cmd else ""))
         in_contact = step.collision
         min_clear = min(min_clear, clearance(loop.world, loop.robot))
         loop.slam.add(step.scan)
@@ -246,8 +260,54 @@ def explore(cfg: ExploreConfig, progress=None) -> ExplorationRun:
         snaps.append(_snapshot(loop, len(truth)))
     run = ExplorationRun(loop.world, grid, np.array(truth), np.array(est), np.array(stamps), loop.explorer,
                          np.array(curve), snaps, loop.goals)  # fmt: skip
+    run.contacts = loop.contacts
     run.metrics = _metrics(run, loop, cover, stop, collisions, min_clear, time.perf_counter() - t_wall)
     return run
+
+
+ESCAPE_DISTANCE = 0.3  # m driven out of a tight spot
+ESCAPE_TIME = 8.0  # s at most
+
+
+def _escape(loop: _Loop, step, now: float):
+    """Out of a spot where the local planner finds no way (the disc nearly touching walls): turn on the
+    spot (a disc always can) to the heading with the longest free sweep, then drive ESCAPE_DISTANCE."""
+    from slam2d.navigation.common import Command
+
+    heading, start, since = loop.escape
+    since = now if since is None else since
+    loop.escape = heading, start, since
+    pose = loop.slam.pose
+    if np.hypot(*(step.pose[:2] - start)) >= ESCAPE_DISTANCE or now - since > ESCAPE_TIME:
+        loop.escape = None
+        return None
+    points = step.scan.points_in_base()
+    if heading is None:
+        heading = pose[2] + _open_heading(points, loop.robot.cfg.radius)
+        loop.escape = heading, start, since
+        loop.escapes += 1
+    err = float(np.arctan2(np.sin(heading - pose[2]), np.cos(heading - pose[2])))
+    if abs(err) > 0.15:
+        return Command(0.0, float(np.clip(2.0 * err, -1.0, 1.0)), False, "escape turn")
+    ahead = (points[:, 0] > 0) & (points[:, 0] < 0.25 + loop.robot.cfg.radius)
+    if (np.abs(points[ahead, 1]) < loop.robot.cfg.radius + 0.01).any():
+        loop.escape = None, start, since  # blocked after all: choose again
+        return Command(0.0, 0.0, False, "escape")
+    return Command(0.15, float(np.clip(2.0 * err, -1.0, 1.0)), False, "escape")
+
+
+def _open_heading(points: np.ndarray, radius: float, reach: float = 1.0) -> float:
+    """Heading (rad, robot frame) along which the disc sweeps farthest (up to ``reach`` m) without
+    touching a laser point (M, 2); ties go to headings away from the nearest point."""
+    angles = np.linspace(-np.pi, np.pi, 72, endpoint=False)
+    c, s_ = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    along = c * points[:, 0] + s_ * points[:, 1]
+    side = -s_ * points[:, 0] + c * points[:, 1]
+    touching = (along > 0) & (np.abs(side) < radius + 0.01)
+    free = np.where(touching, along - radius, reach).min(axis=1).clip(0, reach)
+    nearest = points[np.argmin(np.hypot(*points.T))] if len(points) else np.zeros(2)
+    away = np.cos(angles - np.arctan2(-nearest[1], -nearest[0]))
+    return float(angles[np.argmax(free + 0.01 * away)])
 
 
 def _wait(loop: _Loop, step, period: float, truth, est, stamps):
@@ -283,13 +343,23 @@ def truth_map(world, resolution: float = 0.05):
     return grid.free, grid
 
 
-def reachable_free(free: np.ndarray, frame, start_xy) -> np.ndarray:
-    """Free cells 4-connected to the start's cell: the area an explorer can be asked to map."""
-    labels, _ = ndimage.label(free)
+def reachable_free(free: np.ndarray, frame, start_xy, radius: float = 0.2, max_range: float = 12.0) -> np.ndarray:
+    """The area an explorer can be asked to map: free cells that the laser (``max_range`` m) sees from
+    some place the robot's centre can reach from the start (the free cells farther than ``radius`` m
+    from walls, connected to the start's cell), sampled every VIEW_SPACING m."""
+    from slam2d.exploration.gridops import visible_from
+
+    res = frame.resolution
+    room = ndimage.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1] * res > radius
+    labels, _ = ndimage.label(room, np.ones((3, 3), int))
     cell = frame.world_to_cell(np.asarray(start_xy, float))
     if not frame.in_bounds(cell) or labels[cell[0], cell[1]] == 0:
         raise InputError("exploration.start", "the start is not in the world's free space")
-    return labels == labels[cell[0], cell[1]]
+    robot = labels == labels[cell[0], cell[1]]
+    k = max(1, int(round(VIEW_SPACING / res)))
+    rows, cols = np.nonzero(robot[::k, ::k])
+    origins = np.column_stack([cols * k + 0.5, rows * k + 0.5])
+    return visible_from(free, res, origins, max_range) | robot
 
 
 def seeded_start(world, name: str, free: np.ndarray, frame, seed: int) -> np.ndarray:
@@ -390,7 +460,7 @@ def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, colli
         "collisions": collisions, "min_clearance": float(min_clear),
         "goals": len(run.goals), "goals_reached": outcomes.count("reached"), "goals_spent": outcomes.count("spent"),
         "goals_inaccessible": outcomes.count("inaccessible"), "frontier_fallbacks": ex.fallbacks,
-        "replans": loop.replans, "recoveries": loop.recoveries,
+        "replans": loop.replans, "recoveries": loop.recoveries, "escapes": loop.escapes,
         "path_repetition": path_repetition(run.truth[:, :2]),
         "map_iou": cover.iou(run.grid),
         "ate_rmse": ate(run.estimate, run.truth, align=False)["rmse"],

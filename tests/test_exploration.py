@@ -1,0 +1,278 @@
+"""Exploration: Li et al.'s candidates on hand-made scans, frontiers, the three-ray test, the cache rules
+of the hybrid map, the utility, and a whole exploration of a small two-room world with SLAM in the loop."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from slam2d.errors import InputError
+from slam2d.exploration import config as explore_config
+from slam2d.exploration.candidates import CandidateParams, adjust, scan_candidates, stands
+from slam2d.exploration.explorer import Explorer
+from slam2d.exploration.frontiers import find_frontiers, frontier_mask
+from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, geodesic, information_gain, straight_reachable
+from slam2d.exploration.hybrid import FINAL, MARKED, HybridMap
+from slam2d.exploration.run import path_repetition
+from slam2d.sim.world import World
+
+ANGLES = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+R_MAX = 12.0
+PARAMS = CandidateParams(width=0.4, delta=0.1, safe_d=0.25, safe_dis=0.25, d_tho=0.5)
+
+
+def scan_of(segments, origin=(0.0, 0.0)):
+    """Ranges (360,) from ``origin`` in a world of wall ``segments`` ((x0, y0), (x1, y1)), 12 m limit."""
+    return World(np.array(segments, dtype=float)).raycast(np.array(origin, float), ANGLES, R_MAX)
+
+
+# --------------------------------------------------------------------------- candidates
+
+
+def test_corridor_end_at_max_range_gives_one_a_type_goal_on_the_axis():
+    """A 2 m wide corridor along +x, open beyond the range limit, a wall behind the robot."""
+    ranges = scan_of([((-1, -1), (40, -1)), ((-1, 1), (40, 1)), ((-1, -1), (-1, 1))])
+    found = scan_candidates(ranges, ANGLES, R_MAX, np.zeros(3), PARAMS)
+    assert [c.type for c in found] == ["A"]  # the corridor walls seen at a grazing angle are no occlusions
+    a = found[0]
+    assert a.d == pytest.approx(R_MAX - PARAMS.delta)
+    np.testing.assert_allclose(a.position, [R_MAX - PARAMS.delta, 0.0], atol=0.12)
+    # at the robot's pose (3, 2, 90°) the same goal is straight ahead in the map frame
+    moved = scan_candidates(scan_of([((-1, -1), (40, -1)), ((-1, 1), (40, 1))]), ANGLES, R_MAX,
+                            np.array([3.0, 2.0, np.pi / 2]), PARAMS)  # fmt: skip
+    assert any(np.allclose(c.position, [3.0, 2.0 + R_MAX - PARAMS.delta], atol=0.15) for c in moved if c.type == "A")
+
+
+def test_a_type_goal_beyond_a_slot_is_brought_back_into_free_space():
+    """A 0.3 m slot in a wall 3 m ahead, open beyond the range limit: its arc at the limit is longer
+    than the robot, but no goal may lie in or beyond the slot: the adjustment shortens |OP| to where
+    the section leaves safe_dis on both sides."""
+    walls = [((-3, -3), (3, -3)), ((-3, 3), (3, 3)), ((-3, -3), (-3, 3)), ((3, -3), (3, -0.15)), ((3, 0.15), (3, 3))]
+    found = [c for c in scan_candidates(scan_of(walls), ANGLES, R_MAX, np.zeros(3), PARAMS) if c.type == "A"]
+    assert len(found) == 1
+    assert PARAMS.d_tho < found[0].d <= 3.0 - PARAMS.safe_dis + 1e-9
+    wide = walls[:3] + [((3, -3), (3, -1.0)), ((3, 1.0), (3, 3))]  # a 2 m gap: the goal stays at the limit
+    far = [c for c in scan_candidates(scan_of(wide), ANGLES, R_MAX, np.zeros(3), PARAMS) if c.type == "A"]
+    assert any(c.d == pytest.approx(R_MAX - PARAMS.delta) for c in far)
+
+
+def open_door_walls():
+    """A 4 x 4 m room around the origin with a 1 m door in its east wall (y in [0.5, 1.5]) to a
+    second room (east wall at x = 6)."""
+    return [((-2, -2), (2, -2)), ((-2, 2), (2, 2)), ((-2, -2), (-2, 2)), ((2, -2), (2, 0.5)), ((2, 1.5), (2, 2)),
+            ((2, -3), (6, -3)), ((2, 3), (6, 3)), ((6, -3), (6, 3)), ((2, 2), (2, 3)), ((2, -2), (2, -3))]  # fmt: skip
+
+
+def test_open_door_gives_b_type_goals_inside_the_doorway_clear_of_the_jambs():
+    ranges = scan_of(open_door_walls())
+    found = scan_candidates(ranges, ANGLES, R_MAX, np.zeros(3), PARAMS)
+    assert found and all(c.type == "B" for c in found)
+    hits = ranges[:, None] * np.column_stack([np.cos(ANGLES), np.sin(ANGLES)])
+    for c in found:
+        x, y = c.position
+        assert 1.6 < x < 2.6 and 0.5 < y < 1.5, c.position  # in the doorway, not in the room or beyond
+        assert np.hypot(*(hits - c.position).T).min() > 0.2  # clear of the jambs
+        assert stands(np.minimum(ranges, R_MAX), ANGLES[1] - ANGLES[0], True, c.d, c.idx, "B", PARAMS)
+    # the same room with the door closed has no candidate at all
+    closed = [w for w in open_door_walls() if w != ((2, 1.5), (2, 2))] + [((2, 0.5), (2, 2))]
+    assert scan_candidates(scan_of(closed), ANGLES, R_MAX, np.zeros(3), PARAMS) == []
+
+
+def test_adjustment_moves_a_goal_off_the_section_edge_or_discards_it():
+    ranges = np.minimum(scan_of(open_door_walls()), R_MAX)
+    dtheta = ANGLES[1] - ANGLES[0]
+    door = np.nonzero((np.abs(ANGLES - np.arctan2(1.0, 2.0)) < 0.25) & (ranges > 2.8))[0]
+    edge = int(door.max())  # the last beam through the door: too close to the jamb
+    assert not stands(ranges, dtheta, True, 2.5, edge, "B", PARAMS)
+    fixed = adjust(ranges, dtheta, True, 2.5, edge, "B", PARAMS)
+    assert fixed is not None and fixed[1] < edge and stands(ranges, dtheta, True, 2.5, fixed[1], "B", PARAMS)
+    slot = [((-3, -3), (3, -3)), ((-3, 3), (3, 3)), ((-3, -3), (-3, 3)), ((3, -3), (3, -0.1)), ((3, 0.1), (3, 3)),
+            ((3, -1), (8, -1)), ((3, 1), (8, 1)), ((8, -1), (8, 1))]  # fmt: skip
+    r2 = np.minimum(scan_of(slot), R_MAX)
+    fixed = adjust(r2, dtheta, True, 4.0, 180, "A", PARAMS)  # a goal 4 m ahead, through a 0.2 m slot at 3 m
+    assert fixed is not None and fixed[0] <= 3.0 - PARAMS.safe_dis + 1e-9  # brought back in front of the slot
+    assert adjust(r2, dtheta, True, 4.0, 180, "B", PARAMS) is None  # B-type goals keep |OP|: discarded
+
+
+# --------------------------------------------------------------------------- grids
+
+
+def view_of(state, res=0.05):
+    return GridView(np.asarray(state, dtype=np.int8), res, (0.0, 0.0))
+
+
+def test_three_rays_with_and_without_an_obstacle():
+    blocked = np.zeros((60, 100), dtype=bool)  # 5 m x 3 m at 5 cm
+    a, b = (0.5, 1.5), (4.5, 1.5)
+    assert straight_reachable(blocked, 0.05, (0, 0), a, b, 0.6)
+    mid = blocked.copy()
+    mid[30, 50] = True  # on the midline
+    assert not straight_reachable(mid, 0.05, (0, 0), a, b, 0.6)
+    side = blocked.copy()
+    side[36, 50] = True  # 0.3 m off the midline: on a long side of the 0.6 m box
+    assert not straight_reachable(side, 0.05, (0, 0), a, b, 0.6)
+    assert straight_reachable(side, 0.05, (0, 0), a, b, 0.3)  # a narrower box passes it
+    outside = blocked.copy()
+    outside[45, 50] = True  # 0.75 m off: outside the box
+    assert straight_reachable(outside, 0.05, (0, 0), a, b, 0.6)
+
+
+def corridor_state(w=200, h=60, width_cells=30):
+    """A straight corridor along x (free rows in the middle, walls above and below)."""
+    state = np.full((h, w), OCCUPIED, dtype=np.int8)
+    lo = (h - width_cells) // 2
+    state[lo : lo + width_cells, :] = FREE
+    return state
+
+
+def test_straight_corridor_keeps_no_intermediate_node():
+    view = view_of(corridor_state())
+    blocked = view.state == OCCUPIED
+    hybrid = HybridMap(step=0.9, box_width=0.6)
+    for x in np.arange(0.5, 9.5, 0.9):
+        hybrid.add([x, 1.5, 0.0], [], blocked, view.resolution, view.origin)
+    hybrid.finish()
+    roles = [n.role for n in hybrid.nodes.values()]
+    assert roles[0] == FINAL and roles[-1] == FINAL  # the first node and the last cache
+    assert all(r == MARKED for r in roles[1:-1]) and len(roles) == 10
+
+
+def test_a_corner_keeps_one_node_and_an_open_candidate_keeps_its_node():
+    """An L: a corridor along x to a corner at (5, 1.5), then along y."""
+    state = np.full((200, 200), OCCUPIED, dtype=np.int8)
+    state[15:45, 0:115] = FREE  # y 0.75-2.25, x 0-5.75
+    state[15:200, 85:115] = FREE  # x 4.25-5.75 up
+    view = view_of(state)
+    blocked = view.state == OCCUPIED
+    hybrid = HybridMap(step=0.9, box_width=0.6)
+    path = [[x, 1.5] for x in np.arange(0.5, 5.01, 0.9)] + [[5.0, y] for y in np.arange(2.4, 9.0, 0.9)]
+    for xy in path:
+        hybrid.add([*xy, 0.0], [], blocked, view.resolution, view.origin)
+    finals = [hybrid.nodes[i].pose[:2] for i in hybrid.final_ids]
+    assert len(finals) == 2  # the start and one node at the corner
+    np.testing.assert_allclose(finals[1], [5.0, 1.5])  # the node at the corner
+    assert len(hybrid.marked_ids) == len(path) - 3  # the start, the corner and the cache are not marked
+    # rule (2): in the straight corridor a node holding an open candidate joins the graph
+    from slam2d.exploration.candidates import Candidate
+
+    hybrid = HybridMap(step=0.9, box_width=0.6)
+    straight = view_of(corridor_state())
+    for k, x in enumerate(np.arange(0.5, 6.0, 0.9)):
+        cands = [Candidate(np.array([x, 2.0]), 1.0, 0, "B")] if k == 3 else []
+        hybrid.add([x, 1.5, 0.0], cands, straight.state == OCCUPIED, 0.05, (0, 0))
+    assert hybrid.nodes[3].role == FINAL and hybrid.nodes[2].role == MARKED
+
+
+def test_frontiers_regions_goal_size_visited_and_bounds():
+    state = np.full((80, 120), UNKNOWN, dtype=np.int8)
+    state[10:70, 10:60] = FREE  # a known room, open to the unknown on its east side (x = 3 m)
+    state[9, 9:61] = state[70, 9:61] = OCCUPIED
+    state[9:71, 9] = OCCUPIED
+    view = view_of(state)
+    mask = frontier_mask(view.state)
+    assert mask[:, 59].sum() >= 50 and mask[:, :59].sum() == 0  # the open side only
+    dist = geodesic(view.traversable(0.25), view.to_cell([1.5, 2.0]), 0.05)
+    found = find_frontiers(view, [1.5, 2.0], dist, 0.4, 0.55)
+    assert len(found) == 1
+    f = found[0]
+    assert f.goal[1] == pytest.approx(2.0, abs=0.15) and 2.6 < f.goal[0] < 3.0  # the region's centre, reachable
+    assert f.path == pytest.approx(np.hypot(*(f.goal - [1.5, 2.0])), rel=0.1)
+    assert find_frontiers(view, [1.5, 2.0], dist, 3.5, 0.55) == []  # regions shorter than min_size dropped
+    assert find_frontiers(view, [1.5, 2.0], dist, 0.4, 0.55, avoid=[f.goal]) == []  # visited
+    box = [(0, 0), (2.5, 0), (2.5, 4), (0, 4)]
+    assert find_frontiers(view, [1.5, 2.0], dist, 0.4, 0.55, polygon=box) == []  # outside the bounds
+
+
+def test_information_gain_counts_unknown_cells_in_sight():
+    state = np.full((100, 100), UNKNOWN, dtype=np.int8)
+    state[:, :50] = FREE
+    state[[0, -1], :] = state[:, [0, -1]] = OCCUPIED  # a closed box (beyond a grid is unknown too)
+    view = view_of(state)
+    near, far = information_gain(view, [[2.4, 2.5], [0.3, 2.5]], 3.0)
+    assert near > 2 * far > 0
+    walled = state.copy()
+    walled[:, 50] = OCCUPIED
+    assert information_gain(view_of(walled), [[2.4, 2.5]], 3.0)[0] == 0  # a wall hides the unknown
+
+
+def test_utility_trades_gain_against_distance_and_turning():
+    cfg = explore_config.ExplorationConfig(k1=0.5, k2=1.0)
+    ex = Explorer(cfg, 0.2, 0.05, R_MAX)
+    pose = np.array([0.0, 0.0, 0.0])
+    pts = np.array([[2.0, 0.0], [4.0, 0.0], [-2.0, 0.0]])
+    f = ex.utility(pose, pts, np.array([100.0, 100.0, 100.0]), np.array([2.0, 4.0, 2.0]))
+    assert f[0] > f[1] and f[0] > f[2]  # nearer beats farther, ahead beats behind
+    assert f[1] / f[0] == pytest.approx(np.exp(-0.5 * 2.0))
+    assert f[2] / f[0] == pytest.approx(np.exp(-1.0 * np.pi))
+    more = ex.utility(pose, pts[1:2], np.array([1000.0]), np.array([4.0]))
+    assert more[0] > f[0]  # ten times the gain is worth 2 m more
+    euclid = Explorer(explore_config.ExplorationConfig(distance="euclidean"), 0.2, 0.05, R_MAX)
+    assert euclid.utility(pose, pts[:1], np.array([1.0]), np.array([50.0]))[0] == pytest.approx(np.exp(-0.3 * 2.0))
+
+
+def test_path_repetition():
+    line = np.column_stack([np.linspace(0, 10, 201), np.zeros(201)])
+    assert path_repetition(line) == 0.0
+    back = np.vstack([line, line[::-1][1:]])
+    assert 0.4 < path_repetition(back) < 0.5  # the way back, less the turn
+    with pytest.raises(InputError, match="exploration.strategy"):
+        explore_config.load(None, {"exploration.strategy": "greedy"})
+
+
+# --------------------------------------------------------------------------- a whole run
+
+
+def two_rooms_png(tmp_path):
+    """Two 4 x 3 m rooms side by side joined by a 1 m door, 5 cm pixels, walls 2 px."""
+    from PIL import Image
+
+    img = np.full((80, 180), 255, dtype=np.uint8)  # 4 m x 9 m canvas
+    img[:, :] = 0
+    img[10:70, 10:90] = 255  # room A: x 0.5-4.5, y 0.5-3.5
+    img[10:70, 92:170] = 255  # room B: x 4.6-8.5
+    img[30:50, 88:94] = 255  # the door: y 1.5-2.5
+    path = tmp_path / "two_rooms.png"
+    Image.fromarray(img).save(path)
+    return path
+
+
+@pytest.mark.parametrize("strategy", ["nearest_frontier", "utility"])
+def test_exploring_two_rooms_terminates_with_full_coverage(tmp_path, strategy):
+    from slam2d.exploration.run import run_explore
+
+    world = two_rooms_png(tmp_path)
+    cfg = explore_config.load(None, {
+        "output.root": str(tmp_path / "out"), "dataset.simulator.world": str(world), "seed": 1,
+        "exploration.strategy": strategy, "exploration.start": [1.5, 2.0, 0.0], "exploration.max_time": 150,
+        "exploration.animation": strategy == "utility",
+    })  # fmt: skip
+    folder = run_explore(cfg)
+    m = json.loads((folder / "metrics.json").read_text())
+    assert m["stop_reason"] == "done" and not m["premature_stop"]
+    assert m["coverage"] >= 0.99 and m["collisions"] == 0
+    assert m["map_iou"] > 0.85 and m["ate_rmse"] < 0.1
+    assert m["nodes_final"] <= m["nodes_all"]
+    hybrid = json.loads((folder / "hybrid.json").read_text())
+    assert len(hybrid["nodes"]) == m["nodes_all"]
+    names = ["config.yaml", "map.pgm", "map.yaml", "map.png", "coverage.png", "coverage.csv", "trajectory.tum"]
+    names += ["explore.gif"] if strategy == "utility" else []
+    for name in names:
+        assert (folder / name).stat().st_size > 0, name
+    # room B was mapped: SLAM's grid is free at its centre
+    from slam2d.mapping.export import load_map_server
+
+    grid = load_map_server(folder / "map.yaml")
+    cell = grid.world_to_cell(np.array([6.5, 2.0]))
+    assert grid.free_mask()[cell[0], cell[1]]
+
+
+def test_bad_explore_input_leaves_no_folder(tmp_path):
+    from slam2d.exploration.run import run_explore
+
+    with pytest.raises(InputError, match="world PNG not found"):
+        run_explore(explore_config.load(None, {"output.root": str(tmp_path), "dataset.simulator.world": "nope.png"}))
+    with pytest.raises(InputError, match="exploration.start"):
+        run_explore(explore_config.load(None, {"output.root": str(tmp_path), "exploration.start": [-50, -50, 0]}))
+    assert not list(tmp_path.iterdir())
