@@ -10,10 +10,23 @@ import pytest
 
 from slam2d.errors import InputError
 from slam2d.exploration import config as explore_config
-from slam2d.exploration.candidates import CandidateParams, adjust, scan_candidates, stands
+from slam2d.exploration.candidates import (
+    CandidateParams,
+    adjust,
+    scan_candidates,
+    stands,
+)
 from slam2d.exploration.explorer import Explorer
 from slam2d.exploration.frontiers import find_frontiers, frontier_mask
-from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, geodesic, information_gain, straight_reachable
+from slam2d.exploration.gridops import (
+    FREE,
+    OCCUPIED,
+    UNKNOWN,
+    GridView,
+    geodesic,
+    information_gain,
+    straight_reachable,
+)
 from slam2d.exploration.hybrid import FINAL, MARKED, HybridMap
 from slam2d.exploration.run import path_repetition
 from slam2d.sim.world import World
@@ -209,7 +222,7 @@ def test_utility_trades_gain_against_distance_and_turning():
     more = ex.utility(pose, pts[1:2], np.array([1000.0]), np.array([4.0]))
     assert more[0] > f[0]  # ten times the gain is worth 2 m more
     euclid = Explorer(explore_config.ExplorationConfig(distance="euclidean"), 0.2, 0.05, R_MAX)
-    assert euclid.utility(pose, pts[:1], np.array([1.0]), np.array([50.0]))[0] == pytest.approx(np.exp(-0.3 * 2.0))
+    assert euclid.utility(pose, pts[:1], np.array([1.0]), np.array([50.0]))[0] == pytest.approx(np.exp(-1.0 * 2.0))
 
 
 def test_path_repetition():

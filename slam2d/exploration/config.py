@@ -10,6 +10,8 @@ from pydantic import Field, ValidationError
 from slam2d import config as config_mod
 from slam2d.config import ExperimentConfig, Section
 
+STRATEGY_HELP = ("goal choice: Yamauchi's nearest frontier, explore_lite's cost, Li et al.'s candidates "
+                 "(nearest, farthest, utility)")
 STRATEGIES = ("nearest_frontier", "explore_lite", "nearest_candidate", "farthest_candidate", "utility")
 
 
@@ -17,8 +19,7 @@ class ExplorationConfig(Section):
     """Where the robot explores, how it picks goals, and the limits of a run."""
 
     strategy: Literal["nearest_frontier", "explore_lite", "nearest_candidate", "farthest_candidate", "utility"] = (
-        Field("utility", description="goal choice: Yamauchi's nearest frontier, explore_lite's cost, Li et al.'s "
-                                     "candidates (nearest, farthest, utility)")  # fmt: skip
+        Field("utility", description=STRATEGY_HELP)
     )
     start: tuple[float, float, float] | None = Field(
         None, description="x, y (m), heading (rad); None: the office route's start, or a seeded open cell of a PNG world"
@@ -39,7 +40,7 @@ class ExplorationConfig(Section):
     delta: float = Field(0.1, gt=0, description="m, A-type goals this far short of the range limit")
     safe_margin: float = Field(0.05, ge=0, description="m: safe_d = safe_dis = half the robot's width + this")
     d_tho: float = Field(0.5, gt=0, description="m, nearest A-type goal from the sensor")
-    k1: float = Field(0.3, ge=0, description="1/m, distance weight of the utility")
+    k1: float = Field(1.0, ge=0, description="1/m, distance weight of the utility")
     k2: float = Field(0.5, ge=0, description="1/rad, heading weight of the utility")
     distance: Literal["path", "euclidean"] = Field("path", description="L of the utility: grid path or straight line")
     gain_range: float = Field(6.0, gt=0, description="m, reach of the rays counting unknown cells (information gain)")

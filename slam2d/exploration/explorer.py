@@ -20,7 +20,13 @@ from slam2d import geometry
 from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candidates
 from slam2d.exploration.config import ExplorationConfig
 from slam2d.exploration.frontiers import find_frontiers, frontier_mask
-from slam2d.exploration.gridops import OCCUPIED, GridView, geodesic, information_gain, inside_polygon
+from slam2d.exploration.gridops import (
+    OCCUPIED,
+    GridView,
+    geodesic,
+    information_gain,
+    inside_polygon,
+)
 from slam2d.exploration.hybrid import FINAL, HybridMap
 from slam2d.segmentation.observations import raycast_grid
 

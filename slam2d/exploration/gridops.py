@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-
 from scipy import ndimage
+
 from slam2d.segmentation.observations import raycast_grid
 
 FREE, OCCUPIED, UNKNOWN = 0, 1, 2

@@ -173,8 +173,9 @@ class HybridMap:
     def to_json(self) -> dict:
         nodes = []
         for n in self.nodes.values():
-            cands = [{"position": c.position.tolist(), "d": c.d, "idx": c.idx, "type": c.type, "alive": c.alive,
-                      "utility": None if not np.isfinite(c.utility) else c.utility} for c in n.candidates]  # fmt: skip
+            cands = [{"position": c.position.tolist(), "d": float(c.d), "idx": int(c.idx), "type": c.type,
+                      "alive": bool(c.alive), "utility": None if not np.isfinite(c.utility) else float(c.utility)}
+                     for c in n.candidates]  # fmt: skip
             nodes.append({"id": n.id, "pose": n.pose.tolist(), "role": n.role, "parent": n.parent,
                           "children": list(n.children), "links": list(n.links), "candidates": cands})  # fmt: skip
         return {"step": self.step, "box_width": self.box_width, **self.counts(), "nodes": nodes}

@@ -356,7 +356,7 @@ def reachable_free(free: np.ndarray, frame, start_xy, radius: float = 0.2, max_r
     if not frame.in_bounds(cell) or labels[cell[0], cell[1]] == 0:
         raise InputError("exploration.start", "the start is not in the world's free space")
     robot = labels == labels[cell[0], cell[1]]
-    k = max(1, int(round(VIEW_SPACING / res)))
+    k = max(1, round(VIEW_SPACING / res))
     rows, cols = np.nonzero(robot[::k, ::k])
     origins = np.column_stack([cols * k + 0.5, rows * k + 0.5])
     return visible_from(free, res, origins, max_range) | robot
@@ -431,7 +431,7 @@ def path_repetition(xy: np.ndarray) -> float:
     at = np.arange(0.0, s[-1], SAMPLE_STEP)
     pts = np.column_stack([np.interp(at, s, xy[:, 0]), np.interp(at, s, xy[:, 1])])
     near = cKDTree(pts).query_ball_point(pts, REPEAT_RADIUS)
-    gap = int(round(REPEAT_GAP / SAMPLE_STEP))
+    gap = round(REPEAT_GAP / SAMPLE_STEP)
     repeated = [bool(js) and min(js) < i - gap for i, js in enumerate(near)]
     return float(np.mean(repeated))
 

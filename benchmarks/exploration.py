@@ -1,0 +1,135 @@
+"""Exploration benchmark: every strategy explores the same worlds from the same seeded starts, with online
+SLAM in the loop; coverage, efficiency, the simplified hybrid map and path repetition as tables.
+
+Usage: nice .venv/bin/python benchmarks/exploration.py [--worlds office rooms] [--rooms NAME ...]
+       [--furniture both|with|without] [--seeds N] [--strategies ...] [--workers W] [--max-time S]
+       [--log FILE] [--tables FILE]
+
+Each run is ``slam2d explore`` without the results folder (``slam2d.exploration.run.explore``). Worlds:
+the office, and the room plans of ``$SLAM2D_DATA/rooms/`` (0.05 m/px; ``--rooms`` picks some by name,
+``--furniture`` the furnished and / or unfurnished plans). The seed picks the start (a free place 0.5 m
+from walls inside the building) and the noise; every strategy starts from the same place for a seed.
+Each finished run is appended to the log (JSON lines), so that ``--tables LOG`` redraws the tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+from slam2d.exploration.config import STRATEGIES
+
+ROOMS = ("Freiburg52_scan", "Freiburg79_scan", "lab_b_scan", "lab_c_scan", "lab_d_scan", "lab_ipa", "office_a",
+         "office_b", "office_c", "office_d")  # fmt: skip
+
+
+def worlds(names: list[str], rooms: list[str], furniture: str) -> list[str]:
+    data = Path(os.environ.get("SLAM2D_DATA", "../shared/datasets")) / "rooms"
+    out = []
+    for name in names:
+        if name != "rooms":
+            out.append(name)
+            continue
+        for room in rooms or ROOMS:
+            if furniture in ("both", "without"):
+                out.append(str(data / f"{room}.png"))
+            if furniture in ("both", "with"):
+                out.append(str(data / f"{room}_furnitures.png"))
+    return out
+
+
+def one_run(world: str, strategy: str, seed: int, max_time: float) -> dict:
+    from slam2d.exploration import config
+    from slam2d.exploration.run import explore
+
+    cfg = config.load(None, {"dataset.simulator.world": world, "seed": seed, "exploration.strategy": strategy,
+                             "exploration.max_time": max_time, "exploration.animation": False})  # fmt: skip
+    m = explore(cfg).metrics
+    return {k: (v if not hasattr(v, "item") else v.item()) for k, v in m.items()} | {"world_spec": world}
+
+
+def med(values) -> float:
+    values = [v for v in values if v == v]
+    return statistics.median(values) if values else float("nan")
+
+
+def fmt(x, digits=1) -> str:
+    return "–" if x != x else f"{x:.{digits}f}"
+
+
+def tables(runs: list[dict]) -> str:
+    out = []
+    by = {s: [r for r in runs if r["strategy"] == s] for s in STRATEGIES if any(r["strategy"] == s for r in runs)}
+    d99 = {s: med(r["distance_to_99"] for r in rs) for s, rs in by.items()}
+    out.append("| strategy | runs | reached 99 % | premature stops | runs with a collision | median coverage | "
+               "median map IoU | median distance to 90 % (m) | median distance to 99 % (m) | vs nearest frontier | "
+               "vs explore_lite | median total distance (m) | median ATE (cm) | decision median / p95 (ms) | "
+               "real-time factor |")  # fmt: skip
+    out.append("|" + "---|" * 15)
+    for s, rs in by.items():
+        n = len(rs)
+        reached = sum(r["coverage"] >= 0.99 for r in rs)
+        ratio = lambda ref: fmt(d99[s] / d99[ref], 2) if ref in d99 and d99[ref] == d99[ref] else "–"  # noqa: E731
+        out.append(f"| {s} | {n} | {100 * reached / n:.0f} % | {sum(r['premature_stop'] for r in rs)} | "
+                   f"{sum(r['collisions'] > 0 for r in rs)} | {100 * med(r['coverage'] for r in rs):.1f} % | "
+                   f"{fmt(med(r['map_iou'] for r in rs), 3)} | {fmt(med(r['distance_to_90'] for r in rs))} | "
+                   f"{fmt(d99[s])} | {ratio('nearest_frontier')} | {ratio('explore_lite')} | "
+                   f"{fmt(med(r['distance'] for r in rs))} | {fmt(100 * med(r['ate_rmse'] for r in rs))} | "
+                   f"{fmt(med(r['decision_ms_median'] for r in rs))} / {fmt(med(r['decision_ms_p95'] for r in rs))} | "
+                   f"{fmt(med(r['real_time_factor'] for r in rs))} |")  # fmt: skip
+    out.append("")
+    out.append("| world | strategy | runs | nodes made (every node added) | nodes kept (cached hybrid map) | kept |")
+    out.append("|---|---|---|---|---|---|")
+    for world in sorted({r["world"] for r in runs}):
+        for s in ("nearest_candidate", "farthest_candidate", "utility"):
+            rs = [r for r in runs if r["world"] == world and r["strategy"] == s]
+            if rs:
+                a, k = med(r["nodes_all"] for r in rs), med(r["nodes_final"] for r in rs)
+                out.append(f"| {world} | {s} | {len(rs)} | {a:.0f} | {k:.0f} | {100 * k / a:.0f} % |")
+    out.append("")
+    out.append("| strategy | runs | median path repetition | median goals | median inaccessible goals |")
+    out.append("|---|---|---|---|---|")
+    for s, rs in by.items():
+        out.append(f"| {s} | {len(rs)} | {100 * med(r['path_repetition'] for r in rs):.0f} % | "
+                   f"{med(r['goals'] for r in rs):.0f} | {med(r['goals_inaccessible'] for r in rs):.0f} |")  # fmt: skip
+    return "\n".join(out)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--worlds", nargs="+", default=["office", "rooms"])
+    ap.add_argument("--rooms", nargs="*", default=[])
+    ap.add_argument("--furniture", choices=["both", "with", "without"], default="both")
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--strategies", nargs="+", default=list(STRATEGIES), choices=STRATEGIES)
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--max-time", type=float, default=1800.0)
+    ap.add_argument("--log", default="exploration_runs.jsonl")
+    ap.add_argument("--tables", default=None, help="only print the tables of this log")
+    a = ap.parse_args()
+    if a.tables:
+        print(tables([json.loads(line) for line in Path(a.tables).read_text().splitlines() if line.strip()]))
+        return
+    jobs = [(w, s, seed, a.max_time) for w in worlds(a.worlds, a.rooms, a.furniture) for seed in range(a.seeds)
+            for s in a.strategies]  # fmt: skip
+    runs = []
+    with ProcessPoolExecutor(a.workers) as pool, open(a.log, "a") as log:
+        futures = {pool.submit(one_run, *job): job for job in jobs}
+        for f in as_completed(futures):
+            r = f.result()
+            runs.append(r)
+            log.write(json.dumps(r) + "\n")
+            log.flush()
+            print(f"  {r['world']} {r['strategy']} seed {r['seed']}: {r['stop_reason']}, coverage "
+                  f"{100 * r['coverage']:.1f} %, {r['distance']:.0f} m, {r['wall_s']:.0f} s wall", file=sys.stderr,
+                  flush=True)  # fmt: skip
+    print(tables(runs))
+
+
+if __name__ == "__main__":
+    main()
