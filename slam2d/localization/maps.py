@@ -17,6 +17,8 @@ from slam2d.types import GridFrame
 
 __all__ = ["KnownMap"]
 
+_CHUNK = 5000  # cell centres per distance query (cells x walls floats)
+
 
 @dataclass(eq=False)
 class KnownMap(GridFrame):
@@ -28,6 +30,7 @@ class KnownMap(GridFrame):
     resolution: float
     origin: tuple[float, float]
     name: str = "map"
+    wall_distance: np.ndarray | None = None  # exact distance (H, W) m from cell centres to the walls, if known
 
     def __post_init__(self):
         self.occupied = np.ascontiguousarray(self.occupied, dtype=bool)
@@ -53,8 +56,13 @@ class KnownMap(GridFrame):
         return x0, x0 + w * self.resolution, y0, y0 + h * self.resolution
 
     def distance(self) -> np.ndarray:
-        """Exact Euclidean distance (H, W) in metres from every cell centre to the nearest occupied cell centre."""
-        return ndimage.distance_transform_edt(~self.occupied) * self.resolution
+        """Distance (H, W) in metres from every cell centre to the nearest wall: the exact one when
+        known (a World), else to the nearest occupied cell's edge: scipy's exact Euclidean distance
+        transform between cell centres less half a cell (a wall's face is its cells' edge)."""
+        if self.wall_distance is not None:
+            return self.wall_distance
+        edt = ndimage.distance_transform_edt(~self.occupied) * self.resolution
+        return np.maximum(edt - 0.5 * self.resolution, 0.0)
 
     def free_cells(self, clearance: float = 0.0) -> np.ndarray:
         """Flat indices of free cells at least ``clearance`` m from every occupied cell (all free cells
@@ -73,11 +81,23 @@ class KnownMap(GridFrame):
 
     @classmethod
     def from_world(cls, world, resolution: float = 0.05) -> KnownMap:
-        """From a :class:`~slam2d.sim.World`: its planning grid, blocked cells occupied."""
-        from slam2d.navigation.maps import world_grid
-
-        grid = world_grid(world, resolution)
-        return cls(~grid.free, grid.free, grid.resolution, grid.origin, world.name)
+        """From a :class:`~slam2d.sim.World`: its own cells if read from a plan; else cells whose centre
+        lies inside an obstacle or within half a cell of a wall are occupied, the others free, and the
+        exact distance of every cell centre to the walls is kept (no half-cell bias)."""
+        if world.grid is not None:
+            occ, res = world.grid
+            return cls(occ, ~np.asarray(occ, dtype=bool), res, (0.0, 0.0), world.name)
+        (x0, y0), (x1, y1) = world.bounds
+        origin = (x0 - resolution, y0 - resolution)
+        shape = (int(np.ceil((y1 - y0) / resolution)) + 2, int(np.ceil((x1 - x0) / resolution)) + 2)
+        rows, cols = np.indices(shape)
+        centres = np.column_stack([origin[0] + (cols.ravel() + 0.5) * resolution,
+                                   origin[1] + (rows.ravel() + 0.5) * resolution])  # fmt: skip
+        chunks = np.array_split(centres, max(1, len(centres) // _CHUNK))
+        inside = np.concatenate([world.occupied(c) for c in chunks]).reshape(shape)
+        distance = np.where(inside, 0.0, np.concatenate([world.distance(c) for c in chunks]).reshape(shape))
+        occupied = inside | (distance < resolution / 2)
+        return cls(occupied, ~occupied, resolution, origin, world.name, distance)
 
     @classmethod
     def load(cls, path, resolution: float = 0.05) -> KnownMap:

@@ -34,6 +34,7 @@ from slam2d.types import Scan
 __all__ = ["ParticleFilter", "Estimate", "kld_limit", "sample_motion", "low_variance_indices", "clusters"]
 
 _MIN_TRANS = 0.01  # m: below this a motion has no heading of its own (rot1 = 0), as in amcl
+LOCAL_SPREAD = np.array([0.3, 0.3, 0.1])  # m, m, rad: sd of recovery candidates around the current particles
 
 
 @dataclass(frozen=True)
@@ -175,12 +176,16 @@ class ParticleFilter:
         return np.column_stack([m.origin[0] + xy[:, 0] * m.resolution, m.origin[1] + xy[:, 1] * m.resolution, theta])
 
     def guided_random_poses(self, count: int, scan: Scan) -> np.ndarray:
-        """``count`` free-space poses drawn by the scan's likelihood (the smoother field) from
-        ``recovery_candidates`` times as many uniform ones: sensor-guided random particles."""
+        """``count`` poses drawn by the scan's likelihood (the smoother field) from ``recovery_candidates``
+        times as many candidates: half uniform over the free space, half the current particles moved
+        by ``LOCAL_SPREAD`` (a cloud slightly off the truth finds it as fast as a far one)."""
         k = self.cfg.recovery_candidates
         if count == 0 or k <= 1:
             return self.random_poses(count)
-        pool = self.random_poses(count * k)
+        near = self.particles[self.rng.integers(0, len(self.particles), count * k // 2)]
+        near = near + self.rng.standard_normal(near.shape) * LOCAL_SPREAD
+        pool = np.concatenate([self.random_poses(count * k - len(near)), near])
+        pool[:, 2] = geometry.wrap_angle(pool[:, 2])
         ll = self.coarse.log_likelihood(pool, scan)[0]
         return pool[low_variance_indices(np.exp(ll - logsumexp(ll)), count, self.rng)]
 
