@@ -289,3 +289,33 @@ def test_bad_explore_input_leaves_no_folder(tmp_path):
     with pytest.raises(InputError, match="exploration.start"):
         run_explore(explore_config.load(None, {"output.root": str(tmp_path), "exploration.start": [-50, -50, 0]}))
     assert not list(tmp_path.iterdir())
+
+
+def test_explore_command_reports_bad_input_in_one_line(tmp_path):
+    from typer.testing import CliRunner
+
+    from slam2d.cli import app
+
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["explore", "-q", "--strategy", "greedy", "--set", f"output.root={out}"])
+    assert res.exit_code == 2 and "exploration.strategy" in res.output
+    res = CliRunner().invoke(app, ["explore", "-q", "--set", "exploration.bogus=1", "--set", f"output.root={out}"])
+    assert res.exit_code == 2 and "unknown key 'exploration.bogus'" in res.output
+    assert not out.exists() or not list(out.iterdir())
+
+
+def test_pockets_are_unknown_cells_cut_off_from_the_edge_and_escape_turns_to_open_space():
+    from slam2d.exploration.explorer import enclosed_unknown
+    from slam2d.exploration.run import _open_heading
+
+    state = np.full((40, 40), UNKNOWN, dtype=np.int8)
+    state[5:35, 5:35] = FREE
+    state[10:14, 10:12] = OCCUPIED
+    state[10:14, 12:14] = UNKNOWN  # behind a box, walled on three sides ...
+    state[9, 12:14] = state[14, 12:14] = OCCUPIED
+    state[10:14, 14] = OCCUPIED  # ... and the fourth
+    pockets = enclosed_unknown(state)
+    assert pockets[10:14, 12:14].all() and pockets.sum() == 8  # the outside (touching the edge) is no pocket
+    wall = np.column_stack([np.full(50, 0.25), np.linspace(-1, 1, 50)])  # a wall 5 cm in front of the disc
+    heading = _open_heading(wall, 0.2)
+    assert abs(abs(heading) - np.pi) < 0.5  # away from it
