@@ -246,7 +246,15 @@ class ParticleFilter:
         self.updates += 1
         if beams > 0:
             self._average(float(logsumexp(ll) - math.log(len(pool))), beams)
+            self.w_slow = max(self.w_slow, self._best_fit(ll, beams))
         self._estimate = self._cluster_estimate()
+
+    def _best_fit(self, loglik: np.ndarray, beams: int) -> float:
+        """Mean likelihood (as :meth:`_average` scales it) of the best 1 % of ``loglik``: what a filter
+        converged on the right place should reach, the long-term average a global start begins with."""
+        top = np.partition(loglik, len(loglik) - max(1, len(loglik) // 100))[-max(1, len(loglik) // 100):]
+        total = float(logsumexp(top) - math.log(len(top)))
+        return math.exp(total / (beams * self.cfg.beam_weight)) if self.cfg.combine == "product" else math.exp(total)
 
     def _measure(self, scan: Scan) -> None:
         """Weigh by the scan, track the likelihood averages, resample when due, estimate.
