@@ -21,7 +21,9 @@ from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candi
 from slam2d.exploration.config import ExplorationConfig
 from slam2d.exploration.frontiers import find_frontiers, frontier_mask
 from slam2d.exploration.gridops import (
+    FREE,
     OCCUPIED,
+    UNKNOWN,
     GridView,
     geodesic,
     information_gain,
@@ -31,6 +33,21 @@ from slam2d.exploration.hybrid import FINAL, HybridMap
 from slam2d.segmentation.observations import raycast_grid
 
 FRONTIER_STRATEGIES = ("nearest_frontier", "explore_lite")
+POCKET_SPACING = 0.3  # m between the places tried as views of pockets
+
+
+def enclosed_unknown(state: np.ndarray) -> np.ndarray:
+    """Unknown cells (H, W) not 4-connected through unknown cells to the grid's edge."""
+    from scipy import ndimage
+
+    labels, n = ndimage.label(state == UNKNOWN)
+    if n == 0:
+        return np.zeros(state.shape, dtype=bool)
+    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    outside = np.zeros(n + 1, dtype=bool)
+    outside[edge] = True
+    outside[0] = True
+    return ~outside[labels]
 
 
 @dataclass(eq=False)
@@ -59,7 +76,7 @@ class Explorer:
         self.visited: list[np.ndarray] = []
         self.inaccessible: list[np.ndarray] = []
         self.decision_seconds: list[float] = []
-        self.fallbacks = 0
+        self.fallbacks = self.pocket_goals = 0
 
     # -- nodes and candidates --------------------------------------------------------------
 
@@ -135,6 +152,9 @@ class Explorer:
             if goal is None and self.cfg.fallback_frontiers:
                 goal = self._frontier_goal(pose, view, distance, "nearest_frontier")
                 self.fallbacks += goal is not None
+        if goal is None and self.cfg.pockets:
+            goal = self._pocket_goal(pose, view, distance)
+            self.pocket_goals += goal is not None
         self.decision_seconds.append(time.perf_counter() - t0)
         return goal
 
@@ -151,6 +171,35 @@ class Explorer:
             cost = [f.path for f in found]
         best = found[int(np.argmin(cost))]
         return Goal(best.goal, "frontier", score=float(min(cost)))
+
+    def _pocket_goal(self, pose, view: GridView, distance) -> Goal | None:
+        """When no frontier is left: the nearest reachable place (sampled every POCKET_SPACING m, away
+        from visited and inaccessible goals) that sees at least ``pocket_gain`` of *enclosed* unknown
+        area — pockets whose openings are narrower than a frontier region may be (behind furniture,
+        beside a wall) — unknown cells connected to the map's edge being the unexplored outside."""
+        pockets = enclosed_unknown(view.state)
+        if not pockets.any():
+            return None
+        k = max(1, round(POCKET_SPACING / view.resolution))
+        sub = np.full(distance.shape, np.inf)
+        sub[::k, ::k] = distance[::k, ::k]
+        rows, cols = np.nonzero(np.isfinite(sub))
+        if len(rows) == 0:
+            return None
+        order = np.argsort(sub[rows, cols])
+        cells = np.column_stack([rows[order], cols[order]])
+        xy = view.to_world(cells)
+        avoid = self.visited + self.inaccessible
+        if avoid:
+            far = np.hypot(*(xy[:, None, :] - np.array(avoid)[None]).transpose(2, 0, 1)).min(axis=1)
+            cells, xy = cells[far >= self.cfg.avoid_radius], xy[far >= self.cfg.avoid_radius]
+        state = np.where(view.state == UNKNOWN, np.where(pockets, UNKNOWN, FREE), view.state).astype(np.int8)
+        gain = information_gain(GridView(state, view.resolution, view.origin), xy, self.cfg.gain_range,
+                                self.cfg.gain_rays)  # fmt: skip
+        ok = np.nonzero(gain >= self.cfg.pocket_gain / view.resolution**2)[0]
+        if len(ok) == 0:
+            return None
+        return Goal(xy[ok[0]], "pocket", score=float(gain[ok[0]]))
 
     def _candidate_goal(self, pose, view, distance) -> Goal | None:
         live = self.maintain(view)
@@ -216,6 +265,12 @@ class Explorer:
     def spent(self, goal: Goal, view: GridView) -> bool:
         """Whether the goal is no longer worth reaching: a frontier goal with no frontier cell left
         within the goal reach; a candidate whose gain fell below ``min_gain``."""
+        if goal.kind == "pocket":
+            pockets = enclosed_unknown(view.state)
+            state = np.where(view.state == UNKNOWN, np.where(pockets, UNKNOWN, FREE), view.state).astype(np.int8)
+            g = information_gain(GridView(state, view.resolution, view.origin), goal.position[None],
+                                 self.cfg.gain_range, self.cfg.gain_rays)[0]  # fmt: skip
+            return bool(g < self.cfg.pocket_gain / view.resolution**2)
         if goal.kind == "candidate":
             g = information_gain(view, goal.candidate.position[None], self.cfg.gain_range, self.cfg.gain_rays)[0]
             if g < self.cfg.min_gain / view.resolution**2:
