@@ -63,7 +63,13 @@ def _load(spec: str):
 def run_one(spec: str, scenario: str, seed: int) -> list[dict]:
     """One seeded stream of ``scenario`` in world ``spec`` replayed through its filters; one row per filter."""
     from slam2d.localization import ParticleFilter, preset
-    from slam2d.localization.scenario import PERIOD, converged_at, false_convergence, replay, wander
+    from slam2d.localization.scenario import (
+        PERIOD,
+        converged_at,
+        false_convergence,
+        replay,
+        wander,
+    )
 
     world, known = _load(spec)
     kidnap = [KIDNAP_AT] if scenario == "kidnap" else []
@@ -117,8 +123,8 @@ def _median(rows, key, fmt="{:.3f}") -> str:
 def table(rows: list[dict]) -> str:
     """Markdown: per filter, all worlds pooled and per world."""
     worlds = sorted({r["world"] for r in rows})
-    lines = ["| world | filter | global converged ≤ 10 m | false conv. | median travel (m) | kidnap recovered ≤ 15 s "
-             "| median recovery (s) | tracking RMSE (m) | heading RMSE (°) | particles tracking | ms/update | runs |",
+    lines = [("| world | filter | global converged ≤ 10 m | false conv. | median travel (m) | kidnap recovered ≤ 15 s "
+              "| median recovery (s) | tracking RMSE (m) | heading RMSE (°) | particles tracking | ms/update | runs |"),
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for world in ["all", *worlds]:
         for name in FILTERS["global"]:
@@ -151,8 +157,7 @@ def main(argv: list[str]) -> None:
     with ProcessPoolExecutor(args.workers) as pool, open(out / "runs.jsonl", "w") as f:
         for n, result in enumerate(pool.map(run_one, *zip(*jobs)), start=1):
             rows += result
-            for r in result:
-                f.write(json.dumps(r) + "\n")
+            f.writelines(json.dumps(r) + "\n" for r in result)
             f.flush()
             if n % 10 == 0 or n == len(jobs):
                 print(f"{n}/{len(jobs)} runs, {time.perf_counter() - t0:.0f} s", flush=True)

@@ -12,7 +12,13 @@ from scipy.stats import chi2, norm
 
 from slam2d.config import LaserModel
 from slam2d.errors import InputError
-from slam2d.localization import KnownMap, LocalizeConfig, MclConfig, ParticleFilter, kld_limit
+from slam2d.localization import (
+    KnownMap,
+    LocalizeConfig,
+    MclConfig,
+    ParticleFilter,
+    kld_limit,
+)
 from slam2d.localization.mcl import sample_motion
 from slam2d.localization.scenario import converged_at, replay, wander
 from slam2d.localization.sensor import BeamModel, LikelihoodField

@@ -5,5 +5,14 @@ from slam2d.localization.maps import KnownMap
 from slam2d.localization.mcl import Estimate, ParticleFilter, kld_limit
 from slam2d.localization.navigation import MclPoseSource
 
-__all__ = ["MclConfig", "LocalizeConfig", "amcl_config", "preset", "KnownMap", "ParticleFilter", "Estimate",
-           "kld_limit", "MclPoseSource"]
+__all__ = [
+           "Estimate",
+           "KnownMap",
+           "LocalizeConfig",
+           "MclConfig",
+           "MclPoseSource",
+           "ParticleFilter",
+           "amcl_config",
+           "kld_limit",
+           "preset",
+]

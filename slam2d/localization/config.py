@@ -10,7 +10,7 @@ from pydantic import Field
 
 from slam2d.config import Section
 
-__all__ = ["MclConfig", "amcl_config", "PRESETS", "preset"]
+__all__ = ["PRESETS", "MclConfig", "amcl_config", "preset"]
 
 
 class MclConfig(Section):

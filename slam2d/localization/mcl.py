@@ -31,7 +31,7 @@ from slam2d.localization.maps import KnownMap
 from slam2d.localization.sensor import LikelihoodField, sensor_model
 from slam2d.types import Scan
 
-__all__ = ["ParticleFilter", "Estimate", "kld_limit", "sample_motion", "low_variance_indices", "clusters"]
+__all__ = ["Estimate", "ParticleFilter", "clusters", "kld_limit", "low_variance_indices", "sample_motion"]
 
 _MIN_TRANS = 0.01  # m: below this a motion has no heading of its own (rot1 = 0), as in amcl
 LOCAL_SPREAD = np.array([0.3, 0.3, 0.1])  # m, m, rad: sd of recovery candidates around the current particles
@@ -120,7 +120,7 @@ def clusters(poses: np.ndarray, bin_xy: float, bin_theta: float) -> np.ndarray:
     """Cluster labels (P,) from 0: particles in histogram bins connected through their 26 neighbours
     (heading wrapping round at the emptiest heading bin)."""
     b = _bins(poses, bin_xy, bin_theta)
-    n_theta = int(math.ceil(2 * math.pi / bin_theta))
+    n_theta = math.ceil(2 * math.pi / bin_theta)
     b[:, 2] = np.clip(b[:, 2], 0, n_theta - 1)
     cut = int(np.argmin(np.bincount(b[:, 2], minlength=n_theta)))
     b[:, 2] = (b[:, 2] - cut - 1) % n_theta  # the emptiest bin becomes the last one

@@ -29,7 +29,7 @@ from slam2d.localization.scenario import Stream, Track
 
 log = logging.getLogger(__name__)
 
-__all__ = ["run_localize", "localize", "log_stream", "load_localize_config", "metrics_of"]
+__all__ = ["load_localize_config", "localize", "log_stream", "metrics_of", "run_localize"]
 
 
 def load_localize_config(path: Path | None, overrides: list[str]) -> LocalizeConfig:

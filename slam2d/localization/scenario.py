@@ -19,7 +19,7 @@ from slam2d.localization.maps import KnownMap
 from slam2d.localization.mcl import ParticleFilter
 from slam2d.types import Scan
 
-__all__ = ["Stream", "wander", "replay", "Track", "converged_at", "false_convergence", "random_free_pose"]
+__all__ = ["Stream", "Track", "converged_at", "false_convergence", "random_free_pose", "replay", "wander"]
 
 SPEED = 0.5  # m/s, the wanderer's cruise speed
 PERIOD = 0.1  # s between scans
@@ -87,7 +87,7 @@ def wander(world, known: KnownMap, seconds: float, seed: int, kidnap_at=(), min_
     step = robot.step(0.0, 0.0, 0.0)
     scans, truth, kidnaps, turning = [step.scan], [step.pose], [], 0.0
     pending = sorted(kidnap_at)
-    for k in range(1, int(round(seconds / PERIOD)) + 1):
+    for k in range(1, round(seconds / PERIOD) + 1):
         if pending and k * PERIOD >= pending[0]:
             pending.pop(0)
             robot.pose = random_free_pose(world, known, rng, robot.pose, min_jump)
@@ -163,7 +163,7 @@ HOLD = 5.0  # s
 def converged_at(track: Track, from_index: int = 0) -> int | None:
     """First scan (>= from_index) from which the error stays below 0.2 m and 5 degrees for 5 s."""
     ok = (track.position_error < POSITION_OK) & (track.heading_error < HEADING_OK)
-    return _held(ok, from_index, int(round(HOLD / PERIOD)))
+    return _held(ok, from_index, round(HOLD / PERIOD))
 
 
 CONFIDENT_SHARE = 0.9
@@ -175,4 +175,4 @@ def false_convergence(track: Track, from_index: int = 0) -> bool:
     """Whether the filter was confident (heaviest cluster >= 90 % of the weight, sd < 0.2 m) while
     more than 1 m wrong, for 5 s, after ``from_index``."""
     ok = (track.share >= CONFIDENT_SHARE) & (track.sd_xy < CONFIDENT_SD) & (track.position_error > WRONG)
-    return _held(ok, from_index, int(round(HOLD / PERIOD))) is not None
+    return _held(ok, from_index, round(HOLD / PERIOD)) is not None

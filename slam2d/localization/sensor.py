@@ -22,7 +22,7 @@ from slam2d.localization.config import MclConfig
 from slam2d.localization.maps import KnownMap
 from slam2d.types import Scan
 
-__all__ = ["LikelihoodField", "BeamModel", "select_beams", "sensor_model"]
+__all__ = ["BeamModel", "LikelihoodField", "select_beams", "sensor_model"]
 
 
 def select_beams(scan: Scan, count: int, skip_max: bool = True) -> tuple[np.ndarray, np.ndarray]:
