@@ -83,6 +83,19 @@ def tables(runs: list[dict]) -> str:
                    f"{fmt(med(r['decision_ms_median'] for r in rs))} / {fmt(med(r['decision_ms_p95'] for r in rs))} | "
                    f"{fmt(med(r['real_time_factor'] for r in rs))} |")  # fmt: skip
     out.append("")
+    out.append("| world | strategy | runs | coverage | distance to 90 % (m) | distance to 99 % (m) | total distance (m) | "
+               "path repetition | map IoU | runs with a collision | escapes |")  # fmt: skip
+    out.append("|" + "---|" * 11)
+    for world in sorted({r["world"] for r in runs}):
+        for s in STRATEGIES:
+            rs = [r for r in runs if r["world"] == world and r["strategy"] == s]
+            if rs:
+                out.append(f"| {world} | {s} | {len(rs)} | {100 * med(r['coverage'] for r in rs):.1f} % | "
+                           f"{fmt(med(r['distance_to_90'] for r in rs))} | {fmt(med(r['distance_to_99'] for r in rs))} | "
+                           f"{fmt(med(r['distance'] for r in rs))} | {100 * med(r['path_repetition'] for r in rs):.0f} % | "
+                           f"{fmt(med(r['map_iou'] for r in rs), 3)} | {sum(r['collisions'] > 0 for r in rs)} | "
+                           f"{med(r.get('escapes', 0) for r in rs):.0f} |")  # fmt: skip
+    out.append("")
     out.append("| world | strategy | runs | nodes made (every node added) | nodes kept (cached hybrid map) | kept |")
     out.append("|---|---|---|---|---|---|")
     for world in sorted({r["world"] for r in runs}):
