@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import statistics
 import sys
@@ -54,12 +55,12 @@ def one_run(world: str, strategy: str, seed: int, max_time: float) -> dict:
 
 
 def med(values) -> float:
-    values = [v for v in values if v == v]
+    values = [v for v in values if not math.isnan(v)]
     return statistics.median(values) if values else float("nan")
 
 
 def fmt(x, digits=1) -> str:
-    return "–" if x != x else f"{x:.{digits}f}"
+    return "–" if math.isnan(x) else f"{x:.{digits}f}"
 
 
 def tables(runs: list[dict]) -> str:
@@ -74,11 +75,12 @@ def tables(runs: list[dict]) -> str:
     for s, rs in by.items():
         n = len(rs)
         reached = sum(r["coverage"] >= 0.99 for r in rs)
-        ratio = lambda ref: fmt(d99[s] / d99[ref], 2) if ref in d99 and d99[ref] == d99[ref] else "–"  # noqa: E731
+        ratio = {ref: fmt(d99[s] / d99[ref], 2) if ref in d99 and not math.isnan(d99[ref]) else "–"
+                 for ref in ("nearest_frontier", "explore_lite")}
         out.append(f"| {s} | {n} | {100 * reached / n:.0f} % | {sum(r['premature_stop'] for r in rs)} | "
                    f"{sum(r['collisions'] > 0 for r in rs)} | {100 * med(r['coverage'] for r in rs):.1f} % | "
                    f"{fmt(med(r['map_iou'] for r in rs), 3)} | {fmt(med(r['distance_to_90'] for r in rs))} | "
-                   f"{fmt(d99[s])} | {ratio('nearest_frontier')} | {ratio('explore_lite')} | "
+                   f"{fmt(d99[s])} | {ratio['nearest_frontier']} | {ratio['explore_lite']} | "
                    f"{fmt(med(r['distance'] for r in rs))} | {fmt(100 * med(r['ate_rmse'] for r in rs))} | "
                    f"{fmt(med(r['decision_ms_median'] for r in rs))} / {fmt(med(r['decision_ms_p95'] for r in rs))} | "
                    f"{fmt(med(r['real_time_factor'] for r in rs))} |")  # fmt: skip
