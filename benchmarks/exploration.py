@@ -2,7 +2,7 @@
 SLAM in the loop; coverage, efficiency, the simplified hybrid map and path repetition as tables.
 
 Usage: nice .venv/bin/python benchmarks/exploration.py [--worlds office rooms] [--rooms NAME ...]
-       [--furniture both|with|without] [--seeds N] [--strategies ...] [--workers W] [--max-time S]
+       [--furniture both|with|without] [--seeds N] [--first-seed K] [--strategies ...] [--workers W] [--max-time S]
        [--log FILE] [--tables FILE]
 
 Each run is ``slam2d explore`` without the results folder (``slam2d.exploration.run.explore``). Worlds:
@@ -121,6 +121,7 @@ def main() -> None:
     ap.add_argument("--rooms", nargs="*", default=[])
     ap.add_argument("--furniture", choices=["both", "with", "without"], default="both")
     ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--strategies", nargs="+", default=list(STRATEGIES), choices=STRATEGIES)
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--max-time", type=float, default=1800.0)
@@ -130,7 +131,7 @@ def main() -> None:
     if a.tables:
         print(tables([json.loads(line) for line in Path(a.tables).read_text().splitlines() if line.strip()]))
         return
-    jobs = [(w, s, seed, a.max_time) for w in worlds(a.worlds, a.rooms, a.furniture) for seed in range(a.seeds)
+    jobs = [(w, s, seed, a.max_time) for w in worlds(a.worlds, a.rooms, a.furniture) for seed in range(a.first_seed, a.first_seed + a.seeds)
             for s in a.strategies]  # fmt: skip
     runs = []
     with ProcessPoolExecutor(a.workers) as pool, open(a.log, "a") as log:
