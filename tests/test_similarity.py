@@ -277,3 +277,17 @@ def test_visibility_is_zero_between_closed_rooms():
 def test_unknown_measure_is_an_input_error(door_obs):
     with pytest.raises(InputError, match="unknown measure"):
         similarity_matrix(door_obs, "cosmic")
+
+
+def test_grid_ray_from_a_cell_edge_along_an_axis_is_finite():
+    """A ray starting exactly on a cell edge and moving along the other axis (0 x inf in the
+    traversal's set-up) returned NaN; it stops at the wall like any other."""
+    from slam2d.segmentation.observations import raycast_grid
+
+    free = np.ones((10, 10), dtype=bool)
+    free[:, 8] = False  # a wall at x = 0.8 m (cells 0.1 m)
+    origins = np.array([[0.3, 0.5], [0.35, 0.5]])  # the first on a cell edge
+    ranges, hit = raycast_grid(free, 0.1, origins, np.array([0.0, np.pi / 2]), 5.0)
+    assert np.all(np.isfinite(ranges)) and hit.all()
+    assert np.allclose(ranges[:, 0], [0.5, 0.45])  # east to the wall
+    assert np.allclose(ranges[:, 1], [0.5, 0.5])  # north to the grid's edge

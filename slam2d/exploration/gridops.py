@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 from scipy import ndimage
 
-from slam2d.segmentation.observations import raycast_grid
+from slam2d.segmentation.observations import dda_start, raycast_grid
 
 FREE, OCCUPIED, UNKNOWN = 0, 1, 2
 
@@ -131,12 +131,7 @@ def _gain(state, gxy, n_rays, max_t, mark):
             a = 2.0 * np.pi * b / n_rays
             dx, dy = np.cos(a), np.sin(a)
             c, r = int(np.floor(gx)), int(np.floor(gy))
-            step_c = 1 if dx > 0 else -1
-            step_r = 1 if dy > 0 else -1
-            inv_x = 1.0 / abs(dx) if dx != 0 else np.inf
-            inv_y = 1.0 / abs(dy) if dy != 0 else np.inf
-            tmx = ((c + 1 - gx) if dx > 0 else (gx - c)) * inv_x if dx != 0 else np.inf
-            tmy = ((r + 1 - gy) if dy > 0 else (gy - r)) * inv_y if dy != 0 else np.inf
+            step_c, step_r, inv_x, inv_y, tmx, tmy = dda_start(gx, gy, dx, dy)
             t = 0.0
             while t < max_t:
                 if r < 0 or c < 0 or r >= h or c >= w:
@@ -216,12 +211,7 @@ def _mark_visible(free, gxy, n_rays, max_t, seen):
             a = 2.0 * np.pi * b / n_rays
             dx, dy = np.cos(a), np.sin(a)
             c, r = int(np.floor(gx)), int(np.floor(gy))
-            step_c = 1 if dx > 0 else -1
-            step_r = 1 if dy > 0 else -1
-            inv_x = 1.0 / abs(dx) if dx != 0 else np.inf
-            inv_y = 1.0 / abs(dy) if dy != 0 else np.inf
-            tmx = ((c + 1 - gx) if dx > 0 else (gx - c)) * inv_x if dx != 0 else np.inf
-            tmy = ((r + 1 - gy) if dy > 0 else (gy - r)) * inv_y if dy != 0 else np.inf
+            step_c, step_r, inv_x, inv_y, tmx, tmy = dda_start(gx, gy, dx, dy)
             t = 0.0
             while t < max_t and 0 <= r < h and 0 <= c < w and free[r, c]:
                 seen[r, c] = True

@@ -35,6 +35,7 @@ __all__ = [
     "virtual_observations",
     "lattice_viewpoints",
     "raycast_grid",
+    "dda_start",
     "see_through",
     "cell_centres",
 ]
@@ -233,6 +234,21 @@ def cell_centres(cells, resolution: float, origin=(0.0, 0.0)) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
+def dda_start(gx, gy, dx, dy):
+    """Amanatides & Woo set-up from grid coordinates (gx, gy) (cells) along (dx, dy): the cell
+    steps, the distance (cells) between column and row crossings, and to the first of each
+    (inf along an axis the ray does not move on, also from a cell edge)."""
+    c, r = np.floor(gx), np.floor(gy)
+    step_c = 1 if dx > 0 else -1
+    step_r = 1 if dy > 0 else -1
+    inv_x = 1.0 / abs(dx) if dx != 0 else np.inf
+    inv_y = 1.0 / abs(dy) if dy != 0 else np.inf
+    tmx = ((c + 1 - gx) if dx > 0 else (gx - c)) * inv_x if dx != 0 else np.inf
+    tmy = ((r + 1 - gy) if dy > 0 else (gy - r)) * inv_y if dy != 0 else np.inf
+    return step_c, step_r, inv_x, inv_y, tmx, tmy
+
+
+@njit(cache=True, nogil=True)
 def _dda(blocked, gx, gy, angles, max_t, out_t, out_hit):
     """Amanatides & Woo traversal from grid coordinates (gx, gy) (cells) along angles (B,).
 
@@ -250,12 +266,7 @@ def _dda(blocked, gx, gy, angles, max_t, out_t, out_hit):
             out_t[b] = 0.0
             out_hit[b] = True
             continue
-        step_c = 1 if dx > 0 else -1
-        step_r = 1 if dy > 0 else -1
-        inv_x = 1.0 / abs(dx) if dx != 0 else np.inf
-        inv_y = 1.0 / abs(dy) if dy != 0 else np.inf
-        tmx = ((c + 1 - gx) if dx > 0 else (gx - c)) * inv_x
-        tmy = ((r + 1 - gy) if dy > 0 else (gy - r)) * inv_y
+        step_c, step_r, inv_x, inv_y, tmx, tmy = dda_start(gx, gy, dx, dy)
         t = 0.0
         hit = False
         while True:
