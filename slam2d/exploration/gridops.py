@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 from scipy import ndimage
 
-from slam2d.segmentation.observations import dda_start, raycast_grid
+from slam2d.segmentation.observations import dda_start, dda_step, raycast_grid
 
 FREE, OCCUPIED, UNKNOWN = 0, 1, 2
 
@@ -143,14 +143,7 @@ def _gain(state, gxy, n_rays, max_t, mark):
                     if s == 2 and mark[r, c] != token:
                         mark[r, c] = token
                         count += 1
-                if tmx < tmy:
-                    t = tmx
-                    tmx += inv_x
-                    c += step_c
-                else:
-                    t = tmy
-                    tmy += inv_y
-                    r += step_r
+                t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
         out[p] = count
     return out
 
@@ -215,14 +208,7 @@ def _mark_visible(free, gxy, n_rays, max_t, seen):
             t = 0.0
             while t < max_t and 0 <= r < h and 0 <= c < w and free[r, c]:
                 seen[r, c] = True
-                if tmx < tmy:
-                    t = tmx
-                    tmx += inv_x
-                    c += step_c
-                else:
-                    t = tmy
-                    tmy += inv_y
-                    r += step_r
+                t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
 
 
 def visible_from(free: np.ndarray, resolution: float, origins, max_range: float, rays: int = 720) -> np.ndarray:

@@ -36,6 +36,7 @@ __all__ = [
     "lattice_viewpoints",
     "raycast_grid",
     "dda_start",
+    "dda_step",
     "see_through",
     "cell_centres",
 ]
@@ -249,6 +250,14 @@ def dda_start(gx, gy, dx, dy):
 
 
 @njit(cache=True, nogil=True)
+def dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r):
+    """One Amanatides & Woo step to the next cell: (distance reached in cells, tmx, tmy, c, r)."""
+    if tmx < tmy:
+        return tmx, tmx + inv_x, tmy, c + step_c, r
+    return tmy, tmx, tmy + inv_y, c, r + step_r
+
+
+@njit(cache=True, nogil=True)
 def _dda(blocked, gx, gy, angles, max_t, out_t, out_hit):
     """Amanatides & Woo traversal from grid coordinates (gx, gy) (cells) along angles (B,).
 
@@ -270,14 +279,7 @@ def _dda(blocked, gx, gy, angles, max_t, out_t, out_hit):
         t = 0.0
         hit = False
         while True:
-            if tmx < tmy:
-                t = tmx
-                tmx += inv_x
-                c += step_c
-            else:
-                t = tmy
-                tmy += inv_y
-                r += step_r
+            t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
             if t >= max_t:
                 break
             if c < 0 or r < 0 or c >= w or r >= h or blocked[r, c]:

@@ -32,7 +32,7 @@ from threadpoolctl import threadpool_limits
 
 from slam2d.config import Section
 from slam2d.errors import InputError
-from slam2d.segmentation.observations import Observations, virtual_observations
+from slam2d.segmentation.observations import Observations, dda_start, dda_step, virtual_observations
 from slam2d.segmentation.similarity import similarity_matrix
 
 __all__ = [
@@ -406,25 +406,13 @@ def _march(gx, gy, angle, lim, h, w, cells_r, cells_c, cells_t):
     the entry distance of each; returns how many were written (exact grid traversal)."""
     dx, dy = np.cos(angle), np.sin(angle)
     c, r = int(np.floor(gx)), int(np.floor(gy))
-    step_c = 1 if dx > 0 else -1
-    step_r = 1 if dy > 0 else -1
-    inv_x = 1.0 / abs(dx) if dx != 0 else np.inf
-    inv_y = 1.0 / abs(dy) if dy != 0 else np.inf
-    tmx = ((c + 1 - gx) if dx > 0 else (gx - c)) * inv_x
-    tmy = ((r + 1 - gy) if dy > 0 else (gy - r)) * inv_y
+    step_c, step_r, inv_x, inv_y, tmx, tmy = dda_start(gx, gy, dx, dy)
     t = 0.0
     n = 0
     while t < lim and 0 <= c < w and 0 <= r < h and n < cells_r.shape[0]:
         cells_r[n], cells_c[n], cells_t[n] = r, c, t
         n += 1
-        if tmx < tmy:
-            t = tmx
-            tmx += inv_x
-            c += step_c
-        else:
-            t = tmy
-            tmy += inv_y
-            r += step_r
+        t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
     return n
 
 
