@@ -149,12 +149,15 @@ def _evaluate(cfg: ExperimentConfig, result, relations) -> dict[str, Any]:
             out[f"{label}rpe"] = rpe(est, result.ground_truth, delta_m=ev.rpe_delta)
     if relations is not None:
         from slam2d import geometry
-        from slam2d.evaluation.relations import relations_metric
+        from slam2d.evaluation.relations import relations_frame, relations_metric
 
-        sensor = np.array([s.sensor_pose for s in result.scans])  # relations relate scans: the laser's poses
+        mounts = np.array([s.sensor_pose for s in result.scans])
+        frame, evidence = relations_frame(result.stamps, result.odometry, mounts, relations, ev.relation_tolerance)
+        log.info("relations scored in the %s frame (odometry on short turns: %s)", frame, evidence)
         for label, est in (("", result.poses), ("odometry_", result.odometry)):
-            m = relations_metric(result.stamps, geometry.compose(est, sensor), relations, tolerance=ev.relation_tolerance)
-            out[f"{label}relations"] = m
+            poses = geometry.compose(est, mounts) if frame == "laser" else est
+            m = relations_metric(result.stamps, poses, relations, tolerance=ev.relation_tolerance)
+            out[f"{label}relations"] = m | {"frame": frame, "frame_test": evidence}
         if out["relations"]["unmatched"]:
             log.warning(
                 "%d of %d relations match no scan stamp within %g s and are not scored",

@@ -206,3 +206,48 @@ def test_read_relations_intel(data_file):
     stamps = np.unique(np.concatenate([rel.t1, rel.t2]))
     m = relations_metric(stamps, np.zeros((len(stamps), 3)), rel)
     assert (m["matched"], m["unmatched"]) == (2984, 0)
+
+
+def _turning_run(mount):
+    """A robot that drives and turns (1 s steps) with a laser at ``mount``; true odometry."""
+    t = np.arange(40.0)
+    theta = np.cumsum(np.where(t % 4 < 2, 0.0, 0.6))
+    xy = np.cumsum(0.3 * np.column_stack([np.cos(theta), np.sin(theta)]), axis=0)
+    return t, np.column_stack([xy, theta]), np.tile(mount, (len(t), 1))
+
+
+@pytest.mark.parametrize("frame", ["base", "laser"])
+def test_relations_frame_is_the_one_the_odometry_agrees_with(frame):
+    from slam2d import geometry
+    from slam2d.evaluation.relations import relations_frame
+
+    t, odom, mounts = _turning_run([0.25, 0.0, 0.0])
+    truth = odom if frame == "base" else geometry.compose(odom, mounts)
+    i = np.arange(len(t) - 2)
+    rel = Relations(t[i], t[i + 2], geometry.between(truth[i], truth[i + 2]))
+    found, evidence = relations_frame(t, odom, mounts, rel)
+    assert found == frame and evidence["tested"] > 5
+    assert evidence[f"{frame}_median_m"] < 1e-9 < evidence[f"{'laser' if frame == 'base' else 'base'}_median_m"]
+
+
+def test_relations_frame_defaults_to_the_laser_when_the_frames_coincide():
+    from slam2d import geometry
+    from slam2d.evaluation.relations import relations_frame
+
+    t, odom, mounts = _turning_run([0.0, 0.0, 0.0])
+    rel = Relations(t[:-2], t[2:], geometry.between(odom[:-2], odom[2:]))
+    assert relations_frame(t, odom, mounts, rel)[0] == "laser"
+
+
+@pytest.mark.parametrize("log, frame", [("fr-clinic", "base"), ("fr079", "laser")])
+def test_radish_relations_frames(data_file, log, frame):
+    """The clinic's relations relate robot poses (its laser sits 0.22 m ahead), FR079's the laser's."""
+    from slam2d.datasets.rosbag import RosbagSource as Bag
+    from slam2d.evaluation.relations import relations_frame
+
+    rel = read_relations(data_file(f"radish/{log}.relations"))
+    scans = list(Bag(data_file(f"radish/{log}.bag")))
+    stamps = np.array([s.stamp for s in scans])
+    odom, mounts = np.array([s.odom for s in scans]), np.array([s.sensor_pose for s in scans])
+    found, evidence = relations_frame(stamps, odom, mounts, rel)
+    assert found == frame, evidence

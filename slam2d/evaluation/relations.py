@@ -18,7 +18,7 @@ from slam2d import geometry
 from slam2d.errors import InputError, read_text
 from slam2d.evaluation.trajectory import _parse_row
 
-__all__ = ["Relations", "read_relations", "relations_metric", "format_relations"]
+__all__ = ["Relations", "read_relations", "relations_metric", "relations_frame", "format_relations"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +100,41 @@ def relations_metric(stamps, poses, relations: Relations, tolerance: float = 1e-
         out[f"{name}_mean"], out[f"{name}_std"] = _mean_std(values)
     out["matched"], out["unmatched"] = int(ok.sum()), int((~ok).sum())
     return out
+
+
+#: Relations that tell the robot's frame from the laser's: short (odometry is
+#: still accurate) and turning (a mounting offset then moves the laser sideways).
+FRAME_TEST_MAX_S = 3.0
+FRAME_TEST_MIN_TURN = np.radians(20.0)
+
+
+def relations_frame(stamps, odometry, mounts, relations: Relations, tolerance: float = 1e-3) -> tuple[str, dict]:
+    """The frame the relations were measured in: ``"laser"`` or ``"base"`` (the robot's).
+
+    Relation files do not say which. Decided from the odometry alone, not the
+    estimate being scored: on relations at most ``FRAME_TEST_MAX_S`` s long that
+    turn at least ``FRAME_TEST_MIN_TURN``, the frame whose odometry poses
+    (``odometry`` (N, 3) robot poses, ``mounts`` (N, 3) laser mounting poses)
+    agree better with the relations (median translational error). ``"laser"``
+    when the frames coincide or no relation qualifies. Returns the frame and the
+    evidence (relations tested, median error in each frame, m).
+    """
+    odometry = geometry.as_pose(odometry).reshape(-1, 3)
+    mounts = geometry.as_pose(mounts).reshape(-1, 3)
+    stamps = np.asarray(stamps, dtype=np.float64).reshape(-1)
+    order = np.argsort(stamps, kind="stable")
+    k1, ok1 = _match(stamps[order], relations.t1, tolerance)
+    k2, ok2 = _match(stamps[order], relations.t2, tolerance)
+    test = ok1 & ok2 & (np.abs(relations.t2 - relations.t1) <= FRAME_TEST_MAX_S)
+    test &= np.abs(relations.delta[:, 2]) >= FRAME_TEST_MIN_TURN
+    evidence: dict = {"tested": int(test.sum())}
+    if not test.any() or not np.abs(mounts[:, :2]).any():
+        return "laser", evidence
+    i1, i2 = order[k1[test]], order[k2[test]]
+    for frame, poses in (("base", odometry), ("laser", geometry.compose(odometry, mounts))):
+        d = geometry.between(poses[i1], poses[i2])
+        evidence[f"{frame}_median_m"] = float(np.median(np.hypot(*(d[:, :2] - relations.delta[test, :2]).T)))
+    return ("base" if evidence["base_median_m"] < evidence["laser_median_m"] else "laser"), evidence
 
 
 def format_relations(metrics: dict) -> str:
