@@ -102,7 +102,7 @@ def ablate(
     if not quiet:
         typer.echo((folder / "table.md").read_text())
     failed = [r["variant"] for r in rows if r["error"]]
-    typer.echo(f"table: {folder / 'table.md'} and {folder / 'table.csv'}")
+    typer.echo(f"table: {folder / 'table.md'} and {folder / 'table.csv'}; report: {folder / 'report.html'}")
     if failed:
         typer.secho(f"{len(failed)} of {len(rows)} variants failed: {', '.join(failed)}", fg="red", err=True)
         raise typer.Exit(1)

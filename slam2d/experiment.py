@@ -491,7 +491,8 @@ def _finished(runs: Path, name: str) -> tuple[str, dict[str, Any], None] | None:
 
 
 def _write_sweep_table(root: Path, variants: list[Variant], outcomes: list) -> list[dict[str, Any]]:
-    """Write table.md/.csv: one row per variant (unfinished ones say so); return the rows."""
+    """Write table.md/.csv/.tex and report.html: one row per variant (unfinished ones say so); return the rows."""
+    from slam2d.evaluation.report import write_report
     from slam2d.evaluation.tables import flatten_metrics, write_table
 
     rows = []
@@ -503,7 +504,9 @@ def _write_sweep_table(root: Path, variants: list[Variant], outcomes: list) -> l
         row["error"] = error or ""
         row["folder"] = str(Path(folder).relative_to(root)) if folder else ""
         rows.append(row)
-    write_table(rows, root / "table", leading=["variant", *dict.fromkeys(k for v in variants for k in v.overrides)])
+    leading = ["variant", *dict.fromkeys(k for v in variants for k in v.overrides)]
+    write_table(rows, root / "table", leading=leading)
+    write_report(root, rows, leading)
     return rows
 
 
