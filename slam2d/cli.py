@@ -65,6 +65,8 @@ def _stoppable(what: str):
 def run(
     config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT,
     quiet: bool = QUIET_OPT,
+    viz: bool = typer.Option(False, "--viz", help="stream scans, pose, loops and map to the rerun viewer ([viz] extra)"),
+    viz_save: Optional[Path] = typer.Option(None, "--viz-save", help="record the live view to FILE.rrd instead"),
 ) -> None:
     """Run one experiment; print the results folder."""
     from slam2d.experiment import run_experiment
@@ -72,8 +74,10 @@ def run(
     _setup_logging(quiet)
     with _stoppable("no results folder written"):
         try:
+            if viz and viz_save:
+                raise InputError("--viz-save", "give --viz (a live viewer) or --viz-save FILE.rrd, not both")
             cfg = _load(config, set_, plugin)
-            folder = run_experiment(cfg, quiet=quiet)
+            folder = run_experiment(cfg, quiet=quiet, viz=viz_save or ("viewer" if viz else None))
         except InputError as err:
             _fail(err)
     typer.echo(f"results: {folder}")

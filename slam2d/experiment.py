@@ -38,11 +38,12 @@ log = logging.getLogger("slam2d")
 # --------------------------------------------------------------------------- one run
 
 
-def run_experiment(cfg: ExperimentConfig, quiet: bool = False) -> Path:
-    """Run ``cfg`` end to end; return the results folder."""
+def run_experiment(cfg: ExperimentConfig, quiet: bool = False, viz: str | Path | None = None) -> Path:
+    """Run ``cfg`` end to end; return the results folder. ``viz``: ``"viewer"`` streams the run to
+    the rerun viewer, a path ``FILE.rrd`` records it there (:mod:`slam2d.viz`)."""
     with results_folder(cfg.output.root, cfg.name) as (work, published):
         log.info("slam2d run '%s' -> %s", cfg.name, cfg.output.root)
-        metrics = _run_into(cfg, work, quiet)
+        metrics = _run_into(cfg, work, quiet, viz)
         log.info("done in %.1f s", metrics["runtime_s"])
     return published[0]
 
@@ -78,7 +79,7 @@ def output_root(root: str | Path, key: str = "output.root") -> Path:
     return path
 
 
-def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
+def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | None = None) -> dict[str, Any]:
     from slam2d.datasets.registry import open_dataset
     from slam2d.mapping.occupancy import check_resolution
     from slam2d.pipeline import SlamPipeline
@@ -89,8 +90,8 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
     source = open_dataset(cfg.dataset, seed=cfg.seed)
     relations = _load_relations(cfg)
     pipeline = SlamPipeline(cfg)
-    with _progress(source, quiet) as advance:
-        result = pipeline.run(source, on_scan=lambda: (check_stop(), advance and advance()))
+    with _live_view(viz, cfg) as view, _progress(source, quiet) as advance:
+        result = pipeline.run(source, on_scan=lambda: (check_stop(), advance and advance()), view=view)
     t_slam = time.perf_counter()
     log.info("%d scans processed in %.1f s", len(result.scans), t_slam - t0)
     for key, count in result.stats.items():
@@ -114,6 +115,21 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool) -> dict[str, Any]:
     (out / "metrics.json").write_text(json_text(metrics))
     _log_summary(metrics)
     return metrics
+
+
+@contextmanager
+def _live_view(viz: str | Path | None, cfg: ExperimentConfig):
+    """Yield None, or the :class:`slam2d.viz.LiveView` that ``viz`` asks for (closed after the block)."""
+    if viz is None:
+        yield None
+        return
+    from slam2d.viz import open_view
+
+    view = open_view(viz, cfg.name, cfg.mapping)
+    try:
+        yield view
+    finally:
+        view.close()
 
 
 def resolved(cfg: ExperimentConfig) -> ExperimentConfig:

@@ -67,6 +67,15 @@ class ChainBackend:
     def finish(self) -> np.ndarray:
         return np.array(self.poses)
 
+    def current_pose(self) -> np.ndarray:
+        """Pose (3,) of the latest scan."""
+        return self.poses[-1]
+
+    def scan_anchors(self, start: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """As GraphSlamBackend's: every scan is its own keyframe, at offset zero."""
+        n = len(self.poses) - start
+        return np.arange(start, start + n), np.zeros((n, 3))
+
     def summary(self) -> dict[str, int]:
         return {}
 
@@ -206,21 +215,22 @@ class SlamPipeline:
             return GraphSlamBackend(self.cfg.backend)
         return ChainBackend()
 
-    def run(self, scans: Iterable[Scan], on_scan: Callable[[], None] | None = None) -> SlamResult:
-        """Process every scan; ``on_scan`` is called after each one (progress)."""
+    def run(self, scans: Iterable[Scan], on_scan: Callable[[], None] | None = None, view=None) -> SlamResult:
+        """Process every scan; ``on_scan`` is called after each one (progress); ``view``
+        (a :class:`slam2d.viz.LiveView`) logs each scan, the pose, loops and map as they come."""
         t0 = time.process_time()
         if self.cfg.parallel and can_fork():
             with FrontendWorker(self.frontend, scans) as worker:
-                result = self._consume(worker, scans, on_scan)
+                result = self._consume(worker, scans, on_scan, view)
             events, worker_cpu_s = worker.events, worker.cpu_s
         else:
-            result = self._consume(frontend_steps(self.frontend, scans), scans, on_scan)
+            result = self._consume(frontend_steps(self.frontend, scans), scans, on_scan, view)
             events, worker_cpu_s = getattr(self.frontend, "events", {}), 0.0
         result.stats.update({f"frontend {k}": v for k, v in events.items()})
         result.cpu_s = time.process_time() - t0 + worker_cpu_s
         return result
 
-    def _consume(self, steps, scans, on_scan) -> SlamResult:
+    def _consume(self, steps, scans, on_scan, view=None) -> SlamResult:
         """Feed the (scan, result) pairs to a new back end; the result without the frontend's events."""
         backend = self._new_backend()
         kept: list[Scan] = []
@@ -229,12 +239,16 @@ class SlamPipeline:
             backend.add(scan, result)
             confidences.append(result.confidence)
             kept.append(scan)
+            if view is not None:
+                view.step(scan, backend)
             if on_scan:
                 on_scan()
         if not kept:
             skipped = dict(getattr(scans, "skipped", {}))
             raise InputError(getattr(scans, "name", "dataset"), f"no usable scan (skipped: {skipped})")
         poses = backend.finish()
+        if view is not None:
+            view.finish(poses, backend)
         gts = [s.ground_truth for s in kept]
         return SlamResult(
             scans=kept,
