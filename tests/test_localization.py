@@ -65,6 +65,26 @@ def test_likelihood_field_off_the_map_counts_as_max_distance():
     assert far == pytest.approx(math.log(0.95 * math.exp(-1.0 / (2 * 0.04)) + 0.05 / 10.0))
 
 
+def test_a_pose_inside_a_wall_scores_as_every_beam_missing():
+    occupied = np.zeros((80, 160), bool)
+    occupied[:, 40:] = True  # a solid block right of a 2 m x 4 m room (a plan's black exterior)
+    occupied[0] = occupied[-1] = occupied[:, 0] = True
+    known = KnownMap(occupied, ~occupied, 0.05, (0.0, 0.0))
+    angles = np.linspace(-np.pi, np.pi, 90, endpoint=False)
+    truth = np.array([1.0, 2.0, 0.0])
+    ranges = BeamModel(known, MclConfig(), 12.0).expected_ranges(truth[None], np.zeros(3), angles)[0]
+    scan = Scan(stamp=0.0, ranges=ranges, angles=angles, range_min=0.0, range_max=12.0)
+    poses = np.array([truth, [5.0, 2.0, 0.0]])  # the truth, and a pose deep in the block
+    for model in ("likelihood_field", "beam"):
+        ll, beams = ParticleFilter(known, MclConfig(model=model), 12.0).sensor.log_likelihood(poses, scan)
+        amcl_like = ParticleFilter(known, MclConfig(model=model, wall_poses=True), 12.0).sensor
+        assert ll[1] < ll[0] - 1.0, model
+        assert ll[1] == pytest.approx(ll.min()) and np.isfinite(ll).all()
+        if model == "likelihood_field":  # every end point in the block is "on a wall": it fits perfectly
+            assert amcl_like.log_likelihood(poses, scan)[0][1] > ll[0]
+            assert ll[1] == pytest.approx(beams * LikelihoodField(known, MclConfig(), 12.0).outside)
+
+
 @pytest.mark.parametrize("k", [2, 5, 20, 100, 1000])
 def test_kld_limit_is_fox_formula_and_near_the_chi_square_bound(k):
     err, delta = 0.05, 0.01

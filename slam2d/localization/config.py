@@ -60,6 +60,8 @@ class MclConfig(Section):
                                                 "to beam_weight), or amcl's 1 + sum of cubes")
     beam_weight: float = Field(0.2, gt=0, le=1, description="exponent of each beam's likelihood (beams are "
                                 "correlated: 1 overstates the evidence)")
+    wall_poses: bool = Field(False, description="score poses inside occupied cells as any other (amcl); False: "
+                             "as if every beam missed by the most (a robot cannot stand in a wall)")
     # initial pose of tracking
     initial_sd_xy: float = Field(0.5, ge=0, description="m, standard deviation around an initial pose")
     initial_sd_theta: float = Field(math.pi / 12, ge=0, description="rad")
@@ -73,7 +75,7 @@ def amcl_config(recovery: bool = False) -> MclConfig:
         resample_ess=0.0, resample_interval=2, alpha_slow=0.001 if recovery else 0.0,
         alpha_fast=0.1 if recovery else 0.0, free_clearance=0.0, alpha1=0.2, alpha2=0.2, alpha3=0.2, alpha4=0.2,
         model="likelihood_field", beams=30, z_hit=0.95, z_rand=0.05, sigma_hit=0.2, sigma_hit_uncertain=0.2,
-        max_dist=2.0, combine="amcl",
+        max_dist=2.0, combine="amcl", wall_poses=True,
         beam_weight=1.0, global_candidates=1, recovery_candidates=1, initial_sd_xy=0.5, initial_sd_theta=math.pi / 12,
     )  # fmt: skip
 

@@ -64,6 +64,14 @@ class KnownMap(GridFrame):
         edt = ndimage.distance_transform_edt(~self.occupied) * self.resolution
         return np.maximum(edt - 0.5 * self.resolution, 0.0)
 
+    def in_wall(self, xy) -> np.ndarray:
+        """Whether points ``xy`` (P, 2) m lie in occupied cells (False off the map)."""
+        cells = self.world_to_cell(xy)
+        inside = self.in_bounds(cells)
+        out = np.zeros(len(cells), dtype=bool)
+        out[inside] = self.occupied[cells[inside, 0], cells[inside, 1]]
+        return out
+
     def free_cells(self, clearance: float = 0.0) -> np.ndarray:
         """Flat indices of free cells at least ``clearance`` m from every occupied cell (all free cells
         if none is that far)."""

@@ -4,7 +4,8 @@ Both return the log-likelihood (P,) of one scan at every particle pose. The
 likelihood field scores each beam end point by its distance d to the nearest
 occupied cell (the map's exact distance transform, capped at ``max_dist``):
 p = z_hit N(d; 0, sigma_hit) + z_rand / range_max; end points off the map or at
-"no return" are d = max_dist and skipped respectively, as in amcl. The beam
+"no return" are d = max_dist and skipped respectively, as in amcl; a particle
+standing in an occupied cell scores as if every end point lay at max_dist. The beam
 model ray-casts the expected range in the grid and mixes hit, short, max and
 random readings. Beams combine as a product (each likelihood raised to
 ``beam_weight``) or as amcl does, 1 + sum of cubes. Numba kernels, parallel
@@ -64,6 +65,7 @@ class LikelihoodField:
         m = self.map
         total = _field_sum(np.ascontiguousarray(particles), np.asarray(scan.sensor_pose, dtype=np.float64),
                            ends, self.table, self.outside, m.origin[0], m.origin[1], m.resolution)  # fmt: skip
+        total = out_of_walls(m, self.cfg, particles, total, len(ranges) * self.outside)
         return (np.log1p(total) if self.cfg.combine == "amcl" else total), len(ranges)
 
 
@@ -111,9 +113,19 @@ class BeamModel:
             return np.zeros(len(particles)), 0
         expected = self.expected_ranges(particles, scan.sensor_pose, angles)
         p = beam_probability(ranges[None], expected, self.cfg, self.range_max)
+        worst = self.cfg.z_rand / self.range_max
         if self.cfg.combine == "amcl":
-            return np.log1p((p**3).sum(axis=1)), len(ranges)
-        return self.cfg.beam_weight * np.log(p).sum(axis=1), len(ranges)
+            ll, worst = np.log1p((p**3).sum(axis=1)), math.log1p(len(ranges) * worst**3)
+        else:
+            ll, worst = self.cfg.beam_weight * np.log(p).sum(axis=1), len(ranges) * self.cfg.beam_weight * math.log(worst)
+        return out_of_walls(self.map, self.cfg, particles, ll, worst), len(ranges)
+
+
+def out_of_walls(known: KnownMap, cfg: MclConfig, particles: np.ndarray, score: np.ndarray, worst: float):
+    """``score`` (P,) with the particles standing in an occupied cell set to ``worst`` (unless ``wall_poses``)."""
+    if not cfg.wall_poses:
+        score[known.in_wall(particles[:, :2])] = worst
+    return score
 
 
 def beam_probability(z: np.ndarray, expected: np.ndarray, cfg: MclConfig, range_max: float) -> np.ndarray:
