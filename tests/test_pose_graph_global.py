@@ -1,6 +1,7 @@
 """Batch optimisation of g2o graphs from a global start: chordal initialisation exact on
 a noise-free graph, the MIT benchmark at its best-known minimum from the default start,
-GNC rejecting injected false loops where plain LM fails, every loop edge classified."""
+GNC rejecting injected false loops where plain LM fails, pc_dcs rejecting random false
+loops where DCS fails, pairwise consistency through the odometry, every loop edge classified."""
 
 from __future__ import annotations
 
@@ -8,8 +9,15 @@ import numpy as np
 import pytest
 
 from slam2d import geometry
+from slam2d.backend import consistency
 from slam2d.backend import initialization as ini
-from slam2d.backend.pose_graph import loop_metrics, solve_g2o
+from slam2d.backend.pose_graph import (
+    CHI2_3DOF_99,
+    _g2o_factors,
+    _g2o_values,
+    loop_metrics,
+    solve_g2o,
+)
 from slam2d.datasets.g2o import PoseGraphFile, inject_outliers, odometry_mask, read_g2o
 from slam2d.errors import InputError
 
@@ -138,3 +146,99 @@ def test_optimize_command_writes_results_folder(tmp_path):
     assert metrics["rmse_to_reference"] < 0.05
     bad = CliRunner().invoke(app, ["optimize", "-q", str(tmp_path / "laps.g2o"), "--init", "lago", "--out", str(out)])
     assert bad.exit_code == 2 and "unknown initialisation" in bad.output
+
+
+def manhattan(n: int = 400, seed: int = 2) -> PoseGraphFile:
+    """M3500-like graph: n unit steps on a 6 x 6 m grid (turning at random), a loop from each pose
+    to its last two visits of the same cell, noise 2 cm / 0.6 deg against an information of
+    1 / 0.15^2 (like M3500, whose information overstates its noise); vertices at dead reckoning."""
+    rng = np.random.default_rng(seed)
+    steps, cell, heading, truth = np.array([[1, 0], [0, 1], [-1, 0], [0, -1]]), np.zeros(2, int), 0, [[0.0, 0, 0]]
+    for _ in range(n - 1):
+        if rng.random() < 0.3:
+            heading = (heading + rng.choice([1, 3])) % 4
+        while not np.all((cell + steps[heading] >= 0) & (cell + steps[heading] < 6)):
+            heading = (heading + rng.choice([1, 3])) % 4
+        cell = cell + steps[heading]
+        truth.append([*cell, heading * np.pi / 2])
+    truth = np.array(truth, float)
+    truth[:, 2] = geometry.wrap_angle(truth[:, 2])
+    i, j = list(range(n - 1)), list(range(1, n))
+    for k in range(n):
+        for m in np.flatnonzero(np.all(truth[: max(k - 5, 0), :2] == truth[k, :2], axis=1))[-2:]:
+            i.append(int(m))
+            j.append(k)
+    i, j = np.array(i), np.array(j)
+    meas = geometry.compose(geometry.between(truth[i], truth[j]), rng.normal(size=(len(i), 3)) * [0.02, 0.02, 0.01])
+    poses = [truth[0]]
+    for d in meas[: n - 1]:
+        poses.append(geometry.compose(poses[-1], d))
+    return PoseGraphFile(np.arange(n), np.array(poses), i, j, meas, np.repeat(np.eye(3)[None] / 0.15**2, len(i), 0))
+
+
+def test_pc_dcs_rejects_random_false_loops_where_dcs_fails():
+    clean = manhattan()
+    reference = solve_g2o(clean).poses
+    graph, injected = inject_outliers(clean, 200, "random", seed=3)
+    true_loops = ~odometry_mask(graph) & ~injected
+    dcs = solve_g2o(graph, robust="dcs")
+    assert rmse(dcs.poses, reference) > 1.0 and np.sum(dcs.inlier & true_loops) < 0.95 * true_loops.sum()
+    result = solve_g2o(graph, robust="pc_dcs")
+    assert result.init == "spanning_tree"
+    assert rmse(result.poses, reference) < 1e-5  # least squares over the loops kept: the outlier-free optimum
+    m = loop_metrics(result.inlier, injected)
+    assert m["outliers_rejected"] == 200 and m["true_rejected"] == 0
+    supported = consistency.pairwise_support(graph)
+    assert np.sum(supported & injected) < 20  # most random false loops have no consistent partner
+    assert np.any(~supported & true_loops)  # true loops the screen missed, kept after its second DCS
+
+
+def with_detour(graph: PoseGraphFile, heading_bias: float = 0.015) -> PoseGraphFile:
+    """``graph`` plus a 5 x 5 m square of unit steps off its last vertex, each step's odometry
+    turned by ``heading_bias`` rad too much, closed by one true loop back to that vertex (last edge)."""
+    steps = np.array([[1.0, 0.0, np.pi / 2 if t == 4 else 0.0] for _ in range(4) for t in range(5)])
+    n, k = len(graph.ids), len(steps)
+    meas = steps + [0.0, 0.0, heading_bias]
+    poses = [graph.poses[-1]]
+    for d in meas:
+        poses.append(geometry.compose(poses[-1], d))
+    return PoseGraphFile(np.arange(n + k), np.vstack([graph.poses, poses[1:]]),
+                         np.r_[graph.i, np.arange(n - 1, n + k)], np.r_[graph.j, np.arange(n, n + k), n - 1],
+                         np.vstack([graph.measurements, meas, np.zeros(3)]),
+                         np.concatenate([graph.information, np.repeat(graph.information[:1], k + 1, 0)]))
+
+
+def test_pc_dcs_readmits_an_isolated_loop():
+    graph = with_detour(manhattan())
+    assert not consistency.pairwise_support(graph)[-1]  # no partner, too long for its own odometry
+    assert consistency.edge_chi2(graph, graph.poses)[-1] > 2 * CHI2_3DOF_99  # far off at dead reckoning
+    result = solve_g2o(graph, robust="pc_dcs")
+    assert result.inlier.all()
+    assert rmse(result.poses, solve_g2o(graph).poses) < 1e-4
+
+
+def test_pairwise_support_on_laps():
+    clean = lap_graph(laps(), noise=1.0, seed=8)
+    assert consistency.pairwise_support(clean).all()
+    graph, injected = inject_outliers(clean, 20, "random", seed=9)
+    support = consistency.pairwise_support(graph)
+    assert support[~injected].all() and not support[injected].any()
+    group, injected = inject_outliers(clean, 10, "group", seed=9)
+    assert consistency.pairwise_support(group)[injected].all()  # mutually consistent: left to DCS
+
+
+def test_edge_chi2_is_gtsams_error():
+    graph, _ = inject_outliers(lap_graph(laps(), noise=1.0, seed=10), 10, "random", seed=11)
+    poses = graph.poses + np.random.default_rng(12).normal(size=graph.poses.shape) * [2.0, 2.0, 2.0]
+    fg, values = _g2o_factors(graph), _g2o_values(graph.ids, poses)
+    gtsam_chi2 = [2.0 * fg.at(k).error(values) for k in range(fg.size())]
+    np.testing.assert_allclose(consistency.edge_chi2(graph, poses), gtsam_chi2, rtol=1e-9, atol=1e-9)
+
+
+def test_bad_information_named_by_edge():
+    graph = lap_graph(laps(), noise=0.0)
+    information = graph.information.copy()
+    information[7, 2, 2] = -1.0
+    bad = PoseGraphFile(graph.ids, graph.poses, graph.i, graph.j, graph.measurements, information)
+    with pytest.raises(InputError, match=r"g2o edge 7 \(7 -> 8\).*not positive definite"):
+        solve_g2o(bad)

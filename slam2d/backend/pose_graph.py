@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from slam2d import geometry
+from slam2d.backend import consistency
 from slam2d.backend import robust as rb
 from slam2d.config import BackendConfig
 from slam2d.datasets import g2o
@@ -36,7 +37,7 @@ ISAM2_FACTORIZATION = "CHOLESKY"  # faster; an ill-conditioned update falls back
 PRIOR_SIGMAS = np.array([1e-6, 1e-6, 1e-6])  # m, m, rad: anchors the first keyframe / vertex
 DEFAULT_ODOMETRY_SIGMAS = np.array([0.05, 0.05, np.deg2rad(2.0)])  # m, m, rad, when no information is given
 GNC_OUTLIER_WEIGHT = 0.5  # a loop whose final GNC weight is below this is rejected
-CHI2_3DOF_99 = 11.344866730144373  # chi-square 99% quantile, 3 degrees of freedom: loop residual / consistency gate
+CHI2_3DOF_99 = consistency.CHI2_3DOF_99  # chi-square 99% quantile, 3 degrees of freedom: loop residual / consistency gate
 
 
 def pose_key(k: int) -> int:
@@ -416,6 +417,8 @@ G2O_GNC_INITS = ("spanning_tree", "chordal")  # under GNC both run, the lower TL
 # odometry start is poor (MIT) needs the chordal one. Not for M-estimators: their cost can prefer a chordal
 # solution bent to absorb a false loop (M3500 with 10 random false loops: DCS 25 m off)
 VERIFY_REL = 1e-6  # relative error difference under which two optima agree
+SCREEN_READMIT_CHI2 = 10 * CHI2_3DOF_99  # pc_dcs: loops within this squared whitened residual after the
+# screened DCS enter its second DCS (M3500: a true loop closing a detour has 21.7 there, random false ones ~10^3)
 
 
 @dataclass(frozen=True)
@@ -452,20 +455,37 @@ def _g2o_values(ids, poses):
     return values
 
 
-def _g2o_factors(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0):
-    """gtsam graph of a g2o file's edges (no prior)."""
+def _g2o_factor_list(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0,
+                     plain_odometry: bool = False) -> list:
+    """One gtsam between factor per edge of a g2o graph, under the ``robust`` kernel (odometry
+    edges without it when ``plain_odometry``)."""
     import gtsam
 
-    unknown = ~np.isin(graph.i, graph.ids) | ~np.isin(graph.j, graph.ids)
-    if unknown.any():
-        k = int(np.argmax(unknown))
-        raise InputError("g2o graph", f"edge {graph.i[k]} -> {graph.j[k]} to an unknown vertex")
+    consistency.edge_rows(graph)  # InputError for an edge to an unknown vertex
+    info = rb.check_information_stack(graph.information, lambda k: f"g2o edge {k} ({graph.i[k]} -> {graph.j[k]})")
+    kernel = rb.m_estimator(robust, robust_param)
+    plain = g2o.odometry_mask(graph) if plain_odometry else np.zeros(len(graph.i), bool)
+    factors = []
+    for a, b, m, inf, p in zip(graph.i.tolist(), graph.j.tolist(), graph.measurements.tolist(), info, plain):
+        model = rb.wrap(gtsam.noiseModel.Gaussian.Information(inf), None if p else kernel)
+        factors.append(gtsam.BetweenFactorPose2(pose_key(a), pose_key(b), gtsam.Pose2(*m), model))
+    return factors
+
+
+def _factor_graph(factors, keep=None):
+    """gtsam.NonlinearFactorGraph of ``factors`` (those where ``keep`` (bool) is set)."""
+    import gtsam
+
     fg = gtsam.NonlinearFactorGraph()
-    edges = zip(graph.i.tolist(), graph.j.tolist(), graph.measurements, graph.information)
-    for n, (a, b, m, info) in enumerate(edges):
-        model = rb.noise_model(rb.check_information(info, f"g2o edge {n} ({a} -> {b})"), robust, robust_param)
-        fg.add(gtsam.BetweenFactorPose2(pose_key(a), pose_key(b), _gtsam_pose(m), model))
+    for f in factors if keep is None else (f for f, k in zip(factors, keep) if k):
+        fg.add(f)
     return fg
+
+
+def _g2o_factors(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0,
+                 plain_odometry: bool = False):
+    """gtsam graph of a g2o file's edges (no prior); see ``_g2o_factor_list``."""
+    return _factor_graph(_g2o_factor_list(graph, robust, robust_param, plain_odometry))
 
 
 def _poses_in_vertex_order(values, ids) -> np.ndarray:
@@ -490,29 +510,61 @@ def _anchor_prior(graph: g2o.PoseGraphFile, values):
     return gtsam.PriorFactorPose2(anchor, values.atPose2(anchor), gtsam.noiseModel.Diagonal.Sigmas(PRIOR_SIGMAS))
 
 
+def _lm(graph: g2o.PoseGraphFile, fg, initial):
+    """Levenberg-Marquardt (GTSAM defaults) over ``fg`` and the anchor prior from gtsam.Values
+    ``initial``; returns (values, iterations)."""
+    import gtsam
+
+    anchored = gtsam.NonlinearFactorGraph(fg)
+    anchored.add(_anchor_prior(graph, initial))
+    opt = gtsam.LevenbergMarquardtOptimizer(anchored, initial, _lm_params())
+    return opt.optimize(), opt.iterations()
+
+
 def _optimize_from(graph: g2o.PoseGraphFile, fg, poses, loss: str | None):
     """LM (or GNC with ``loss``, odometry known inliers) from ``poses``; returns
     (values, iterations, seconds, GNC weights (M,) or None)."""
     import gtsam
 
     initial = _g2o_values(graph.ids, poses)
-    anchored = gtsam.NonlinearFactorGraph(fg)
-    anchored.add(_anchor_prior(graph, initial))
     t0 = time.perf_counter()
     if loss is None:
-        opt = gtsam.LevenbergMarquardtOptimizer(anchored, initial, _lm_params())
-        result = opt.optimize()
-        return result, opt.iterations(), time.perf_counter() - t0, None
+        result, iterations = _lm(graph, fg, initial)
+        return result, iterations, time.perf_counter() - t0, None
+    anchored = gtsam.NonlinearFactorGraph(fg)
+    anchored.add(_anchor_prior(graph, initial))
     known = np.r_[np.flatnonzero(g2o.odometry_mask(graph)), fg.size()]  # odometry and the prior
     opt = gtsam.GncLMOptimizer(anchored, initial, rb.gnc_params(known, loss, _lm_params()))
     result = opt.optimize()
     return result, -1, time.perf_counter() - t0, np.asarray(opt.getWeights()).ravel()[: fg.size()]
 
 
+def _screened_from(graph: g2o.PoseGraphFile, plain: list, robust: list, poses):
+    """The ``pc_dcs`` batch method from ``poses`` (N, 3), given every edge's factor without
+    (``plain``) and with the loop kernel (``robust``, odometry plain):
+
+    1. robust LM over the odometry and the loops of ``consistency.pairwise_support``;
+    2. robust LM from there over the odometry and every loop whose squared whitened residual
+       is within ``SCREEN_READMIT_CHI2`` (isolated true loops return; loops far off stay out of
+       the linear system, where each would add fill-in);
+    3. LM over the odometry and the loops within the chi-square gate ``CHI2_3DOF_99``.
+
+    Returns (values, LM iterations of all three, seconds)."""
+    t0 = time.perf_counter()
+    odometry = g2o.odometry_mask(graph)
+    keep = consistency.pairwise_support(graph)
+    values, iterations = _g2o_values(graph.ids, poses), 0
+    for factors, limit in ((robust, None), (robust, SCREEN_READMIT_CHI2), (plain, CHI2_3DOF_99)):
+        if limit is not None:
+            keep = odometry | (edge_chi2(graph, _poses_in_vertex_order(values, graph.ids)) <= limit)
+        values, n = _lm(graph, _factor_graph(factors, keep), values)
+        iterations += n
+    return values, iterations, time.perf_counter() - t0
+
+
 def edge_chi2(graph: g2o.PoseGraphFile, poses) -> np.ndarray:
     """(M,) squared whitened residual of every edge at ``poses`` (N, 3) (no robust kernel)."""
-    fg, values = _g2o_factors(graph), _g2o_values(graph.ids, poses)
-    return np.array([2.0 * fg.at(k).error(values) for k in range(fg.size())])
+    return consistency.edge_chi2(graph, poses)
 
 
 def _classify(graph: g2o.PoseGraphFile, poses, weights) -> np.ndarray:
@@ -543,12 +595,16 @@ def _robust_cost(graph: g2o.PoseGraphFile, fg, values, weights) -> float:
     return float(np.sum(np.where(g2o.odometry_mask(graph), e, np.minimum(e, 0.5 * CHI2_3DOF_99))))
 
 
-def _run(graph: g2o.PoseGraphFile, fg, name: str, loss: str | None) -> _Run:
-    """Optimise from the start ``name`` ("chordal_isotropic": chordal with unit weights)."""
+def _run(graph: g2o.PoseGraphFile, fg, name: str, loss: str | None, screen=None) -> _Run:
+    """Optimise from the start ``name`` ("chordal_isotropic": chordal with unit weights); ``screen``:
+    the (plain, robust) factor lists of the ``pc_dcs`` method, else None."""
     from slam2d.backend import initialization as ini
 
     start = ini.chordal(graph, weighted=False) if name == "chordal_isotropic" else ini.initial_poses(graph, name)
-    values, iters, seconds, weights = _optimize_from(graph, fg, start, loss)
+    if screen is None:
+        values, iters, seconds, weights = _optimize_from(graph, fg, start, loss)
+    else:
+        (values, iters, seconds), weights = _screened_from(graph, *screen, start), None
     return _Run(name, start, values, iters, seconds, weights, _robust_cost(graph, fg, values, weights))
 
 
@@ -562,22 +618,26 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     tight prior; errors exclude the prior.
 
     ``robust``: an M-estimator of ``robust.ROBUST_KERNELS`` on every edge (width
-    ``robust_param``, whitened units) under Levenberg-Marquardt (GTSAM defaults), or
-    GNC ("gnc" = TLS, "gnc_gm") with the odometry edges as known inliers. ``init``:
+    ``robust_param``, whitened units) under Levenberg-Marquardt (GTSAM defaults), GNC
+    ("gnc" = TLS, "gnc_gm") with the odometry edges as known inliers, or "pc_dcs": loops
+    screened by pairwise consistency, then DCS (Phi = ``robust_param``) on the loops only,
+    then least squares over the loops it keeps (``_screened_from``). ``init``:
     "chordal", "spanning_tree" or "file"; default ``G2O_INIT``, ``G2O_ROBUST_INIT`` under an
     M-estimator, each of ``G2O_GNC_INITS`` under GNC. ``verify``: also optimise from the other starts
     (chordal, spanning tree, isotropic chordal). Of several runs the first is kept unless
     another reaches a lower (robust) cost beyond VERIFY_REL; verified when another run
     agrees with the kept one; None: one run only."""
-    loss = rb.gnc_loss(robust)
-    kernel = "none" if loss is not None else robust
+    loss, screened = rb.gnc_loss(robust), rb.screened_kernel(robust)
+    kernel = "none" if loss is not None else (screened or robust)
     plain = kernel == "none" and loss is None
     default = [G2O_INIT] if plain else (list(G2O_GNC_INITS) if loss else [G2O_ROBUST_INIT])
     names = [str(init).lower()] if init else default
     if verify:
         names += [n for n in ("chordal", "spanning_tree", "chordal_isotropic") if n not in names]
-    fg = _g2o_factors(graph, kernel, robust_param)
-    runs = [_run(graph, fg, name, loss) for name in names]
+    factors = _g2o_factor_list(graph, kernel, robust_param, plain_odometry=screened is not None)
+    fg = _factor_graph(factors)
+    screen = (_g2o_factor_list(graph), factors) if screened else None
+    runs = [_run(graph, fg, name, loss, screen) for name in names]
     best = runs[0]  # the first start's run unless another reaches a clearly lower cost
     for r in runs[1:]:
         if r.cost < best.cost and not _agree(r.cost, best.cost):

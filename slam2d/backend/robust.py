@@ -10,6 +10,9 @@
 GNC (graduated non-convexity, Yang et al. 2020) replaces the kernel in batch
 optimisation; ``gnc_params`` builds its parameters with the known inliers
 (prior and odometry factors) fixed.
+
+``pc_dcs`` (batch only) screens the loops by pairwise consistency through the
+odometry before DCS (``pose_graph.solve_g2o``); ``param`` is DCS's Phi.
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ ROBUST_KERNELS = ("none", "huber", "cauchy", "dcs")
 GNC_LOSSES = ("gm", "tls")  # Geman-McClure, truncated least squares
 GNC_INLIER_PROBABILITY = 0.99  # chi-square probability mass an inlier residual stays within
 GNC_METHODS = {"gnc": "tls", "gnc_tls": "tls", "gnc_gm": "gm"}  # batch g2o method -> GNC loss
-BATCH_METHODS = ROBUST_KERNELS + tuple(GNC_METHODS)  # what ``solve_g2o(robust=...)`` accepts
+SCREENED_METHODS = {"pc_dcs": "dcs"}  # batch method -> kernel of its loops after the consistency screen
+BATCH_METHODS = ROBUST_KERNELS + tuple(GNC_METHODS) + tuple(SCREENED_METHODS)  # ``solve_g2o(robust=...)``
 
 
 def check_information(matrix, where: str = "information", kind: str = "information") -> np.ndarray:
@@ -38,6 +42,23 @@ def check_information(matrix, where: str = "information", kind: str = "informati
     if np.linalg.eigvalsh(m)[0] <= 0:
         raise InputError(where, f"{kind} matrix is not positive definite")
     return 0.5 * (m + m.T)
+
+
+def check_information_stack(matrices, where) -> np.ndarray:
+    """``check_information`` of a stack (M, n, n) at once; the InputError names the first bad
+    matrix by ``where(k)``."""
+    m = np.asarray(matrices, dtype=np.float64)
+    if m.ndim != 3 or m.shape[1] != m.shape[2] or m.shape[1] == 0:
+        raise InputError(where(0), f"expected a stack of square information matrices, got shape {m.shape}")
+    finite = np.isfinite(m).all(axis=(1, 2))
+    sym = np.abs(m - m.transpose(0, 2, 1)).max(axis=(1, 2), initial=0.0) <= 1e-8 * np.maximum(
+        1.0, np.abs(m).max(axis=(1, 2), initial=0.0))
+    ok = finite & sym
+    ok[ok] = np.linalg.eigvalsh(m[ok])[:, 0] > 0
+    if not ok.all():
+        k = int(np.argmin(ok))
+        check_information(m[k], where(k))  # raises with the reason
+    return 0.5 * (m + m.transpose(0, 2, 1))
 
 
 def m_estimator(robust: str, param: float):
@@ -61,8 +82,13 @@ def noise_model(information, robust: str = "none", param: float = 1.0):
     wrapped in the ``robust`` kernel of width ``param`` unless ``robust == "none"``."""
     import gtsam
 
-    gaussian = gtsam.noiseModel.Gaussian.Information(check_information(information))
-    kernel = m_estimator(robust, param)
+    return wrap(gtsam.noiseModel.Gaussian.Information(check_information(information)), m_estimator(robust, param))
+
+
+def wrap(gaussian, kernel):
+    """``gaussian`` under the mEstimator ``kernel`` (None: unchanged)."""
+    import gtsam
+
     return gaussian if kernel is None else gtsam.noiseModel.Robust.Create(kernel, gaussian)
 
 
@@ -80,6 +106,11 @@ def gnc_params(known_inliers, loss: str = "gm", lm_params=None):
     params.setLossType(gtsam.GncLossType.GM if name == "gm" else gtsam.GncLossType.TLS)
     params.setKnownInliers([int(k) for k in known_inliers])
     return params
+
+
+def screened_kernel(method: str) -> str | None:
+    """The loop kernel of a screened batch method ("pc_dcs" -> "dcs"), else None."""
+    return SCREENED_METHODS.get(str(method).lower())
 
 
 def gnc_loss(method: str) -> str | None:

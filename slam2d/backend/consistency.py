@@ -1,0 +1,174 @@
+"""Loop-closure consistency through the odometry chain (numpy only, no GTSAM).
+
+Two loops whose ends lie close together along the trajectory close a short
+cycle with the odometry between their ends: loop 1 ``a -> b``, odometry
+``b -> d``, loop 2 back ``d -> c``, odometry ``c -> a``. Its error, whitened by
+the covariance of the four relative poses (first order, the odometry chain's
+covariance from prefix sums), is chi-square with 3 degrees of freedom when both
+loops are true (the pairwise consistency of PCM, Mangelson et al. 2018). A loop
+that spans few vertices is checked against the odometry between its own ends.
+
+``pairwise_support`` marks the loops consistent with at least one such short
+cycle. A false loop between random places has no partner and fails; true loops
+come in runs along revisited corridors and pass; a group of mutually consistent
+false loops passes too and is left to the robust optimisation.
+
+``edge_chi2`` is the squared whitened residual of every edge at given poses,
+GTSAM's ``2 * BetweenFactorPose2.error`` (Pose2 logmap) in one vectorised pass.
+
+Poses are ``(x, y, theta)`` (m, m, rad); covariances are in the tangent space
+of the pose they belong to (GTSAM's right perturbation, order x, y, theta).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from slam2d import geometry
+from slam2d.datasets import g2o
+from slam2d.errors import InputError
+
+SUPPORT_WINDOW = 10  # vertices: the most each end of a partner loop (or a loop's own ends) may lie apart
+CHI2_3DOF_99 = 11.344866730144373  # chi-square 99 % quantile, 3 degrees of freedom
+
+
+def _adjoint(p: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) adjoints of poses (..., 3), as gtsam.Pose2.AdjointMap."""
+    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+    out = np.zeros(p.shape[:-1] + (3, 3))
+    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = c, -s, p[..., 1]
+    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = s, c, -p[..., 0]
+    out[..., 2, 2] = 1.0
+    return out
+
+
+def _sandwich(a: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """a s a^T over leading dimensions."""
+    return a @ s @ np.swapaxes(a, -1, -2)
+
+
+def _mahalanobis2(r: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """(P,) r^T cov^-1 r for residuals (P, 3) and covariances (P, 3, 3)."""
+    return np.einsum("pi,pi->p", r, np.linalg.solve(cov, r[..., None])[..., 0])
+
+
+def logmap(p: np.ndarray) -> np.ndarray:
+    """(..., 3) SE(2) logarithm of poses (..., 3), as gtsam.Pose2.Logmap."""
+    x, y, w = p[..., 0], p[..., 1], geometry.wrap_angle(p[..., 2])
+    c1, s = np.cos(w) - 1.0, np.sin(w)
+    small = np.abs(w) < 1e-10
+    det = np.where(small, 1.0, c1 * c1 + s * s)
+    ux, uy = c1 * x + s * y, -s * x + c1 * y  # R^T t - t
+    scale = np.where(small, 0.0, w / det)
+    vx, vy = np.where(small, x, -uy * scale), np.where(small, y, ux * scale)  # R(pi/2) (R^T t - t) w / det
+    return np.stack([vx, vy, w], -1)
+
+
+def edge_rows(graph: g2o.PoseGraphFile) -> tuple[np.ndarray, np.ndarray]:
+    """Row numbers (into ``graph.ids``) of every edge's two ends; InputError for an unknown vertex."""
+    order = np.argsort(graph.ids)
+    a = np.searchsorted(graph.ids, graph.i, sorter=order).clip(0, len(order) - 1)
+    b = np.searchsorted(graph.ids, graph.j, sorter=order).clip(0, len(order) - 1)
+    a, b = order[a], order[b]
+    if not (np.array_equal(graph.ids[a], graph.i) and np.array_equal(graph.ids[b], graph.j)):
+        k = int(np.argmax((graph.ids[a] != graph.i) | (graph.ids[b] != graph.j)))
+        raise InputError("g2o graph", f"edge {graph.i[k]} -> {graph.j[k]} to an unknown vertex")
+    return a, b
+
+
+def edge_chi2(graph: g2o.PoseGraphFile, poses) -> np.ndarray:
+    """(M,) squared whitened residual of every edge at ``poses`` (N, 3), no robust kernel."""
+    a, b = edge_rows(graph)
+    poses = np.asarray(poses, dtype=np.float64)
+    r = logmap(geometry.between(graph.measurements, geometry.between(poses[a], poses[b])))
+    return np.einsum("mi,mij,mj->m", r, graph.information, r)
+
+
+def id_ranks(graph: g2o.PoseGraphFile) -> tuple[np.ndarray, np.ndarray]:
+    """Every edge's two ends as ranks in id order (0 = smallest id)."""
+    a, b = edge_rows(graph)
+    rank = np.empty(len(graph.ids), int)
+    rank[np.argsort(graph.ids)] = np.arange(len(graph.ids))
+    return rank[a], rank[b]
+
+
+@dataclass(frozen=True)
+class OdometryChain:
+    """Dead reckoning along the odometry edges, indexed by id rank: poses ``dead`` (N, 3),
+    prefix sums ``prefix`` (N, 3, 3) of the step covariances moved to the world frame, and
+    ``segment`` (N,) numbering the runs of vertices linked by odometry."""
+
+    dead: np.ndarray
+    prefix: np.ndarray
+    segment: np.ndarray
+
+    def relative(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Relative poses (P, 3) of ranks ``y`` seen from ranks ``x`` along the odometry and their
+        covariances (P, 3, 3) in the frame of ``y`` (ranks of one segment)."""
+        rel = geometry.between(self.dead[x], self.dead[y])
+        world = np.where((y >= x)[:, None, None], self.prefix[y] - self.prefix[x], self.prefix[x] - self.prefix[y])
+        return rel, _sandwich(np.linalg.inv(_adjoint(self.dead[y])), world)
+
+
+def odometry_chain(graph: g2o.PoseGraphFile) -> OdometryChain:
+    """The ``OdometryChain`` of ``graph`` (odometry: ``g2o.odometry_mask``; an edge from id k
+    to id k + 1 links consecutive ranks)."""
+    steps = max(len(graph.ids) - 1, 0)
+    odo = np.flatnonzero(g2o.odometry_mask(graph))
+    first = id_ranks(graph)[0][odo]
+    step, cov, linked = np.zeros((steps, 3)), np.zeros((steps, 3, 3)), np.zeros(steps, bool)
+    step[first], cov[first], linked[first] = graph.measurements[odo], np.linalg.inv(graph.information[odo]), True
+    theta = np.r_[0.0, np.cumsum(step[:, 2])]
+    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
+    moves = np.column_stack([c * step[:, 0] - s * step[:, 1], s * step[:, 0] + c * step[:, 1]])
+    dead = np.column_stack([np.vstack([[0.0, 0.0], np.cumsum(moves, 0)]), theta])
+    world = _sandwich(_adjoint(dead[1:]), cov)
+    prefix = np.concatenate([np.zeros((1, 3, 3)), np.cumsum(world, 0)])
+    return OdometryChain(dead, prefix, np.r_[0, np.cumsum(~linked)])
+
+
+def _loops_forward(graph: g2o.PoseGraphFile):
+    """Loop edges (indices), their ends as id ranks (first < second), measurements and
+    covariances turned to match."""
+    loops = np.flatnonzero(~g2o.odometry_mask(graph))
+    ra, rb = id_ranks(graph)
+    a, b = ra[loops], rb[loops]
+    z, cov = graph.measurements[loops].copy(), np.linalg.inv(graph.information[loops])
+    flip = a > b
+    cov[flip] = _sandwich(_adjoint(z[flip]), cov[flip])  # covariance of the inverse measurement
+    z[flip] = geometry.inverse(z[flip])
+    a[flip], b[flip] = b[flip], a[flip]
+    return loops, a, b, z, cov
+
+
+def pairwise_support(graph: g2o.PoseGraphFile, window: int = SUPPORT_WINDOW,
+                     gate: float = CHI2_3DOF_99) -> np.ndarray:
+    """(M,) bool: odometry edges, and every loop that closes a consistent short cycle (squared
+    Mahalanobis error within ``gate``) with another loop whose ends each lie within ``window``
+    vertices of its own, or with the odometry between its own ends when they are within ``window``."""
+    from scipy.spatial import cKDTree
+
+    chain = odometry_chain(graph)
+    loops, a, b, z, cov = _loops_forward(graph)
+    seg = chain.segment
+    support = np.zeros(len(loops), bool)
+    if len(loops) > 1:
+        pairs = cKDTree(np.column_stack([a, b])).query_pairs(window, p=np.inf, output_type="ndarray")
+        k, m = pairs[:, 0], pairs[:, 1]
+        same = (seg[a[k]] == seg[a[m]]) & (seg[b[k]] == seg[b[m]])
+        k, m = k[same], m[same]
+        o_ac, c_ac = chain.relative(a[k], a[m])
+        o_bd, c_bd = chain.relative(b[k], b[m])
+        r = logmap(geometry.between(geometry.compose(z[k], o_bd), geometry.compose(o_ac, z[m])))
+        s = (_sandwich(_adjoint(geometry.inverse(o_bd)), cov[k]) + c_bd
+             + _sandwich(_adjoint(geometry.inverse(z[m])), c_ac) + cov[m])
+        good = _mahalanobis2(r, s) <= gate
+        support[k[good]] = support[m[good]] = True
+    short = np.flatnonzero((b - a <= window) & (seg[a] == seg[b]))
+    o, c = chain.relative(a[short], b[short])
+    support[short[_mahalanobis2(logmap(geometry.between(z[short], o)), cov[short] + c) <= gate]] = True
+    out = np.ones(len(graph.i), bool)
+    out[loops] = support
+    return out
