@@ -113,85 +113,122 @@ def ablate(
 
 
 @app.command("dump-config")
-def dump_config(config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT) -> None:
+def dump_config(
+    config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT,
+    command: str = typer.Option("run", "--command", help="whose config: run, segment or plan"),
+) -> None:
     """Print the fully resolved config (defaults included) as YAML."""
     from slam2d import config as config_mod
-    from slam2d.experiment import resolved
+    from slam2d.experiment import command_model, resolved
 
     try:
-        typer.echo(config_mod.dump(resolved(_load(config, set_, plugin))), nl=False)
+        model = command_model(command, "--command")
+        cfg = _load(config, set_, plugin) if command == "run" else config_mod.load(config, set_, model)
+        typer.echo(config_mod.dump(resolved(cfg)), nl=False)
     except InputError as err:
         _fail(err)
 
 
+CONFIG_OPT = typer.Option(None, "--config", "-c", help="the command's YAML config (slam2d dump-config --command ...)")
+OUT_SET_OPT = typer.Option(None, "--out", "-o", help="results folders are created under this (output.root)")
+
+
+def _command_config(command: str, config: Optional[Path], set_: list[str], flags: dict):
+    """The config of ``command`` from ``config`` (or defaults), ``--set`` overrides, then the short
+    flags given (``flags``: dotted key -> value or None)."""
+    from slam2d import config as config_mod
+    from slam2d.experiment import command_model, output_root
+
+    if flags.get("output.root") is not None:
+        output_root(flags["output.root"], "--out")  # its error names the option
+    overrides = dict(map(config_mod.parse_override, set_))
+    overrides.update({k: str(v) if isinstance(v, Path) else v for k, v in flags.items() if v is not None})
+    return config_mod.load(config, overrides, command_model(command))
+
+
+def _echo_metrics(folder: Path, keys: tuple[str, ...]) -> None:
+    import json
+
+    metrics = json.loads((folder / "metrics.json").read_text())
+    typer.echo(" ".join(f"{k}={metrics[k]:.4g}" if isinstance(metrics[k], float) else f"{k}={metrics[k]}"
+                        for k in keys if metrics.get(k) is not None))  # fmt: skip
+
+
 @app.command()
 def segment(
-    map_path: Path = typer.Argument(..., help="floor-plan PNG (free = white, 0.05 m/px) or a map.yaml"),
-    method: str = typer.Option("spectral", help="spectral, morphological, distance or voronoi"),
-    similarity: str = typer.Option("visibility", help="hausdorff, nearest_neighbor, feature_points or visibility"),
+    map_path: Optional[Path] = typer.Argument(None, help="floor-plan PNG (free = white, 0.05 m/px) or a map.yaml "
+                                              "(the config's map)"),
+    config: Optional[Path] = CONFIG_OPT,
+    method: Optional[str] = typer.Option(None, help="spectral, morphological, distance or voronoi "
+                                         "(segmentation.method; default spectral)"),
+    similarity: Optional[str] = typer.Option(None, help="hausdorff, nearest_neighbour, feature_points or "
+                                             "visibility (segmentation.similarity; default visibility)"),
     ground_truth: Optional[Path] = typer.Option(None, help="GT room image (default: <stem>_gt_segmentation.png)"),
-    root: Path = OUT_OPT,
+    set_: list[str] = SET_OPT,
+    root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT,
 ) -> None:
-    """Split a map into rooms: colour image, topological graph, metrics."""
-    from slam2d.experiment import results_folder
-    from slam2d.segmentation.run import segment_map
+    """Split a map into rooms: colour image, topological graph, metrics (a config, or the map and flags)."""
+    from slam2d.segmentation.run import run_segment
 
     _setup_logging(quiet)
     with _stoppable("no results folder written"):
         try:
-            with results_folder(root, f"segment-{map_path.stem}-{method}", "--out") as (work, published):
-                metrics = segment_map(map_path, method, similarity, work, ground_truth=ground_truth)
+            cfg = _command_config("segment", config, set_, {
+                "map": map_path, "segmentation.method": method, "segmentation.similarity": similarity,
+                "ground_truth": ground_truth, "output.root": root})
+            folder = run_segment(cfg)
         except InputError as err:
             _fail(err)
-    summary = {k: metrics[k] for k in ("rooms", "k", "recall", "precision", "seconds") if k in metrics}
-    typer.echo(" ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in summary.items()))
-    typer.echo(f"results: {published[0]}")
+    _echo_metrics(folder, ("rooms", "k", "recall", "precision", "seconds"))
+    typer.echo(f"results: {folder}")
 
 
-def _xy(text: str, name: str):
+def _xy(text: str | None, name: str):
+    if text is None:
+        return None
     try:
         x, y = (float(v) for v in text.split(","))
     except ValueError:
         raise InputError(f"--{name}", f"expected x,y in metres, got '{text}'") from None
-    return x, y
+    return [x, y]
 
 
 @app.command()
 def plan(
-    map_path: Path = typer.Argument(..., help="map.yaml, Moving AI .map, or floor-plan PNG (0.05 m/px)"),
-    start: str = typer.Option(..., help="x,y in metres"),
-    goal: str = typer.Option(..., help="x,y in metres"),
-    hierarchical: Optional[str] = typer.Option(None, help="hpa (square clusters) or rooms (needs --labels)"),
-    labels: Optional[Path] = typer.Option(None, help="room label image (labels.png of slam2d segment)"),
-    robot_radius: float = typer.Option(0.2, help="obstacle inflation, m"),
-    root: Path = OUT_OPT,
+    map_path: Optional[Path] = typer.Argument(None, help="map.yaml, Moving AI .map, or floor-plan PNG (0.05 m/px) "
+                                              "(the config's map)"),
+    config: Optional[Path] = CONFIG_OPT,
+    start: Optional[str] = typer.Option(None, help="x,y in metres (planning.start)"),
+    goal: Optional[str] = typer.Option(None, help="x,y in metres (planning.goal)"),
+    hierarchical: Optional[str] = typer.Option(None, help="hpa (square clusters) or rooms (planning.hierarchy)"),
+    labels: Optional[Path] = typer.Option(None, help="room label image (labels.png of slam2d segment); default: "
+                                          "the map's segmentation (segmentation.*, morphological)"),
+    robot_radius: Optional[float] = typer.Option(None, help="obstacle inflation, m (planning.robot_radius, 0.2)"),
+    set_: list[str] = SET_OPT,
+    root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT,
 ) -> None:
-    """Plan a path (A* or hierarchical), smooth it, time it with toppra; write figures."""
-    from slam2d.experiment import results_folder
-    from slam2d.planning.run import plan_on_map
+    """Plan a path (A* or hierarchical), smooth it, time it with toppra; write figures. With
+    planning.queries > 0: many seeded queries against A* (suboptimality, speed-up)."""
+    from slam2d.planning.run import NoPathError, run_plan
 
     _setup_logging(quiet)
     with _stoppable("no results folder written"):
         try:
-            start_xy, goal_xy = _xy(start, "start"), _xy(goal, "goal")
-            with results_folder(root, f"plan-{map_path.stem}", "--out") as (work, published):
-                metrics = plan_on_map(map_path, start_xy, goal_xy, hierarchical, work, robot_radius, labels=labels)
-                if not metrics.get("found", False):
-                    raise _NoPath(metrics.get("reason", "unknown"))  # leaves no results folder
+            cfg = _command_config("plan", config, set_, {
+                "map": map_path, "planning.start": _xy(start, "start"), "planning.goal": _xy(goal, "goal"),
+                "planning.hierarchy": hierarchical, "planning.labels": labels,
+                "planning.robot_radius": robot_radius, "output.root": root})
+            folder = run_plan(cfg)
         except InputError as err:
             _fail(err)
-        except _NoPath as err:
+        except NoPathError as err:
             typer.secho(f"no path: {err}", fg="red", err=True)
             raise typer.Exit(1) from None
-    keys = ("length_m", "duration_s", "nodes_expanded", "plan_ms")
-    typer.echo(" ".join(f"{k}={metrics[k]:.4g}" for k in keys if isinstance(metrics.get(k), (int, float))))
-    typer.echo(f"results: {published[0]}")
-
-
-class _NoPath(Exception):
-    """The planner found no path (its reason is the message)."""
+    _echo_metrics(folder, ("length_m", "duration_s", "nodes_expanded", "plan_ms", "queries", "failures",
+                           "mean_subopt_pct", "median_speedup"))
+    typer.echo(f"results: {folder}")
 
 
 @app.command("map")

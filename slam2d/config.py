@@ -200,9 +200,30 @@ class ExperimentConfig(Section):
     @field_validator("name")
     @classmethod
     def _folder_name(cls, name: str) -> str:
-        if not 0 < len(name) <= 200 or name.startswith(".") or any(c in name for c in "/\\\0"):
-            raise ValueError("must be a folder name: 1-200 characters, no '/', '\\' or NUL, no leading '.'")
-        return name
+        return folder_name(name)
+
+
+def folder_name(name: str) -> str:
+    """``name`` if it can name a results folder, else ValueError (for a pydantic validator)."""
+    if not 0 < len(name) <= 200 or name.startswith(".") or any(c in name for c in "/\\\0"):
+        raise ValueError("must be a folder name: 1-200 characters, no '/', '\\' or NUL, no leading '.'")
+    return name
+
+
+class CommandConfig(Section):
+    """Base of the configs of ``slam2d segment`` and ``slam2d plan``: a name, a seed, an output section
+    and the map they read (a file; a relative path resolves against the working directory, then SLAM2D_DATA)."""
+
+    name: str | None = Field(None, description="results folder name (default: the command, map and method)")
+    seed: int = Field(0, ge=0, lt=2**63, description="one seed for every random choice")
+    map: str | None = Field(None, description="map file (map.yaml, floor-plan PNG, Moving AI .map)")
+    resolution: float | None = Field(None, gt=0, description="m per pixel of an image map (default 0.05)")
+    output: OutputConfig = OutputConfig()
+
+    @field_validator("name")
+    @classmethod
+    def _folder_name(cls, name: str | None) -> str | None:
+        return None if name is None else folder_name(name)
 
 
 def short_repr(value: Any, limit: int = 80) -> str:
@@ -249,10 +270,10 @@ def read_yaml(path: Path) -> Any:
         raise InputError(where, f"malformed YAML ({str(getattr(err, 'problem', None) or err)[:200]})") from None
 
 
-def validate(data: dict[str, Any], source: str = "config") -> ExperimentConfig:
-    """Build an ExperimentConfig from a plain dict, with one-line errors."""
+def validate(data: dict[str, Any], source: str = "config", model: type[BaseModel] | None = None):
+    """Build a ``model`` (default ExperimentConfig) from a plain dict, with one-line errors."""
     try:
-        return ExperimentConfig.model_validate(data or {})
+        return (model or ExperimentConfig).model_validate(data or {})
     except ValidationError as err:
         raise _format_error(err, source) from None
 
@@ -294,20 +315,22 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key.strip(), value
 
 
-def load(path: str | Path | None = None, overrides: list[str] | dict[str, Any] = ()) -> ExperimentConfig:
-    """Load a config from YAML (or defaults when ``path`` is None), then apply overrides."""
+def load(path: str | Path | None = None, overrides: list[str] | dict[str, Any] = (),
+         model: type[BaseModel] | None = None):
+    """Load a config from YAML (or defaults when ``path`` is None), then apply overrides;
+    ``model``: the config's pydantic model (default ExperimentConfig)."""
     data = load_dict(path) if path else {}
     items = overrides.items() if isinstance(overrides, dict) else map(parse_override, overrides)
     for key, value in items:
         set_key(data, key, value)
-    cfg = validate(data, str(path) if path else "config")
-    if path and cfg.plugins:
+    cfg = validate(data, str(path) if path else "config", model)
+    if path and getattr(cfg, "plugins", None):
         from slam2d.plugins import resolve
 
         cfg.plugins = [resolve(p, Path(path).parent) for p in cfg.plugins]
     return cfg
 
 
-def dump(cfg: ExperimentConfig) -> str:
+def dump(cfg: BaseModel) -> str:
     """The fully resolved config as YAML."""
     return yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False)

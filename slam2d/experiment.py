@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import glob
+import importlib
 import itertools
 import json
 import logging
@@ -132,9 +133,13 @@ def _live_view(viz: str | Path | None, cfg: ExperimentConfig):
         view.close()
 
 
-def resolved(cfg: ExperimentConfig) -> ExperimentConfig:
-    """``cfg`` with the frontend's options completed by its defaults (its plugins imported first)."""
+def resolved(cfg):
+    """``cfg`` with the frontend's options completed by its defaults (its plugins imported first);
+    the config of another command as it is."""
     from slam2d.frontends.base import resolve_options
+
+    if not isinstance(cfg, ExperimentConfig):
+        return cfg
     from slam2d.plugins import load_plugins
 
     load_plugins(cfg.plugins)
@@ -142,6 +147,36 @@ def resolved(cfg: ExperimentConfig) -> ExperimentConfig:
     if params is None:
         return cfg
     return cfg.model_copy(update={"frontend": cfg.frontend.model_copy(update={"options": params.model_dump()})})
+
+
+COMMANDS = {
+    "run": ("slam2d.config:ExperimentConfig", "slam2d.experiment:run_experiment"),
+    "segment": ("slam2d.segmentation.config:SegmentConfig", "slam2d.segmentation.run:run_segment"),
+    "plan": ("slam2d.planning.config:PlanConfig", "slam2d.planning.run:run_plan"),
+}
+"""Commands whose configs ``slam2d ablate`` sweeps: (config model, runner taking the config)."""
+
+
+def _named(target: str):
+    module, name = target.split(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def command_model(command: str, key: str = "command"):
+    """The config model of ``command`` (run, segment or plan); InputError naming ``key`` otherwise."""
+    if command not in COMMANDS:
+        raise InputError(key, f"unknown command {config_mod.short_repr(command)} ({', '.join(COMMANDS)})")
+    return _named(COMMANDS[command][0])
+
+
+def run_command(cfg, quiet: bool = False) -> Path:
+    """Run the config of any command of :data:`COMMANDS` into its results folder; return the folder."""
+    if isinstance(cfg, ExperimentConfig):
+        return run_experiment(cfg, quiet=quiet)
+    for model, runner in COMMANDS.values():
+        if type(cfg) is _named(model):
+            return _named(runner)(cfg)
+    raise TypeError(f"not a command config: {type(cfg).__name__}")
 
 
 def _load_relations(cfg: ExperimentConfig):
@@ -311,18 +346,38 @@ class Variant:
     overrides: dict[str, Any]
 
 
-def load_sweep(path: str | Path) -> tuple[dict[str, Any], list[Variant], int]:
-    """Read a sweep file: (base config dict, variants, workers).
+@dataclass(frozen=True)
+class Sweep:
+    """A sweep file read and checked: the base config dict, its variants, workers, the command's
+    config model, and the summary spec ({"by": [columns], aggregate: [columns]}, or None)."""
 
-    Keys: ``base`` (config path relative to the sweep file) or ``config`` (inline
-    mapping); ``grid`` ({dotted key: [values]}, Cartesian product) and/or
-    ``variants`` ([{name, set: {dotted key: value}}]); ``workers`` (default 2).
+    base: dict[str, Any]
+    variants: list[Variant]
+    workers: int
+    model: type
+    summary: dict[str, list[str]] | None = None
+
+
+SWEEP_KEYS = ("name", "command", "base", "config", "grid", "variants", "workers", "summary")
+
+
+def read_sweep(path: str | Path) -> Sweep:
+    """Read a sweep file and check every variant's config before any runs.
+
+    Keys: ``command`` (run, segment or plan; default run); ``base`` (config path relative to
+    the sweep file) or ``config`` (inline mapping); ``variants`` ([{name, set: {dotted key:
+    value}}]) and/or ``grid`` ({dotted key: [values]}, Cartesian product), both given: every
+    variant with every grid point; ``workers`` (default 2); ``summary`` (rows grouped by the
+    columns ``by``, with ``mean``/``median``/``sum``/``min``/``max`` of the columns listed).
     """
+    from slam2d.evaluation.tables import check_summary
+
     path = Path(path)
     sweep = config_mod.load_dict(path)
-    unknown = set(sweep) - {"base", "config", "grid", "variants", "workers", "name"}
+    unknown = set(sweep) - set(SWEEP_KEYS)
     if unknown:
         raise InputError(path, f"unknown sweep key '{sorted(unknown)[0]}'")
+    model = command_model(sweep.get("command", "run"), f"{path}: command")
     base = _sweep_base(sweep, path)
     variants = _expand(sweep, path)
     if not variants:
@@ -331,18 +386,25 @@ def load_sweep(path: str | Path) -> tuple[dict[str, Any], list[Variant], int]:
     if len(set(names)) != len(names):
         raise InputError(path, "variant names must be unique")
     for v in variants:  # validate every variant, its frontend included, before running any
-        _check_variant(base, v, path)
+        _check_variant(base, v, path, model)
     workers = sweep.get("workers", 2)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise InputError(f"{path}: workers", f"expected a positive integer, got {config_mod.short_repr(workers)}")
-    return base, variants, workers
+    summary = check_summary(sweep["summary"], f"{path}: summary") if "summary" in sweep else None
+    return Sweep(base, variants, workers, model, summary)
 
 
-def _check_variant(base: dict[str, Any], variant: Variant, path: Path) -> None:
+def load_sweep(path: str | Path) -> tuple[dict[str, Any], list[Variant], int]:
+    """(base config dict, variants, workers) of :func:`read_sweep`."""
+    sweep = read_sweep(path)
+    return sweep.base, sweep.variants, sweep.workers
+
+
+def _check_variant(base: dict[str, Any], variant: Variant, path: Path, model=None) -> None:
     """Validate ``variant``'s config and frontend options; an InputError names the sweep file and variant."""
     source = f"{path} (variant '{variant.name}')"
     try:
-        resolved(variant_config(base, variant, Path("runs"), source))
+        resolved(variant_config(base, variant, Path("runs"), source, model))
     except InputError as err:
         if err.where.startswith(source):
             raise
@@ -373,6 +435,7 @@ def _plugins_from(data: dict[str, Any], folder: Path) -> dict[str, Any]:
 
 
 def _expand(sweep: dict[str, Any], path: Path) -> list[Variant]:
+    """The variants: the listed ones, the grid points, or each listed one with each grid point."""
     variants = []
     for key, kind in (("variants", list), ("grid", dict)):
         if not isinstance(sweep.get(key) or kind(), kind):
@@ -387,9 +450,10 @@ def _expand(sweep: dict[str, Any], path: Path) -> list[Variant]:
         for key in keys:
             if not isinstance(grid[key], list):
                 raise InputError(f"{path}: grid.{key}", "grid values must be lists")
-        for combo in itertools.product(*(grid[k] for k in keys)):
-            name = ",".join(f"{k.split('.')[-1]}={v}" for k, v in zip(keys, combo))
-            variants.append(Variant(name, dict(zip(keys, combo))))
+        points = [Variant(",".join(f"{k.split('.')[-1]}={v}" for k, v in zip(keys, combo)), dict(zip(keys, combo)))
+                  for combo in itertools.product(*(grid[k] for k in keys))]  # fmt: skip
+        variants = [Variant(f"{v.name},{p.name}", {**v.overrides, **p.overrides}) for v in variants for p in points
+                    ] if variants else points  # fmt: skip
     return variants
 
 
@@ -401,10 +465,11 @@ def _apply(data: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     return data
 
 
-def variant_config(base: dict[str, Any], variant: Variant, root: Path, source: str | None = None) -> ExperimentConfig:
-    """The config of ``variant``: named after it (``/`` replaced by ``_``), results under ``root``."""
+def variant_config(base: dict[str, Any], variant: Variant, root: Path, source: str | None = None, model=None):
+    """The config (a ``model``, default ExperimentConfig) of ``variant``: named after it (``/``
+    replaced by ``_``), results under ``root``."""
     data = _apply(base, {**variant.overrides, "name": variant.name.replace("/", "_"), "output.root": str(root)})
-    return config_mod.validate(data, source or f"variant '{variant.name}'")
+    return config_mod.validate(data, source or f"variant '{variant.name}'", model)
 
 
 def _run_variant(cfg: ExperimentConfig) -> tuple[str, dict[str, Any] | None, str | None]:
@@ -414,7 +479,7 @@ def _run_variant(cfg: ExperimentConfig) -> tuple[str, dict[str, Any] | None, str
         raise KeyboardInterrupt
     _RUNNING_VARIANT = True
     try:
-        folder = run_experiment(cfg, quiet=True)
+        folder = run_command(cfg, quiet=True)
         return str(folder), json.loads((folder / "metrics.json").read_text()), None
     except Exception as err:  # reported in the table, the sweep goes on
         if _STOPPED:  # a signal can surface as another error (an interrupted import raises ImportError)
@@ -446,27 +511,28 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
     """
     if executor not in EXECUTORS:
         raise InputError("--executor", f"unknown executor '{executor}' ({', '.join(EXECUTORS)})")
-    base, variants, sweep_workers = load_sweep(path)
+    sweep = read_sweep(path)
+    base, variants = sweep.base, sweep.variants
     if executor == "ray":
         _connect_ray()  # before the sweep folder: an unreachable cluster leaves none
-    root = _sweep_folder(path, base, resume)
-    cfgs = [variant_config(base, v, root / "runs") for v in variants]
+    root = _sweep_folder(path, base, resume, sweep.model)
+    cfgs = [variant_config(base, v, root / "runs", model=sweep.model) for v in variants]
     outcomes = [_finished(root / "runs", c.name) for c in cfgs]
     todo = [i for i, o in enumerate(outcomes) if o is None]
     if resume is not None:
         log.info("%s: %d of %d variants already finished", root, len(variants) - len(todo), len(variants))
     try:
-        for i, outcome in _execute([cfgs[i] for i in todo], workers or sweep_workers, executor, quiet):
+        for i, outcome in _execute([cfgs[i] for i in todo], workers or sweep.workers, executor, quiet):
             outcomes[todo[i]] = outcome
     except BaseException as err:
         if not (isinstance(err, KeyboardInterrupt) or _STOPPED):
             raise
-        _write_sweep_table(root, variants, outcomes)
+        _write_sweep_table(root, variants, outcomes, sweep.summary)
         raise SweepStopped(root, sum(o is not None and not o[2] for o in outcomes), len(variants)) from None
-    return root, _write_sweep_table(root, variants, outcomes)
+    return root, _write_sweep_table(root, variants, outcomes, sweep.summary)
 
 
-def _sweep_folder(path, base: dict[str, Any], resume) -> Path:
+def _sweep_folder(path, base: dict[str, Any], resume, model=None) -> Path:
     """``resume`` (checked), else a new folder ``ablate-NAME-YYYYmmdd-HHMMSS[-k]`` holding a copy of the sweep file."""
     if resume is not None:
         root = Path(resume).expanduser()
@@ -479,7 +545,7 @@ def _sweep_folder(path, base: dict[str, Any], resume) -> Path:
         return root
     name = str(config_mod.load_dict(path).get("name") or Path(path).stem)
     config_mod.validate({"name": name}, f"{path}: name")  # a folder name
-    parent = output_root(config_mod.validate(base, str(path)).output.root)
+    parent = output_root(config_mod.validate(base, str(path), model).output.root)
     root = _new_folder(parent, f"ablate-{name}-{datetime.now():%Y%m%d-%H%M%S}")
     shutil.copyfile(path, root / "sweep.yaml")
     return root
@@ -506,23 +572,28 @@ def _finished(runs: Path, name: str) -> tuple[str, dict[str, Any], None] | None:
     return None
 
 
-def _write_sweep_table(root: Path, variants: list[Variant], outcomes: list) -> list[dict[str, Any]]:
-    """Write table.md/.csv/.tex and report.html: one row per variant (unfinished ones say so); return the rows."""
+def _write_sweep_table(root: Path, variants: list[Variant], outcomes: list, summary=None) -> list[dict[str, Any]]:
+    """Write table.md/.csv/.tex, summary.md/.csv/.tex (with a summary spec) and report.html: one row
+    per variant (unfinished ones say so); return the rows."""
     from slam2d.evaluation.report import write_report
-    from slam2d.evaluation.tables import flatten_metrics, write_table
+    from slam2d.evaluation.tables import flatten_metrics, summarize, write_table
 
     rows = []
     for v, outcome in zip(variants, outcomes):
         folder, metrics, error = outcome or ("", None, "not run (sweep stopped)")
         row: dict[str, Any] = {"variant": v.name, **v.overrides}
         if metrics is not None:
-            row.update(flatten_metrics(metrics))
+            row.update((k, v) for k, v in flatten_metrics(metrics).items() if k not in row)  # a key set wins
         row["error"] = error or ""
         row["folder"] = str(Path(folder).relative_to(root)) if folder else ""
         rows.append(row)
     leading = ["variant", *dict.fromkeys(k for v in variants for k in v.overrides)]
     write_table(rows, root / "table", leading=leading)
-    write_report(root, rows, leading)
+    grouped = None
+    if summary:
+        grouped = summarize(rows, summary)
+        write_table(grouped, root / "summary", leading=list(grouped[0]) if grouped else summary["by"], full=True)
+    write_report(root, rows, leading, (grouped, summary["by"]) if summary else None)
     return rows
 
 
@@ -558,7 +629,7 @@ def _execute_ray(cfgs: list[ExperimentConfig]):
     try:
         while pending:
             (ref,), _ = ray.wait(list(pending), num_returns=1)
-            yield pending.pop(ref), _collect(runs, ray.get(ref))
+            yield pending.pop(ref), _collect(runs, ray.get(ref), type(cfgs[0]))
     except BaseException:
         for ref in pending:
             ray.cancel(ref)
@@ -603,8 +674,9 @@ def _pack(folder: Path) -> bytes:
     return buffer.getvalue()
 
 
-def _collect(runs: Path, outcome) -> tuple[str, dict[str, Any] | None, str | None]:
-    """A Ray task's outcome as (folder under ``runs``, metrics, error); a packed folder is unpacked there."""
+def _collect(runs: Path, outcome, model=None) -> tuple[str, dict[str, Any] | None, str | None]:
+    """A Ray task's outcome as (folder under ``runs``, metrics, error); a packed folder is unpacked there.
+    ``model``: the variants' config model (default ExperimentConfig)."""
     import io
     import tarfile
 
@@ -617,7 +689,7 @@ def _collect(runs: Path, outcome) -> tuple[str, dict[str, Any] | None, str | Non
     with tarfile.open(fileobj=io.BytesIO(packed), mode="r:gz") as tar:
         tar.extractall(dest, filter="data")
     config = dest / "config.yaml"  # names the task's temporary folder: name the runs folder instead
-    cfg = config_mod.validate(config_mod.load_dict(config), str(config))
+    cfg = config_mod.validate(config_mod.load_dict(config), str(config), model)
     config.write_text(config_mod.dump(_with_root(cfg, str(runs))))
     return str(dest), metrics, error
 

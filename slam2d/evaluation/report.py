@@ -1,7 +1,8 @@
 """The sweep report: one self-contained ``report.html`` per ``slam2d ablate`` folder.
 
-The page holds the ablation table (main metrics; click a column header to sort,
-again to reverse; ``report.html#sort=COLUMN`` or ``#sort=-COLUMN`` opens it
+The page holds the sweep's summary (when the sweep file asks for one) and the
+ablation table (main metrics; click a column header to sort, again to reverse;
+``report.html#sort=COLUMN`` or ``#sort=-COLUMN`` opens the ablation table
 sorted), each variant's figures as thumbnails and a link to its folder. Styles
 and script are inline; figures are linked relative to the sweep folder, so the
 folder can be moved or served as a whole.
@@ -35,8 +36,7 @@ img{height:110px;margin-right:4px;border:1px solid #ddd;background:#fff}
 """
 
 _SCRIPT = """
-(function () {
-  const table = document.getElementById("results");
+document.querySelectorAll("table.sortable").forEach(table => {
   const heads = Array.from(table.tHead.rows[0].cells);
   const value = (row, col) => {
     const cell = row.cells[col];
@@ -61,28 +61,35 @@ _SCRIPT = """
     sortBy(col, desc);
     history.replaceState(null, "", "#sort=" + (desc ? "-" : "") + encodeURIComponent(th.dataset.col));
   }));
-  const m = location.hash.match(/^#sort=(-?)(.+)$/);
+  const m = table.id === "results" && location.hash.match(/^#sort=(-?)(.+)$/);
   const col = m ? heads.findIndex(h => h.dataset.col === decodeURIComponent(m[2])) : -1;
   if (col >= 0) sortBy(col, m[1] === "-");
-})();
+});
 """
 
 
-def write_report(root: Path, rows: Sequence[dict[str, Any]], leading: Sequence[str] = ("variant",)) -> Path:
+def write_report(root: Path, rows: Sequence[dict[str, Any]], leading: Sequence[str] = ("variant",),
+                 summary: tuple[Sequence[dict[str, Any]], Sequence[str]] | None = None) -> Path:
     """Write ``root/report.html`` for the sweep rows (``variant``, overrides, metrics, ``error``,
-    ``folder`` relative to ``root``); return its path."""
+    ``folder`` relative to ``root``) and the ``summary`` (its rows and group columns); return its path."""
     root = Path(root)
     columns = [c for c in columns_of(rows, leading, full=False) if c != "folder"]
     names = [columns[0], "figures", *columns[1:]]  # the figures beside the variant's name
-    head = "".join(f'<th data-col="{html.escape(c)}">{html.escape(c)}</th>' for c in names)
     body = "\n".join(_row(root, row, columns) for row in rows)
     name = html.escape(root.name)
+    grouped = ""
+    if summary is not None and summary[0]:
+        cols = list(summary[0][0])
+        cells = "\n".join(f"<tr>{''.join(_cell(r.get(c), c) for c in cols)}</tr>" for r in summary[0])
+        grouped = (f'<h2>Summary</h2>\n<p><a href="summary.csv">summary.csv</a></p>\n'
+                   f'<table class="sortable" id="summary">{_head(cols)}<tbody>\n{cells}\n</tbody></table>\n'
+                   f"<h2>Variants</h2>\n")  # fmt: skip
     page = (
         f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{name}</title>'
         f"<style>{_STYLE}</style></head><body>\n<h1>{name}</h1>\n"
         f'<p>{len(rows)} variants · <a href="sweep.yaml">sweep.yaml</a> · <a href="table.csv">table.csv</a> '
-        f"(every metric) · click a column header to sort</p>\n"
-        f'<table id="results"><thead><tr>{head}</tr></thead><tbody>\n{body}\n</tbody></table>\n'
+        f"(every metric) · click a column header to sort</p>\n{grouped}"
+        f'<table class="sortable" id="results">{_head(names)}<tbody>\n{body}\n</tbody></table>\n'
         f"<script>{_SCRIPT}</script></body></html>\n"
     )
     path = root / "report.html"
@@ -90,18 +97,24 @@ def write_report(root: Path, rows: Sequence[dict[str, Any]], leading: Sequence[s
     return path
 
 
+def _head(names: Sequence[str]) -> str:
+    return "<thead><tr>" + "".join(f'<th data-col="{html.escape(c)}">{html.escape(c)}</th>' for c in names) + \
+        "</tr></thead>"
+
+
+def _cell(value: Any, col: str, link: str = "") -> str:
+    """A table cell: numbers right-aligned with their full value in ``data-num`` (for sorting)."""
+    text = html.escape(_fmt(value))
+    if link:
+        text = f'<a href="{link}">{text}</a>'
+    if _is_number(value):
+        return f'<td class="num" data-num="{value!r}">{text}</td>'
+    return f'<td{" class=error" if col == "error" else ""}>{text}</td>'
+
+
 def _row(root: Path, row: dict[str, Any], columns: Sequence[str]) -> str:
     folder = row.get("folder") or ""
-    cells = []
-    for col in columns:
-        value = row.get(col)
-        text = html.escape(_fmt(value))
-        if col == "variant" and folder:
-            text = f'<a href="{quote(folder)}/">{text}</a>'
-        if _is_number(value):
-            cells.append(f'<td class="num" data-num="{value!r}">{text}</td>')
-        else:
-            cells.append(f'<td{" class=error" if col == "error" else ""}>{text}</td>')
+    cells = [_cell(row.get(c), c, f"{quote(folder)}/" if c == "variant" and folder else "") for c in columns]
     figures = "".join(f'<a href="{quote(f)}"><img src="{quote(f)}" alt="{html.escape(Path(f).name)}" '
                       f'loading="lazy"></a>' for f in figures_of(root, folder)) if folder else ""
     cells.insert(1, f"<td>{figures}</td>")

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import csv
+import math
+import statistics
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -25,7 +27,31 @@ PREFERRED = [
     "scans",
     "runtime_s",
     "peak_rss_mb",
+    # slam2d segment
+    "recall",
+    "precision",
+    "rooms_found",
+    "rooms_gt",
+    "rooms",
+    "k",
+    "seconds",
+    "cpu_seconds",
+    # slam2d plan
+    "found",
+    "length_m",
+    "duration_s",
+    "plan_ms",
+    "nodes_expanded",
+    "queries",
+    "failures",
+    "mean_subopt_pct",
+    "max_subopt_pct",
+    "median_speedup",
+    "segmentation_s",
 ]
+
+AGGREGATES = {"mean": statistics.fmean, "median": statistics.median, "sum": sum, "min": min, "max": max}
+"""Aggregates of a sweep summary, applied to a column's numbers within a group."""
 
 
 def flatten_metrics(metrics: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -75,10 +101,45 @@ def to_latex(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_table(rows: Sequence[dict[str, Any]], stem: Path, leading: Sequence[str] = ("variant",)) -> list[Path]:
-    """Write ``stem.md`` and ``stem.tex`` (main metrics) and ``stem.csv`` (every metric)."""
+def check_summary(spec: Any, where: str) -> dict[str, list[str]]:
+    """A sweep's ``summary`` spec ({"by": [column...], aggregate: [column...]}) checked; InputError naming ``where``."""
+    from slam2d.errors import InputError
+
+    if not isinstance(spec, dict) or not spec.get("by"):
+        raise InputError(where, "expected a mapping with 'by' (columns to group by) and aggregates of columns")
+    for key, columns in spec.items():
+        if key != "by" and key not in AGGREGATES:
+            raise InputError(where, f"unknown key '{key}' (by, {', '.join(AGGREGATES)})")
+        if not isinstance(columns, list) or not all(isinstance(c, str) for c in columns):
+            raise InputError(f"{where}.{key}", "expected a list of column names")
+    return spec
+
+
+def summarize(rows: Sequence[dict[str, Any]], spec: dict[str, list[str]]) -> list[dict[str, Any]]:
+    """One row per distinct value of the ``spec["by"]`` columns (in order of appearance): those values,
+    ``variants`` (rows in the group), ``failed`` (rows with an error), and ``AGG COLUMN`` for every
+    aggregate of ``spec`` over the group's finite numbers (booleans count as 0/1)."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault(tuple(row.get(c) for c in spec["by"]), []).append(row)
+    out = []
+    for key, members in groups.items():
+        summary: dict[str, Any] = dict(zip(spec["by"], key))
+        summary.update(variants=len(members), failed=sum(bool(r.get("error")) for r in members))
+        for agg, columns in spec.items():
+            for col in columns if agg != "by" else ():
+                values = [float(r[col]) for r in members if isinstance(r.get(col), (int, float))
+                          and math.isfinite(r[col])]  # fmt: skip
+                summary[f"{agg} {col}"] = AGGREGATES[agg](values) if values else None
+        out.append(summary)
+    return out
+
+
+def write_table(rows: Sequence[dict[str, Any]], stem: Path, leading: Sequence[str] = ("variant",),
+                full: bool = False) -> list[Path]:
+    """Write ``stem.md`` and ``stem.tex`` (main metrics, or every column if ``full``) and ``stem.csv`` (every one)."""
     stem = Path(stem)
-    columns = columns_of(rows, leading, full=False)
+    columns = columns_of(rows, leading, full=full)
     md, tex, csv_path = stem.with_suffix(".md"), stem.with_suffix(".tex"), stem.with_suffix(".csv")
     md.write_text(to_markdown(rows, columns))
     tex.write_text(to_latex(rows, columns))

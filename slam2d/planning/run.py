@@ -21,7 +21,7 @@ from slam2d.planning.grid import PlanningGrid, load_grid
 from slam2d.planning.smoothing import shortcut
 from slam2d.planning.timing import TimedPath, TrajectoryLimits, plot_profile, time_parametrize
 
-__all__ = ["plan_on_map", "make_planner", "PLANNERS"]
+__all__ = ["plan_on_map", "plan_queries", "make_planner", "run_plan", "room_labels", "NoPathError", "PLANNERS"]
 
 PLANNERS = ("hpa", "rooms")
 """Values of ``hierarchical``: HPA* over square clusters, or the room-graph planner."""
@@ -34,14 +34,28 @@ def _point(value, name: str) -> np.ndarray:
     return p
 
 
-def _labels(labels, grid: PlanningGrid) -> np.ndarray:
-    """Room labels aligned with ``grid`` (rows going up): an array, a .npy, the
-    ``labels.png`` of ``slam2d segment`` (row 0 the top), or, if None, a
-    morphological segmentation of ``grid``."""
-    if labels is None:
-        from slam2d.segmentation.baselines import morphological
+class NoPathError(Exception):
+    """The planner found no path for the one query asked (its reason is the message)."""
 
-        return morphological(grid.free, grid.resolution)
+
+def room_labels(grid: PlanningGrid, segmentation=None, seed: int = 0) -> np.ndarray:
+    """Room labels (H, W) aligned with ``grid`` (rows going up): the map segmented as ``slam2d segment``
+    would (row 0 the top) by ``segmentation`` (a SegmentationConfig; None: morphological)."""
+    from slam2d.segmentation.config import SegmentationConfig
+    from slam2d.segmentation.run import segment_free
+
+    seg = segmentation or SegmentationConfig(method="morphological")
+    params = {"seed": seed, **seg.params} if seg.method == "spectral" else seg.params
+    labels, _ = segment_free(np.flipud(grid.free), grid.resolution, seg.method, seg.similarity, params)
+    return np.ascontiguousarray(labels[::-1])
+
+
+def _labels(labels, grid: PlanningGrid, segmentation=None, seed: int = 0) -> np.ndarray:
+    """Room labels aligned with ``grid`` (rows going up): an array, a .npy, the
+    ``labels.png`` of ``slam2d segment`` (row 0 the top), or, if None, the map's
+    segmentation by ``segmentation`` (see :func:`room_labels`)."""
+    if labels is None:
+        return room_labels(grid, segmentation, seed)
     shape = grid.shape
     if isinstance(labels, (str, Path)):
         path = Path(labels)
@@ -97,6 +111,9 @@ def plan_on_map(
     cluster_size: int = 16,
     labels=None,
     resolution: float | None = None,
+    segmentation=None,
+    seed: int = 0,
+    figures: bool = True,
 ) -> dict:
     """Plan from ``start`` to ``goal`` (x, y) m on a map and write figures and metrics.
 
@@ -104,8 +121,9 @@ def plan_on_map(
     image (``resolution`` m/px, default 0.05). Obstacles are inflated by
     ``robot_radius`` m. ``hierarchical``: None (A*), ``"hpa"`` or ``"rooms"``
     (``labels``: a region image aligned with the map's rows going up, or
-    None for the morphological segmentation of the map, which is then run on
-    the map before inflation). Returns the metrics dict
+    None for the map's segmentation by ``segmentation``, a SegmentationConfig, default
+    morphological, run on the map before inflation; ``seed`` for spectral). ``figures``:
+    write path.png and velocity.png. Returns the metrics dict
     (``found`` False with a ``reason`` when there is no path).
     """
     t_all = time.perf_counter()
@@ -119,7 +137,7 @@ def plan_on_map(
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     if hierarchical == "rooms":
-        labels = _labels(labels, grid)  # segment the map itself, not the inflated free space
+        labels = _labels(labels, grid, segmentation, seed)  # segment the map itself, not the inflated free space
     planner = make_planner(free, hierarchical, cluster_size, labels)
     build_s = time.perf_counter() - t0
     result = planner.plan(free.world_to_cell(start), free.world_to_cell(goal))
@@ -157,15 +175,130 @@ def plan_on_map(
             spline_deviation_m=timed.max_deviation,
         )
         _write_trajectory(out / "trajectory.csv", timed)
-        plot_profile(timed, out / "velocity.png")
-    _plot_path(grid, free, result, waypoints, timed, start, goal, out / "path.png", metrics["planner"])
+        if figures:
+            plot_profile(timed, out / "velocity.png")
+    if figures:
+        _plot_path(grid, free, result, waypoints, timed, start, goal, out / "path.png", metrics["planner"])
     metrics["total_ms"] = 1e3 * (time.perf_counter() - t_all)
-    names = {"path": "path.png", "metrics": "metrics.json"}
+    names = {"metrics": "metrics.json", **({"path": "path.png"} if figures else {})}
     if timed is not None:
-        names.update(velocity="velocity.png", trajectory="trajectory.csv")
+        names.update(trajectory="trajectory.csv", **({"velocity": "velocity.png"} if figures else {}))
     metrics["files"] = {k: f for k, f in names.items()}
     (out / "metrics.json").write_text(json_text(metrics))
     return metrics
+
+
+def run_plan(cfg) -> Path:
+    """Run a :class:`~slam2d.planning.config.PlanConfig` into a new results folder under
+    ``cfg.output.root``; return the folder. One query (start, goal): the path, its timing and figures
+    (NoPathError when there is none, leaving no folder); ``queries`` > 0: :func:`plan_queries`."""
+    from slam2d import config as config_mod
+    from slam2d.datasets.registry import resolve_data_path
+    from slam2d.experiment import results_folder
+
+    p = cfg.planning
+    if cfg.map is None:
+        raise InputError("map", "no map given (map: FILE in the config, or slam2d plan MAP)")
+    if p.queries == 0 and p.start is None:
+        raise InputError("planning.start", "give start and goal (--start x,y --goal x,y), or planning.queries > 0")
+    map_path = resolve_data_path(cfg.map, key="map")
+    labels = resolve_data_path(p.labels, key="planning.labels") if p.labels else None
+    hierarchy = None if p.hierarchy == "none" else p.hierarchy
+    name = cfg.name or f"plan-{map_path.stem}" + (f"-{hierarchy}" if hierarchy else "")
+    with results_folder(cfg.output.root, name) as (work, published):
+        (work / "config.yaml").write_text(config_mod.dump(cfg))
+        if p.queries:
+            metrics = plan_queries(map_path, cfg, labels)
+            (work / "metrics.json").write_text(json_text(metrics))
+        else:
+            metrics = plan_on_map(map_path, p.start, p.goal, hierarchy, work, p.robot_radius, p.limits,
+                                  p.cluster_size, labels, cfg.resolution, cfg.segmentation, cfg.seed,
+                                  cfg.output.figures)  # fmt: skip
+            if not metrics["found"]:
+                raise NoPathError(metrics.get("reason") or "unknown")
+    return published[0]
+
+
+def plan_queries(map_path, cfg, labels=None) -> dict:
+    """Plan ``cfg.planning.queries`` seeded random start-goal pairs on the map with A* and with the
+    configured planner; return the metrics: queries, failures (no path, or an invalid one, where A*
+    found one), suboptimality % of the planner's path length over A*'s (mean, max), speed-up (median
+    of A* CPU time / the planner's, per query), CPU ms per query (medians), rooms, build and
+    segmentation seconds."""
+    from slam2d.planning.astar import check_path
+
+    p = cfg.planning
+    hierarchy = None if p.hierarchy == "none" else p.hierarchy
+    grid = load_grid(map_path, resolution=cfg.resolution)
+    free = grid.inflated(p.robot_radius)
+    t0 = time.perf_counter()
+    if hierarchy == "rooms":
+        labels = _labels(labels, grid, cfg.segmentation, cfg.seed)
+    segmentation_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    planner = make_planner(free, hierarchy, p.cluster_size, labels)
+    build_s = time.perf_counter() - t0
+    astar = AStar(free)
+    queries = sample_queries(free, astar, p.queries, p.min_distance, cfg.seed, Path(map_path).stem)
+    sub, speedups, ref_ms, own_ms, failures = [], [], [], [], 0
+    for n, (s, g) in enumerate(queries):
+        if n == 0:  # compiled and cached outside the timings
+            astar.plan(s, g), planner.plan(s, g)
+        ref, ref_s = _cpu_timed(astar.plan, s, g)
+        got, own_s = _cpu_timed(planner.plan, s, g)
+        if not got.found or check_path(free.free, got.path) or (got.path[0] != s).any() or (got.path[-1] != g).any():
+            failures += 1
+            continue
+        sub.append(100.0 * (got.length_m / ref.length_m - 1.0))
+        speedups.append(ref_s / max(own_s, 1e-9))
+        ref_ms.append(1e3 * ref_s)
+        own_ms.append(1e3 * own_s)
+    stat = (lambda f, v: float(f(v)) if len(v) else None)  # noqa: E731
+    return {
+        "map": str(map_path), "planner": hierarchy or "astar", "queries": len(queries), "failures": failures,
+        "mean_subopt_pct": stat(np.mean, sub), "max_subopt_pct": stat(np.max, sub),
+        "median_speedup": stat(np.median, speedups), "astar_ms_median": stat(np.median, ref_ms),
+        "planner_ms_median": stat(np.median, own_ms),
+        "min_query_m": stat(np.min, [np.hypot(*(s - g)) * grid.resolution for s, g in queries]),
+        **({"rooms": planner.graph.number_of_nodes(), "segmentation_s": segmentation_s} if hierarchy == "rooms"
+           else {}),
+        "build_s": build_s, "robot_radius_m": p.robot_radius, "resolution_m": grid.resolution,
+    }  # fmt: skip
+
+
+def sample_queries(grid: PlanningGrid, astar: AStar, n: int, min_dist_m: float, seed: int, name: str):
+    """Up to ``n`` (start, goal) cell pairs that A* connects, preferably >= ``min_dist_m`` apart, drawn
+    from the largest 8-connected free component; the seed is mixed with ``name`` (the map), so each map
+    keeps its queries in any subset of maps. Too few far pairs: the longest near ones fill up."""
+    import zlib
+
+    from scipy import ndimage
+
+    rng = np.random.default_rng([seed, zlib.crc32(name.encode())])
+    comp, k = ndimage.label(grid.free, structure=np.ones((3, 3)))
+    if k == 0:
+        return []
+    cells = np.argwhere(comp == np.argmax(np.bincount(comp.ravel())[1:]) + 1)
+    far, near = [], []
+    min_cells = min_dist_m / grid.resolution
+    for _ in range(50 * n):
+        if len(far) >= n or len(cells) < 2:
+            break
+        s, g = cells[rng.choice(len(cells), 2, replace=False)]
+        d = float(np.hypot(*(s - g)))
+        if d < min_cells and len(near) >= n:
+            continue
+        if astar.plan(s, g).found:
+            (far if d >= min_cells else near).append((d, s, g))
+    near.sort(key=lambda q: -q[0])
+    return [(s, g) for _, s, g in (far + near)[:n]]
+
+
+def _cpu_timed(fn, *args):
+    """(result, process CPU seconds) of ``fn(*args)``."""
+    t0 = time.process_time()
+    out = fn(*args)
+    return out, time.process_time() - t0
 
 
 def _write_trajectory(path: Path, timed: TimedPath) -> None:

@@ -29,13 +29,13 @@ from slam2d.errors import InputError
 from slam2d.experiment import json_text
 
 __all__ = [
-    "segment_map", "METHODS", "find_ground_truth", "load_map", "save_labels_png", "save_rooms_png", "room_colours",
+    "run_segment", "segment_map", "segment_free", "METHODS", "find_ground_truth", "load_map", "save_labels_png",
+    "save_rooms_png", "room_colours",
 ]
 
 METHODS = ("spectral", "morphological", "distance", "voronoi")
 """Method names :func:`segment_map` accepts."""
 
-_SIMILARITY_ALIASES = {"nearest_neighbor": "nearest_neighbour", "knn": "nearest_neighbour"}
 
 FURNISHED_SUFFIX = "_furnitures"
 GT_SUFFIX = "_gt_segmentation.png"
@@ -79,13 +79,25 @@ def find_ground_truth(map_path) -> Path | None:
     return gt if gt.is_file() else None
 
 
+def segment_free(free, resolution, method, similarity="visibility", params=None) -> tuple[np.ndarray, dict]:
+    """Labels (H, W) int32 of the free space ``free`` (H, W) bool at ``resolution`` m/cell by ``method``
+    (with ``similarity`` for spectral, and the method's ``params``), and run facts (seconds, cpu_seconds;
+    k, silhouette and similarity for spectral)."""
+    cpu0 = time.process_time()
+    run = _run_method(free, resolution, method, similarity, params or {})
+    run["cpu_seconds"] = time.process_time() - cpu0
+    return run.pop("labels"), run
+
+
 def _run_method(free, resolution, method, similarity, params) -> dict:
     """Labels (H, W) int32 and run facts (seconds; k and silhouette for spectral)."""
     if method == "spectral":
         from slam2d.segmentation.similarity import SIMILARITIES
         from slam2d.segmentation.spectral import segment_spectral
 
-        similarity = _SIMILARITY_ALIASES.get(similarity, similarity)
+        from slam2d.segmentation.config import SIMILARITY_ALIASES
+
+        similarity = SIMILARITY_ALIASES.get(similarity, similarity)
         if similarity not in SIMILARITIES:
             raise InputError("similarity", f"unknown measure {similarity!r}; choose from {sorted(SIMILARITIES)}")
         res = segment_spectral(free, resolution, similarity=similarity, **params)
@@ -103,15 +115,38 @@ def _run_method(free, resolution, method, similarity, params) -> dict:
     return dict(labels=labels, seconds=time.perf_counter() - t0)
 
 
+def run_segment(cfg) -> Path:
+    """Run a :class:`~slam2d.segmentation.config.SegmentConfig` into a new results folder under
+    ``cfg.output.root`` (resolved config, labels, figures, metrics, log); return the folder."""
+    from slam2d import config as config_mod
+    from slam2d.datasets.registry import resolve_data_path
+    from slam2d.experiment import results_folder
+
+    if cfg.map is None:
+        raise InputError("map", "no map given (map: FILE in the config, or slam2d segment MAP)")
+    map_path = resolve_data_path(cfg.map, key="map")
+    gt = resolve_data_path(cfg.ground_truth, key="ground_truth") if cfg.ground_truth else None
+    seg = cfg.segmentation
+    params = {"seed": cfg.seed, **seg.params} if seg.method == "spectral" else seg.params
+    name = cfg.name or f"segment-{map_path.stem}-{seg.method}"
+    with results_folder(cfg.output.root, name) as (work, published):
+        (work / "config.yaml").write_text(config_mod.dump(cfg))
+        segment_map(map_path, seg.method, seg.similarity, work, ground_truth=gt, resolution=cfg.resolution,
+                    figures=cfg.output.figures, **params)
+    return published[0]
+
+
 def segment_map(map_path, method="spectral", similarity="visibility", out_dir=None, *, ground_truth=None,
-                resolution=None, **params) -> dict:
+                resolution=None, figures=True, **params) -> dict:
     """Segment the map at ``map_path`` into rooms and write the results into ``out_dir``.
 
     method: one of :data:`METHODS`; similarity: the spectral measure (ignored by
     the baselines); out_dir: results folder (default ``results/segment-<stem>-<method>-<time>``);
     ground_truth: GT image (default: found beside the map, see :func:`find_ground_truth`);
-    resolution: m/px for an image map (default 0.05); params: the method's parameters.
-    Returns the metrics written to ``metrics.json`` (plus ``out_dir``).
+    resolution: m/px for an image map (default 0.05); figures: write ``rooms.png``; params: the
+    method's parameters. Returns the metrics written to ``metrics.json`` (plus ``out_dir``):
+    ``seconds`` (wall) and ``cpu_seconds`` of the segmentation itself, ``furnished`` (the map is a
+    ``*_furnitures`` variant), rooms, portals, and the scores against a ground truth.
     """
     from slam2d.mapping.topological import region_graph, save_graph
 
@@ -121,18 +156,19 @@ def segment_map(map_path, method="spectral", similarity="visibility", out_dir=No
     m = load_map(map_path, resolution)
     if not m["free"].any():
         raise InputError(map_path, "no free cell: nothing to segment (check the image, negate and free_thresh)")
-    run = _run_method(m["free"], m["resolution"], method, similarity, params)
-    labels = run.pop("labels")
+    labels, run = segment_free(m["free"], m["resolution"], method, similarity, params)
     graph = region_graph(labels, m["resolution"], m["origin"], row0_top=m["row0_top"])
     out = Path(out_dir) if out_dir is not None else _default_out_dir(map_path, method)
     out.mkdir(parents=True, exist_ok=True)
     image_labels = labels if m["row0_top"] else np.flipud(labels)
     save_labels_png(image_labels, out / "labels.png")
     save_graph(graph, out / "rooms_graph.json")
-    save_rooms_png(labels, m["free"], graph, m["resolution"], m["origin"], m["row0_top"], out / "rooms.png",
-                   title=f"{map_path.stem}: {method}" + (f" ({run['similarity']})" if "similarity" in run else ""))
-    metrics = dict(map=str(map_path), method=method, **run, rooms=graph.number_of_nodes(),
-                   portals=graph.number_of_edges(), params=_jsonable(params))  # fmt: skip
+    if figures:
+        title = f"{map_path.stem}: {method}" + (f" ({run['similarity']})" if "similarity" in run else "")
+        save_rooms_png(labels, m["free"], graph, m["resolution"], m["origin"], m["row0_top"], out / "rooms.png",
+                       title=title)
+    metrics = dict(map=str(map_path), furnished=map_path.stem.endswith(FURNISHED_SUFFIX), method=method, **run,
+                   rooms=graph.number_of_nodes(), portals=graph.number_of_edges(), params=_jsonable(params))
     metrics.update(_score(image_labels, ground_truth, map_path))
     (out / "metrics.json").write_text(json_text(metrics))
     return dict(metrics, out_dir=str(out))
