@@ -191,6 +191,34 @@ def test_global_localisation_keeps_both_symmetric_hypotheses_until_the_alcove_is
     assert np.hypot(*(pf.pose(step.scan.odom)[:2] - robot.pose[:2])) < 0.1
 
 
+@pytest.mark.parametrize("refit", [True, False])
+def test_look_alike_places_keep_their_weight_whatever_their_particles_spread(tmp_path, refit):
+    from slam2d.sim.world import load_world
+
+    plan = _symmetric_corridor(tmp_path)
+    world, known = load_world(plan), KnownMap.load(plan)
+    laser = LaserModel(beams=180, range_max=3.0)
+    truth = np.array([6.0, 1.4, 0.2])
+    mirror = np.array([16.2 - truth[0], 3.0 - truth[1], truth[2] - np.pi])  # looks the same (no alcove in view)
+    scan = Robot(world, truth, RobotConfig(laser=laser), seed=0).step(0.0, 0.0, 0.0).scan
+    rng = np.random.default_rng(0)
+    tight = truth + rng.standard_normal((200, 3)) * [0.02, 0.02, 0.005]
+    broad = mirror + rng.standard_normal((2000, 3)) * [0.2, 0.2, 0.05]  # ten times as many, ten times wider
+    cfg = MclConfig(hypothesis_fit=refit, max_particles=2200, update_min_d=0.0, update_min_a=0.0)  # standing still
+    pf = ParticleFilter(known, cfg, laser.range_max, seed=0)
+    pf.init_pose(truth)
+    pf.particles = np.concatenate([tight, broad])
+    pf.log_w = np.log(np.r_[np.full(200, 0.5 / 200), np.full(2000, 0.5 / 2000)])
+    pf._estimate = pf._cluster_estimate()
+    for _ in range(4):
+        assert pf.add(scan)
+    ratio = _mass_near(pf, mirror) / _mass_near(pf, truth)
+    if refit:
+        assert 0.5 < ratio < 2.0  # both places explain the scans equally well
+    else:  # plain MCL: the broad cloud's mean likelihood is lower, its place loses weight
+        assert ratio < 0.3
+
+
 def _office_kidnap_stream():
     world = World.office()
     known = KnownMap.from_world(world)

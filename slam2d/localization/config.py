@@ -37,6 +37,8 @@ class MclConfig(Section):
     alpha_fast: float = Field(0.1, ge=0, le=1, description="short-term average likelihood decay (0: off)")
     recovery_candidates: int = Field(20, gt=0, description="random particles are drawn by the scan's likelihood "
                                      "from this many times as many uniform poses (1: uniform, as amcl)")
+    hypothesis_fit: bool = Field(True, description="each cluster's weight follows the scan's likelihood at its "
+                                 "mean pose, not the mean over its particles (False: plain MCL, as amcl)")
     free_clearance: float = Field(0.1, ge=0, description="m from walls of random and global particles")
     # odometry motion model (sample_motion_model_odometry)
     alpha1: float = Field(0.05, ge=0, description="rotation noise from rotation")
@@ -75,7 +77,7 @@ def amcl_config(recovery: bool = False) -> MclConfig:
         resample_ess=0.0, resample_interval=2, alpha_slow=0.001 if recovery else 0.0,
         alpha_fast=0.1 if recovery else 0.0, free_clearance=0.0, alpha1=0.2, alpha2=0.2, alpha3=0.2, alpha4=0.2,
         model="likelihood_field", beams=30, z_hit=0.95, z_rand=0.05, sigma_hit=0.2, sigma_hit_uncertain=0.2,
-        max_dist=2.0, combine="amcl", wall_poses=True,
+        max_dist=2.0, combine="amcl", wall_poses=True, hypothesis_fit=False,
         beam_weight=1.0, global_candidates=1, recovery_candidates=1, initial_sd_xy=0.5, initial_sd_theta=math.pi / 12,
     )  # fmt: skip
 

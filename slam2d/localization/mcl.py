@@ -131,6 +131,26 @@ def clusters(poses: np.ndarray, bin_xy: float, bin_theta: float) -> np.ndarray:
     return labels[b[:, 0], b[:, 1], b[:, 2]] - 1
 
 
+def _group_logsumexp(x: np.ndarray, labels: np.ndarray, k: int) -> np.ndarray:
+    """log sum exp of ``x`` (P,) per label 0..k-1, (k,)."""
+    top = np.full(k, -np.inf)
+    np.maximum.at(top, labels, x)
+    top = np.where(np.isfinite(top), top, 0.0)
+    return top + np.log(np.bincount(labels, weights=np.exp(x - top[labels]), minlength=k))
+
+
+def cluster_means(poses: np.ndarray, log_w: np.ndarray, labels: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted mean pose (k, 3) (circular heading) of each cluster 0..k-1 and its log weight (k,)."""
+    w = np.exp(log_w - log_w.max())
+    total = np.bincount(labels, weights=w, minlength=k)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.column_stack([np.bincount(labels, weights=w * poses[:, 0], minlength=k) / total,
+                                np.bincount(labels, weights=w * poses[:, 1], minlength=k) / total,
+                                np.arctan2(np.bincount(labels, weights=w * np.sin(poses[:, 2]), minlength=k),
+                                           np.bincount(labels, weights=w * np.cos(poses[:, 2]), minlength=k))])
+        return np.nan_to_num(mean), np.log(total) + log_w.max()
+
+
 def weighted_pose(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weighted mean pose (3,) (circular mean heading) and covariance (3, 3) of poses (P, 3)."""
     w = weights / weights.sum()  # sums, not BLAS: its threads contend with numba's
@@ -162,6 +182,7 @@ class ParticleFilter:
         self.updates = self.resamples = self.injected = 0
         self._odom: np.ndarray | None = None  # odometry at the last update
         self._estimate: Estimate | None = None
+        self._labels: np.ndarray | None = None  # cluster of each particle at the last estimate
         self._candidates = False  # the next update weighs global candidates
 
     # initialisation ------------------------------------------------------
@@ -211,7 +232,7 @@ class ParticleFilter:
         self.particles = poses
         self.log_w = np.full(len(poses), -math.log(len(poses)))
         self.w_slow = self.w_fast = 0.0
-        self._estimate = None
+        self._estimate = self._labels = None
 
     # the filter ------------------------------------------------------------
 
@@ -261,17 +282,29 @@ class ParticleFilter:
 
         While the pose is uncertain the weights come from the smoother field; the likelihood
         averages always do, so that they stay comparable."""
+        sharp = self.confident() and self.coarse is not self.sensor
         coarse, beams = self.coarse.log_likelihood(self.particles, scan)
-        fine = self.sensor.log_likelihood(self.particles, scan)[0] if self.confident() and (
-            self.coarse is not self.sensor) else coarse
+        fine = self.sensor.log_likelihood(self.particles, scan)[0] if sharp else coarse
         self.updates += 1
         if beams > 0:
             self._average(float(logsumexp(self.log_w + coarse)), beams)
             joint = self.log_w + fine
+            if self.cfg.hypothesis_fit and self._labels is not None:
+                joint = self._refit_hypotheses(joint, scan, self.sensor if sharp else self.coarse)
             self.log_w = joint - logsumexp(joint)
         if self._resample_due():
             self._resample(scan)
         self._estimate = self._cluster_estimate()
+
+    def _refit_hypotheses(self, joint: np.ndarray, scan: Scan, model) -> np.ndarray:
+        """Log weights ``joint`` (P,) rescaled so that each cluster's total is its old one times the scan's
+        likelihood at the cluster's weighted mean pose, not the mean over its particles: a look-alike
+        place weighs as much as the true one whatever the number and spread of its particles."""
+        labels, k = self._labels, int(self._labels.max()) + 1
+        means, old = cluster_means(self.particles, self.log_w, labels, k)
+        fit = model.log_likelihood(means, scan)[0]
+        new = _group_logsumexp(joint, labels, k)
+        return joint + (old + fit - new)[labels]
 
     def _average(self, log_total: float, beams: int) -> None:
         """Update w_slow and w_fast from the weighted mean likelihood (per beam for the product model)."""
@@ -331,7 +364,7 @@ class ParticleFilter:
 
     def _cluster_estimate(self) -> Estimate:
         cfg, w = self.cfg, np.exp(self.log_w)
-        labels = clusters(self.particles, cfg.kld_bin_xy, cfg.kld_bin_theta)
+        labels = self._labels = clusters(self.particles, cfg.kld_bin_xy, cfg.kld_bin_theta)
         mass = np.bincount(labels, weights=w)
         best = int(np.argmax(mass))
         inside = labels == best
