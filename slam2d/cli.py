@@ -275,8 +275,9 @@ def optimize(
     graph_path: Path = typer.Argument(..., help="2D pose graph, g2o or TORO"),
     init: Optional[str] = typer.Option(None, help="chordal, spanning_tree or file (default: chordal; "
                                        "spanning_tree under an M-estimator; both under GNC, the lower cost kept)"),
-    robust: str = typer.Option("none", help="none, huber, cauchy, dcs, gnc (TLS), gnc_tls or gnc_gm"),
-    robust_param: float = typer.Option(1.0, help="M-estimator width, whitened units (sigmas)"),
+    robust: str = typer.Option("none", help="none, huber, cauchy, dcs, gnc (TLS), gnc_tls, gnc_gm or pc_dcs "
+                               "(pairwise-consistency screen, then DCS: for false loop closures)"),
+    robust_param: float = typer.Option(1.0, help="M-estimator width, whitened units (sigmas); Phi of dcs, pc_dcs"),
     outliers: int = typer.Option(0, help="false loop closures to inject before optimising"),
     outlier_kind: str = typer.Option("random", help="random, local or group (clusters of 10)"),
     seed: int = typer.Option(0, help="seed of the outlier injection"),

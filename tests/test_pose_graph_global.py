@@ -242,3 +242,21 @@ def test_bad_information_named_by_edge():
     bad = PoseGraphFile(graph.ids, graph.poses, graph.i, graph.j, graph.measurements, information)
     with pytest.raises(InputError, match=r"g2o edge 7 \(7 -> 8\).*not positive definite"):
         solve_g2o(bad)
+
+
+def test_optimize_command_pc_dcs(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from slam2d.cli import app
+    from slam2d.datasets.g2o import write_g2o
+
+    write_g2o(tmp_path / "grid.g2o", manhattan())
+    res = CliRunner().invoke(app, ["optimize", "-q", str(tmp_path / "grid.g2o"), "--robust", "pc_dcs", "--outliers",
+                                   "200", "--seed", "3", "--no-verify", "--out", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    (folder,) = tmp_path.glob("optimize-grid-*")
+    metrics = json.loads((folder / "metrics.json").read_text())
+    assert metrics["init"] == "spanning_tree" and metrics["outliers_rejected"] == 200
+    assert metrics["loops_rejected"] == 200 and metrics["true_loops_kept"] == 1.0
