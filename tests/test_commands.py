@@ -170,3 +170,23 @@ def test_sweep_of_real_floor_plans_matches_single_runs(tmp_path, data_file):
     row = next(r for r in rows if r["variant"].startswith("morphological") and "furnitures" in r["variant"])
     assert (row["recall"], row["precision"], row["rooms"], row["furnished"]) == (
         one["recall"], one["precision"], one["rooms"], True)
+
+
+def test_segment_command_loads_no_plotting_or_learning_library(tmp_path):
+    """A short command pays for what it uses: the rooms figure is drawn without matplotlib."""
+    import subprocess
+    import sys
+
+    plan = _write_plan(tmp_path)
+    code = ("import sys\nfrom slam2d.cli import main\n"
+            f"sys.argv = ['slam2d', 'segment', {str(plan)!r}, '--method', 'morphological', '-q', '-o', {str(tmp_path)!r}]\n"
+            "try:\n    main()\nexcept SystemExit as done:\n    assert not done.code, done.code\n"
+            "heavy = sorted({m.split('.')[0] for m in sys.modules} & {'matplotlib', 'sklearn', 'gtsam', 'numba', 'open3d'})\n"
+            "assert not heavy, heavy\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    (folder,) = [p for p in tmp_path.iterdir() if p.name.startswith("segment-")]
+    figure = np.asarray(Image.open(folder / "rooms.png").convert("RGB"))
+    assert figure.shape[1] >= 1000
+    colours = {tuple(c) for c in figure.reshape(-1, 3)[::7].tolist()}
+    assert {(31, 119, 180), (255, 127, 14)} <= colours  # the two rooms in the first two palette colours

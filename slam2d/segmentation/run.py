@@ -220,43 +220,65 @@ def save_labels_png(labels, path) -> Path:
     return Path(path)
 
 
+PALETTE = np.array([
+    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75), (227, 119, 194),
+    (188, 189, 34), (23, 190, 207), (174, 199, 232), (255, 187, 120), (152, 223, 138), (255, 152, 150),
+    (197, 176, 213), (196, 156, 148), (247, 182, 210), (219, 219, 141), (158, 218, 229)]) / 255.0
+"""Room colours (matplotlib's tab20 without its greys, dark shades first), RGB in 0..1."""
+FIGURE_MIN_PX = 1000
+"""rooms.png is scaled up by a whole factor until it is at least this wide, px."""
+
+
 def room_colours(labels, graph) -> np.ndarray:
     """RGB (H, W, 3) float: rooms coloured so that neighbours in ``graph`` differ,
     obstacles dark grey, unlabelled cells white."""
     import networkx as nx
-    from matplotlib import colormaps
 
-    palette = np.asarray(colormaps["tab20"].colors)[[0, 2, 4, 6, 8, 10, 12, 16, 18, 1, 3, 5, 7, 9, 11, 13, 17, 19]]
     colour = nx.greedy_color(graph, strategy="largest_first")
     lut = np.ones((int(labels.max()) + 1, 3))
     for n, c in colour.items():
-        lut[n] = palette[c % len(palette)]
+        lut[n] = PALETTE[c % len(PALETTE)]
     return lut[labels]
 
 
 def save_rooms_png(labels, free, graph, resolution, origin, row0_top, path, title=None) -> Path:
-    """Figure of the rooms (see :func:`room_colours`) with the region graph drawn over them."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    from slam2d.mapping.topological import draw_graph
+    """Image of the rooms (see :func:`room_colours`, unlabelled obstacles dark grey), north up, with the
+    region graph over them (room centres as dots with their numbers, edges through portal squares),
+    a 1 m / 5 m scale bar and ``title`` with the room count. Drawn with PIL from the label array
+    itself (one pixel per cell, scaled up to FIGURE_MIN_PX): no plotting library is loaded."""
+    from PIL import Image, ImageDraw, ImageFont
 
     rgb = room_colours(labels, graph)
     rgb[~np.asarray(free, bool) & (labels == 0)] = 0.25
+    if not row0_top:
+        rgb = rgb[::-1]  # north up
     h, w = labels.shape
-    extent = (origin[0], origin[0] + w * resolution, origin[1], origin[1] + h * resolution)
-    aspect = h / max(w, 1)
-    fig = Figure(figsize=(9.0, float(np.clip(9.0 * aspect, 3.0, 16.0))), dpi=150)
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
-    ax.imshow(rgb, origin="upper" if row0_top else "lower", extent=extent, interpolation="nearest")
-    draw_graph(ax, graph, node_size=18.0, linewidth=0.8, labels=graph.number_of_nodes() <= 80)
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_aspect("equal")
-    ax.set_xlim(extent[0], extent[1])
-    ax.set_ylim(extent[2], extent[3])
-    if title:
-        ax.set_title(f"{title}: {graph.number_of_nodes()} rooms")
-    fig.savefig(path, bbox_inches="tight")
+    scale = max(1, -(-FIGURE_MIN_PX // max(w, 1)))
+    band = 24  # px above the map for the title
+    image = Image.new("RGB", (w * scale, h * scale + band), "white")
+    image.paste(Image.fromarray((255 * rgb).astype(np.uint8)).resize((w * scale, h * scale), Image.NEAREST), (0, band))
+    draw, font = ImageDraw.Draw(image), ImageFont.load_default(size=12)
+
+    def px(xy) -> tuple[float, float]:
+        return ((xy[0] - origin[0]) / resolution * scale, (origin[1] + h * resolution - xy[1]) / resolution * scale
+                + band)  # fmt: skip
+
+    r = max(2.0, 1.5 * scale)
+    for a, b, d in graph.edges(data=True):
+        points = [px(graph.nodes[a]["centre"]), px(d["portal_centre"]), px(graph.nodes[b]["centre"])]
+        draw.line(points, fill="black", width=max(1, scale))
+        x, y = points[1]
+        draw.rectangle([x - r, y - r, x + r, y + r], fill="black")
+    for n, d in graph.nodes(data=True):
+        x, y = px(d["centre"])
+        draw.ellipse([x - 2 * r, y - 2 * r, x + 2 * r, y + 2 * r], fill="black", outline="white")
+        if graph.number_of_nodes() <= 80:
+            draw.text((x + 2 * r + 1, y - 2 * r - 12), str(n), fill="black", font=font)
+    metres = 5 if w * resolution >= 20 else 1
+    x0, y0 = 10, h * scale + band - 12
+    draw.line([(x0, y0), (x0 + metres / resolution * scale, y0)], fill="black", width=3)
+    draw.text((x0, y0 - 15), f"{metres} m", fill="black", font=font)
+    caption = f"{title}: {graph.number_of_nodes()} rooms" if title else f"{graph.number_of_nodes()} rooms"
+    draw.text((6, 5), caption, fill="black", font=font)
+    image.save(path, compress_level=1)
     return Path(path)
