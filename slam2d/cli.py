@@ -65,7 +65,7 @@ def _stoppable(what: str):
 def run(
     config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT,
     quiet: bool = QUIET_OPT,
-    viz: bool = typer.Option(False, "--viz", help="stream scans, pose, loops and map to the rerun viewer ([viz] extra)"),
+    viz: bool = typer.Option(False, "--viz", help="stream scans, pose, loops and map to rerun ([viz] extra)"),
     viz_save: Optional[Path] = typer.Option(None, "--viz-save", help="record the live view to FILE.rrd instead"),
 ) -> None:
     """Run one experiment; print the results folder."""

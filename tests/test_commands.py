@@ -20,6 +20,7 @@ from slam2d.experiment import read_sweep, run_command, run_sweep
 from slam2d.planning.config import PlanConfig
 from slam2d.segmentation.config import SegmentConfig
 
+
 def _write_plan(tmp_path: Path, stem: str = "plan") -> Path:
     """Two 6 m x 6 m rooms (0.05 m/px) joined by a 0.9 m door, as a floor-plan PNG with its ground truth."""
     free = np.zeros((130, 255), bool)
@@ -63,7 +64,8 @@ def test_dump_config_of_each_command():
     assert code == 0 and dumped["segmentation"]["method"] == "voronoi" and "ground_truth" in dumped
     code, out = _cli("dump-config", "--command", "plan")
     dumped = yaml.safe_load(out)
-    assert code == 0 and dumped["planning"]["hierarchy"] == "none" and dumped["segmentation"]["method"] == "morphological"
+    assert code == 0 and dumped["planning"]["hierarchy"] == "none"
+    assert dumped["segmentation"]["method"] == "morphological"
     code, out = _cli("dump-config", "--command", "explore")
     assert code == 2 and "--command: unknown command 'explore'" in out
 
@@ -178,10 +180,11 @@ def test_segment_command_loads_no_plotting_or_learning_library(tmp_path):
     import sys
 
     plan = _write_plan(tmp_path)
+    argv = ["slam2d", "segment", str(plan), "--method", "morphological", "-q", "-o", str(tmp_path)]
     code = ("import sys\nfrom slam2d.cli import main\n"
-            f"sys.argv = ['slam2d', 'segment', {str(plan)!r}, '--method', 'morphological', '-q', '-o', {str(tmp_path)!r}]\n"
+            f"sys.argv = {argv!r}\n"
             "try:\n    main()\nexcept SystemExit as done:\n    assert not done.code, done.code\n"
-            "heavy = sorted({m.split('.')[0] for m in sys.modules} & {'matplotlib', 'sklearn', 'gtsam', 'numba', 'open3d'})\n"
+            "heavy = {'matplotlib', 'sklearn', 'gtsam', 'numba', 'open3d'} & {m.split('.')[0] for m in sys.modules}\n"
             "assert not heavy, heavy\n")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]

@@ -89,7 +89,8 @@ def test_bad_viz_target_is_one_line_error(tmp_path):
 
     from slam2d.cli import app
 
-    out = CliRunner().invoke(app, ["run", "--viz-save", str(tmp_path / "no" / "x.rrd"), "--set", f"output.root={tmp_path}"])
+    root = f"output.root={tmp_path}"
+    out = CliRunner().invoke(app, ["run", "--viz-save", str(tmp_path / "no" / "x.rrd"), "--set", root])
     assert out.exit_code == 2 and "--viz-save" in out.output and "FILE.rrd" in out.output
     out = CliRunner().invoke(app, ["run", "--viz", "--viz-save", str(tmp_path / "x.rrd")])
     assert out.exit_code == 2 and "not both" in out.output

@@ -8,7 +8,6 @@ from pydantic import Field, field_validator
 
 from slam2d.config import CommandConfig, Section
 
-
 SIMILARITY_ALIASES = {"nearest_neighbor": "nearest_neighbour", "knn": "nearest_neighbour"}
 
 
