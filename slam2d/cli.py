@@ -297,8 +297,8 @@ def optimize(
                                          seed, reference, verify)
         except InputError as err:
             _fail(err)
-    keys = ("gtsam_error", "iterations", "seconds", "verified", "loops_rejected", "precision", "recall",
-            "rmse_to_reference")
+    keys = ("gtsam_error", "iterations", "seconds", "verified", "certified", "loops_rejected", "precision",
+            "recall", "rmse_to_reference")
     typer.echo(" ".join(f"{k}={metrics[k]:.6g}" if isinstance(metrics[k], float) else f"{k}={metrics[k]}"
                         for k in keys if k in metrics))
     typer.echo(f"results: {published[0]}")

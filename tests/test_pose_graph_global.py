@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from slam2d import geometry
-from slam2d.backend import consistency
+from slam2d.backend import certificate, consistency
 from slam2d.backend import initialization as ini
 from slam2d.backend.pose_graph import (
     CHI2_3DOF_99,
@@ -70,7 +70,7 @@ def test_chordal_exact_on_noise_free_graph():
     assert pose_error(ini.chordal(graph), truth) < 1e-9
     assert pose_error(ini.spanning_tree(graph), truth) < 1e-9
     result = solve_g2o(graph, verify=True)
-    assert result.init == "chordal" and result.verified
+    assert result.init == "chordal" and result.verified and result.certified
     assert result.final_error < 1e-12 and result.inlier.all()
     with pytest.raises(InputError, match="unknown initialisation"):
         ini.initial_poses(graph, "lago")
@@ -81,8 +81,11 @@ def test_mit_reaches_best_known_minimum_from_default_start(data_file):
     result = solve_g2o(graph, verify=True)
     assert result.init == "chordal"
     assert result.final_error == pytest.approx(MIT_OPTIMUM, rel=1e-6)
-    assert result.verified
-    assert solve_g2o(graph, init="file").final_error > 300  # the file's start ends in a local minimum
+    assert result.verified and result.certified
+    local = solve_g2o(graph, init="file")
+    assert local.final_error > 300  # the file's start ends in a local minimum
+    cert = certificate.certify(graph, local.poses)
+    assert cert.stationarity < 1e-9 and not cert.certified and cert.negative_pivots > 0
 
 
 def test_gnc_rejects_50_outliers_where_lm_fails():
@@ -260,3 +263,13 @@ def test_optimize_command_pc_dcs(tmp_path):
     metrics = json.loads((folder / "metrics.json").read_text())
     assert metrics["init"] == "spanning_tree" and metrics["outliers_rejected"] == 200
     assert metrics["loops_rejected"] == 200 and metrics["true_loops_kept"] == 1.0
+
+
+def test_certificate_at_the_optimum_of_a_noisy_graph():
+    graph = lap_graph(laps(), noise=1.0, seed=13)
+    result = solve_g2o(graph, verify=True)
+    assert result.certified
+    cert = certificate.certify(graph, result.poses)
+    assert cert.stationarity < 1e-9 and cert.negative_pivots == 0 and cert.moved < 0.05
+    kappa, tau = certificate.isotropic_weights(graph)
+    assert np.allclose(kappa, INFO[2, 2]) and np.allclose(tau, INFO[0, 0])  # isotropic information: tau = its value

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from slam2d import geometry
-from slam2d.backend import consistency
+from slam2d.backend import certificate, consistency
 from slam2d.backend import robust as rb
 from slam2d.config import BackendConfig
 from slam2d.datasets import g2o
@@ -430,7 +430,9 @@ class BatchResult:
     the optimisation (the start excluded), the start's name; ``verified``
     when a second start reached the same error (None: not checked); ``inlier`` (M,)
     bool per edge (odometry always; a loop when its GNC weight is >= 0.5, else when its
-    whitened squared residual is within the chi-square 99 % gate)."""
+    whitened squared residual is within the chi-square 99 % gate); ``certified``: SE-Sync's
+    certificate holds at the isotropic optimum next to the result (``certificate.certify``;
+    plain least squares with ``verify`` only, else None)."""
 
     poses: np.ndarray
     initial_error: float
@@ -441,6 +443,7 @@ class BatchResult:
     start_error: float = float("nan")
     verified: bool | None = None
     inlier: np.ndarray | None = None
+    certified: bool | None = None
 
 def _g2o_values(ids, poses):
     """gtsam.Values with vertex ``ids[n]`` at ``poses[n]``."""
@@ -626,7 +629,8 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     M-estimator, each of ``G2O_GNC_INITS`` under GNC. ``verify``: also optimise from the other starts
     (chordal, spanning tree, isotropic chordal). Of several runs the first is kept unless
     another reaches a lower (robust) cost beyond VERIFY_REL; verified when another run
-    agrees with the kept one; None: one run only."""
+    agrees with the kept one; None: one run only. Plain least squares with ``verify`` is also
+    checked by SE-Sync's certificate (``BatchResult.certified``)."""
     loss, screened = rb.gnc_loss(robust), rb.screened_kernel(robust)
     kernel = "none" if loss is not None else (screened or robust)
     plain = kernel == "none" and loss is None
@@ -646,9 +650,10 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     for r in runs:
         log.info("g2o %s from %s: cost %.9g%s", robust, r.init, r.cost, " (kept)" if r is best else "")
     poses = _poses_in_vertex_order(best.values, graph.ids)
+    certified = certificate.certify(graph, poses).certified if verify and plain else None
     out = BatchResult(poses, fg.error(_g2o_values(graph.ids, graph.poses)), float(fg.error(best.values)),
                       best.iterations, best.seconds, best.init, fg.error(_g2o_values(graph.ids, best.start)),
-                      verified, _classify(graph, poses, best.weights))
+                      verified, _classify(graph, poses, best.weights), certified)
     log.info("g2o %s from %s: error %.6g -> %.6g, %d iterations, %.3f s",
              robust, best.init, out.start_error, out.final_error, out.iterations, best.seconds)
     return out
@@ -725,7 +730,7 @@ def g2o_metrics(graph: g2o.PoseGraphFile, result: BatchResult, injected=None, re
         "vertices": len(graph.ids), "edges": len(graph.i), "loops": int(loops.sum()),
         "init": result.init, "initial_error": result.initial_error, "start_error": result.start_error,
         "gtsam_error": result.final_error, "iterations": result.iterations, "seconds": result.seconds,
-        "verified": result.verified,
+        "verified": result.verified, "certified": result.certified,
         "loops_rejected": int(np.sum(~result.inlier & loops)),
     }
     if injected is not None and np.any(injected):
