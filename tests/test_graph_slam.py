@@ -30,9 +30,64 @@ def test_loop_closures_beat_odometry_on_the_simulator():
 
 
 def test_without_loop_closure_the_graph_keeps_the_frontend_chain():
-    chained = run("dataset.max_scans=300", "backend.loop_closure.enabled=false").poses
-    plain = run("dataset.max_scans=300", "backend.name=none").poses
+    """With the odometry frontend (its deltas are the odometry: nothing to fuse) the keyframe chain is the frontend's."""
+    common = ("dataset.max_scans=300", "frontend.name=odometry")
+    chained = run(*common, "backend.loop_closure.enabled=false").poses
+    plain = run(*common, "backend.name=none").poses
     assert np.allclose(chained, plain, atol=1e-6)
+
+
+def _fused_run(odom_sigma_deg, wild_step_at=None, steps=600, seed=0):
+    """A 0.25 m-per-scan path; the frontend's heading noise is 0.3 deg per scan (honestly reported),
+    the odometry's ``odom_sigma_deg``. Returns the heading error RMS (deg) per scan of the fused
+    chain and of the frontend alone, and the back end's stats."""
+    from slam2d.backend.slam import GraphSlamBackend
+    from slam2d.config import BackendConfig
+    from slam2d.types import Scan
+
+    rng = np.random.default_rng(seed)
+    sigma_f = np.array([0.005, 0.005, np.deg2rad(0.3)])
+    true = np.column_stack([np.full(steps, 0.25), np.zeros(steps), np.deg2rad(2.0) * np.sin(np.arange(steps) / 20)])
+    frontend = true + rng.normal(0, sigma_f, (steps, 3))
+    odometry = true + rng.normal(0, [0.005, 0.005, np.deg2rad(odom_sigma_deg)], (steps, 3))
+    if wild_step_at is not None:
+        odometry[wild_step_at] += [0.8, 0.3, np.deg2rad(40.0)]
+    cfg = BackendConfig(name="pose_graph")
+    cfg.loop_closure.enabled = False
+    backend = GraphSlamBackend(cfg)
+    odom_pose, no_points = np.zeros(3), np.full(4, np.nan)
+    for k in range(steps + 1):
+        if k:
+            odom_pose = geometry.compose(odom_pose, odometry[k - 1])
+        scan = Scan(float(k), no_points, np.linspace(-1, 1, 4), 0.1, 30.0, odom=odom_pose.copy(), index=k)
+        delta = frontend[k - 1] if k else np.zeros(3)
+        backend.add(scan, FrontendResult(delta=delta, information=np.diag(1 / sigma_f**2), confidence=1.0))
+    poses = backend.finish()
+    est_steps = geometry.between(poses[:-1], poses[1:])
+
+    def rms(steps_):
+        return float(np.rad2deg(np.sqrt(np.mean(geometry.wrap_angle(steps_[:, 2] - true[:, 2]) ** 2))))
+
+    return rms(est_steps), rms(frontend), backend.stats
+
+
+def test_odometry_that_agrees_with_the_scans_is_fused():
+    """Odometry three times steadier than the matcher: the learnt noise lets it count, the chain's heading steps
+    are clearly better than the frontend's alone."""
+    fused, frontend, stats = _fused_run(odom_sigma_deg=0.1)
+    assert stats["odometry fused"] > 500
+    assert fused < 0.6 * frontend, (fused, frontend)
+
+
+def test_odometry_that_drifts_adds_nothing_and_a_wild_step_is_not_fused():
+    """Odometry ten times noisier than the matcher barely moves the chain; a single wild step (0.8 m, 40 deg)
+    is counted as a disagreement and left out."""
+    fused, frontend, stats = _fused_run(odom_sigma_deg=3.0, wild_step_at=300)
+    assert fused < 1.02 * frontend, (fused, frontend)
+    assert stats["odometry disagreed"] >= 1
+    fused, frontend, stats = _fused_run(odom_sigma_deg=0.1, wild_step_at=300)
+    assert stats["odometry disagreed"] >= 1
+    assert fused < 0.6 * frontend, (fused, frontend)
 
 
 @register_frontend("test_landmark_odometry")
@@ -78,31 +133,45 @@ def test_icp_pose_graph_beats_odometry_on_the_start_of_intel(data_file):
     assert est["rot_abs_mean"] < 0.5, est
 
 
-@register_frontend("test_bent_odometry")
-class BentOdometry:
-    """True motion bent by 0.5 deg per metre travelled (a wheel-radius mismatch): drift beyond the local window."""
+def bent_odometry(scans):
+    """The scans with wheel odometry bent by 0.5 deg per metre travelled (a wheel-radius mismatch) instead of the
+    simulator's: drift beyond the local window, which the frontend (odometry) cannot see."""
+    import dataclasses
 
-    def __init__(self):
-        self._last = None
+    odom, last = None, None
+    for scan in scans:
+        if last is None:
+            odom = np.asarray(scan.odom, float)
+        else:
+            true = geometry.between(last, scan.ground_truth)
+            odom = geometry.compose(odom, true + [0.0, 0.0, np.deg2rad(0.5) * np.hypot(true[0], true[1])])
+        last = scan.ground_truth
+        yield dataclasses.replace(scan, odom=odom.copy())
+
+
+@register_frontend("test_odometry_half_degree")
+class OdometryHalfDegree:
+    """The wheel odometry's delta with 2 cm and 0.5 deg per scan of information."""
 
     def process(self, scan, odom_delta):
-        true = np.zeros(3) if self._last is None else geometry.between(self._last, scan.ground_truth)
-        self._last = scan.ground_truth
-        bent = true + [0.0, 0.0, np.deg2rad(0.5) * np.hypot(true[0], true[1])]
         info = np.diag([1 / 0.02**2, 1 / 0.02**2, 1 / np.deg2rad(0.5) ** 2])
-        return FrontendResult(delta=bent, information=info, confidence=1.0)
+        return FrontendResult(delta=np.asarray(odom_delta, float), information=info, confidence=1.0)
 
 
 def test_a_loop_beyond_the_local_window_is_found_by_the_drift_grown_search():
     """After a lap of bent odometry the return to the start lies more than the +-2 m window away:
     with a window that grows with the path between the keyframes the loop closes; with a fixed one it does not."""
-    common = ("dataset.max_scans=800", "frontend.name=test_bent_odometry")
+    def bent_run(*overrides):
+        cfg = config.load(None, ["backend.name=pose_graph", "dataset.max_scans=800",
+                                 "frontend.name=test_odometry_half_degree",
+                                 *overrides])
+        return SlamPipeline(cfg).run(bent_odometry(open_dataset(cfg.dataset, seed=cfg.seed)))
 
     def end_error(result):
         return np.hypot(*(result.poses[-1, :2] - result.ground_truth[-1, :2]))
 
-    assert end_error(run(*common, "backend.name=none")) > 3.0
-    assert end_error(run(*common, "backend.loop_closure.drift=0")) > 2.0
-    grown = run(*common)
+    assert end_error(bent_run("backend.name=none")) > 3.0
+    assert end_error(bent_run("backend.loop_closure.drift=0")) > 2.0
+    grown = bent_run()
     assert end_error(grown) < 0.2
     assert grown.stats["loop matcher accepted_grown_window"] > 0
