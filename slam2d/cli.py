@@ -61,6 +61,17 @@ def _stoppable(what: str):
         _stopped(what)
 
 
+@contextmanager
+def _command(quiet: bool, what: str = "no results folder written"):
+    """A command's frame: logging set up; bad input -> "error: ..." and exit 2; a signal -> "stopped: WHAT", 130."""
+    _setup_logging(quiet)
+    with _stoppable(what):
+        try:
+            yield
+        except InputError as err:
+            _fail(err)
+
+
 @app.command()
 def run(
     config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT,
@@ -71,15 +82,11 @@ def run(
     """Run one experiment; print the results folder."""
     from slam2d.experiment import run_experiment
 
-    _setup_logging(quiet)
-    with _stoppable("no results folder written"):
-        try:
-            if viz and viz_save:
-                raise InputError("--viz-save", "give --viz (a live viewer) or --viz-save FILE.rrd, not both")
-            cfg = _load(config, set_, plugin)
-            folder = run_experiment(cfg, quiet=quiet, viz=viz_save or ("viewer" if viz else None))
-        except InputError as err:
-            _fail(err)
+    with _command(quiet):
+        if viz and viz_save:
+            raise InputError("--viz-save", "give --viz (a live viewer) or --viz-save FILE.rrd, not both")
+        cfg = _load(config, set_, plugin)
+        folder = run_experiment(cfg, quiet=quiet, viz=viz_save or ("viewer" if viz else None))
     typer.echo(f"results: {folder}")
 
 
@@ -94,12 +101,9 @@ def ablate(
     """Run every variant of a sweep in parallel; write one table (Markdown + CSV)."""
     from slam2d.experiment import SweepStopped, run_sweep
 
-    _setup_logging(quiet)
-    with _stoppable("no sweep folder written"):
+    with _command(quiet, "no sweep folder written"):
         try:
             folder, rows = run_sweep(sweep, workers=workers, executor=executor, quiet=quiet, resume=resume)
-        except InputError as err:
-            _fail(err)
         except SweepStopped as stop:
             _stopped(f"{stop.finished} of {stop.total} variants finished in {stop.folder}; "
                      f"resume with: slam2d ablate {sweep} --resume {stop.folder}")
@@ -171,15 +175,11 @@ def segment(
     """Split a map into rooms: colour image, topological graph, metrics (a config, or the map and flags)."""
     from slam2d.segmentation.run import run_segment
 
-    _setup_logging(quiet)
-    with _stoppable("no results folder written"):
-        try:
-            cfg = _command_config("segment", config, set_, {
-                "map": map_path, "segmentation.method": method, "segmentation.similarity": similarity,
-                "ground_truth": ground_truth, "output.root": root})
-            folder = run_segment(cfg)
-        except InputError as err:
-            _fail(err)
+    with _command(quiet):
+        cfg = _command_config("segment", config, set_, {
+            "map": map_path, "segmentation.method": method, "segmentation.similarity": similarity,
+            "ground_truth": ground_truth, "output.root": root})
+        folder = run_segment(cfg)
     _echo_metrics(folder, ("rooms", "k", "recall", "precision", "seconds"))
     typer.echo(f"results: {folder}")
 
@@ -213,16 +213,13 @@ def plan(
     planning.queries > 0: many seeded queries against A* (suboptimality, speed-up)."""
     from slam2d.planning.run import NoPathError, run_plan
 
-    _setup_logging(quiet)
-    with _stoppable("no results folder written"):
+    with _command(quiet):
         try:
             cfg = _command_config("plan", config, set_, {
                 "map": map_path, "planning.start": _xy(start, "start"), "planning.goal": _xy(goal, "goal"),
                 "planning.hierarchy": hierarchical, "planning.labels": labels,
                 "planning.robot_radius": robot_radius, "output.root": root})
             folder = run_plan(cfg)
-        except InputError as err:
-            _fail(err)
         except NoPathError as err:
             typer.secho(f"no path: {err}", fg="red", err=True)
             raise typer.Exit(1) from None
@@ -242,20 +239,16 @@ def map_layers(
     """Make mapping layers (sparse, quadtree, line map, wall mesh) of an existing map."""
     from slam2d.experiment import results_folder
 
-    _setup_logging(quiet)
-    with _stoppable("no results folder written"):
-        try:
-            chosen = _layer_names(layers)
-            if wall_height is not None and not wall_height > 0:
-                raise InputError("--wall-height", f"must be > 0 m, got {wall_height}")
-            from slam2d.config import MappingConfig
-            from slam2d.mapping.layers import load_grid, write_layers
+    with _command(quiet):
+        chosen = _layer_names(layers)
+        if wall_height is not None and not wall_height > 0:
+            raise InputError("--wall-height", f"must be > 0 m, got {wall_height}")
+        from slam2d.config import MappingConfig
+        from slam2d.mapping.layers import load_grid, write_layers
 
-            grid = load_grid(map_path)
-            with results_folder(root, f"map-{map_path.stem}", "--out") as (work, published):
-                stats = write_layers(grid, work, MappingConfig(layers=chosen), wall_height=wall_height)
-        except InputError as err:
-            _fail(err)
+        grid = load_grid(map_path)
+        with results_folder(root, f"map-{map_path.stem}", "--out") as (work, published):
+            stats = write_layers(grid, work, MappingConfig(layers=chosen), wall_height=wall_height)
     typer.echo(" ".join(f"{k}={v['bytes']}B" for k, v in stats.items() if "bytes" in v))
     typer.echo(f"results: {published[0]}")
 
@@ -287,16 +280,12 @@ def optimize(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Optimise a pose graph in one batch: optimised g2o, overlay figure, metrics."""
-    _setup_logging(quiet)
-    with _stoppable("no results folder written"):
-        try:
-            from slam2d.experiment import results_folder
+    with _command(quiet):
+        from slam2d.experiment import results_folder
 
-            with results_folder(root, f"optimize-{graph_path.stem}", "--out") as (work, published):
-                metrics = _optimize_into(work, graph_path, init, robust, robust_param, outliers, outlier_kind,
-                                         seed, reference, verify)
-        except InputError as err:
-            _fail(err)
+        with results_folder(root, f"optimize-{graph_path.stem}", "--out") as (work, published):
+            metrics = _optimize_into(work, graph_path, init, robust, robust_param, outliers, outlier_kind,
+                                     seed, reference, verify)
     keys = ("gtsam_error", "iterations", "seconds", "verified", "certified", "loops_rejected", "precision",
             "recall", "rmse_to_reference")
     typer.echo(" ".join(f"{k}={metrics[k]:.6g}" if isinstance(metrics[k], float) else f"{k}={metrics[k]}"
@@ -372,13 +361,9 @@ def navigate(
     """Drive the simulated robot to a goal (online SLAM on by default); print the results folder."""
     from slam2d.navigation.run import run_navigate
 
-    _setup_logging(quiet)
-    with _stoppable("no results folder written"):
-        try:
-            extra = [f"navigation.goal=[{goal}]"] if goal else []
-            folder = run_navigate(_load(config, [*set_, *extra], plugin))
-        except InputError as err:
-            _fail(err)
+    with _command(quiet):
+        extra = [f"navigation.goal=[{goal}]"] if goal else []
+        folder = run_navigate(_load(config, [*set_, *extra], plugin))
     typer.echo(f"results: {folder}")
 
 
@@ -395,13 +380,9 @@ def explore(
     from slam2d.exploration import config as explore_config
     from slam2d.exploration.run import run_explore
 
-    _setup_logging(quiet)
-    with _stoppable("no results folder written"):
-        try:
-            extra = [f"exploration.strategy={strategy}"] if strategy else []
-            folder = run_explore(explore_config.load(config, [*set_, *extra]))
-        except InputError as err:
-            _fail(err)
+    with _command(quiet):
+        extra = [f"exploration.strategy={strategy}"] if strategy else []
+        folder = run_explore(explore_config.load(config, [*set_, *extra]))
     typer.echo(f"results: {folder}")
 
 
@@ -418,14 +399,10 @@ def localize(
     """Monte Carlo localisation on a known map: estimate vs truth, errors, particle clouds, metrics."""
     from slam2d.localization.run import load_localize_config, run_localize
 
-    _setup_logging(quiet)
-    with _stoppable("no results folder written"):
-        try:
-            cfg = load_localize_config(config, set_)
-            experiment = _load(dataset, [], []) if dataset else None
-            folder = run_localize(map_path, cfg, experiment, root)
-        except InputError as err:
-            _fail(err)
+    with _command(quiet):
+        cfg = load_localize_config(config, set_)
+        experiment = _load(dataset, [], []) if dataset else None
+        folder = run_localize(map_path, cfg, experiment, root)
     typer.echo(f"results: {folder}")
 
 
