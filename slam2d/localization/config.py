@@ -37,8 +37,10 @@ class MclConfig(Section):
     alpha_fast: float = Field(0.1, ge=0, le=1, description="short-term average likelihood decay (0: off)")
     recovery_candidates: int = Field(20, gt=0, description="random particles are drawn by the scan's likelihood "
                                      "from this many times as many uniform poses (1: uniform, as amcl)")
-    hypothesis_fit: bool = Field(True, description="each cluster's weight follows the scan's likelihood at its "
-                                 "mean pose, not the mean over its particles (False: plain MCL, as amcl)")
+    hypothesis_fit: bool = Field(True, description="each cluster's total weight follows the scan's likelihood at "
+                                 "its weighted mean pose, not the mean over its particles: a look-alike place "
+                                 "weighs as much as the true one whatever the number and spread of its particles "
+                                 "(False: plain MCL, as amcl)")
     free_clearance: float = Field(0.1, ge=0, description="m from walls of random and global particles")
     # odometry motion model (sample_motion_model_odometry)
     alpha1: float = Field(0.05, ge=0, description="rotation noise from rotation")

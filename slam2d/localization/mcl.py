@@ -281,30 +281,25 @@ class ParticleFilter:
         """Weigh by the scan, track the likelihood averages, resample when due, estimate.
 
         While the pose is uncertain the weights come from the smoother field; the likelihood
-        averages always do, so that they stay comparable."""
+        averages always do, so that they stay comparable. With ``hypothesis_fit`` the clusters'
+        mean poses are scored in the same pass as the particles."""
         sharp = self.confident() and self.coarse is not self.sensor
-        coarse, beams = self.coarse.log_likelihood(self.particles, scan)
-        fine = self.sensor.log_likelihood(self.particles, scan)[0] if sharp else coarse
+        refit = self.cfg.hypothesis_fit and self._labels is not None and len(self._labels) == len(self.particles)
+        k = int(self._labels.max()) + 1 if refit else 0
+        means, old = cluster_means(self.particles, self.log_w, self._labels, k) if refit else (np.zeros((0, 3)), None)
+        poses, p = np.concatenate([self.particles, means]), len(self.particles)
+        coarse, beams = self.coarse.log_likelihood(poses, scan)
+        fine = self.sensor.log_likelihood(poses, scan)[0] if sharp else coarse
         self.updates += 1
         if beams > 0:
-            self._average(float(logsumexp(self.log_w + coarse)), beams)
-            joint = self.log_w + fine
-            if self.cfg.hypothesis_fit and self._labels is not None:
-                joint = self._refit_hypotheses(joint, scan, self.sensor if sharp else self.coarse)
+            self._average(float(logsumexp(self.log_w + coarse[:p])), beams)
+            joint = self.log_w + fine[:p]
+            if refit:
+                joint = joint + (old + fine[p:] - _group_logsumexp(joint, self._labels, k))[self._labels]
             self.log_w = joint - logsumexp(joint)
         if self._resample_due():
             self._resample(scan)
         self._estimate = self._cluster_estimate()
-
-    def _refit_hypotheses(self, joint: np.ndarray, scan: Scan, model) -> np.ndarray:
-        """Log weights ``joint`` (P,) rescaled so that each cluster's total is its old one times the scan's
-        likelihood at the cluster's weighted mean pose, not the mean over its particles: a look-alike
-        place weighs as much as the true one whatever the number and spread of its particles."""
-        labels, k = self._labels, int(self._labels.max()) + 1
-        means, old = cluster_means(self.particles, self.log_w, labels, k)
-        fit = model.log_likelihood(means, scan)[0]
-        new = _group_logsumexp(joint, labels, k)
-        return joint + (old + fit - new)[labels]
 
     def _average(self, log_total: float, beams: int) -> None:
         """Update w_slow and w_fast from the weighted mean likelihood (per beam for the product model)."""
