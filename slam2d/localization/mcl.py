@@ -5,7 +5,8 @@ tracking from a rough pose (:meth:`~ParticleFilter.init_pose`) and recovery afte
 kidnapping (random particles, Thrun et al. 2005 Table 8.3). Every scan goes to
 :meth:`~ParticleFilter.add`; the filter updates only after ``update_min_d`` m or
 ``update_min_a`` rad of odometry (as amcl): odometry motion model (four alphas),
-sensor model (likelihood field or beams), then low-variance resampling when the
+sensor model (likelihood field or beams; each cluster's total weight by the
+scan's likelihood at its mean pose), then low-variance resampling when the
 effective sample size drops, drawing random free-space poses with probability
 max(0, 1 - w_fast / w_slow) and keeping as many particles as KLD sampling
 (Fox 2003) asks. The pose is the weighted mean of the heaviest cluster of
