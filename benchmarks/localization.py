@@ -1,8 +1,8 @@
 """Monte Carlo localisation: slam2d's filter beside a re-implementation of ROS amcl's defaults,
 on the office and the room plans, global localisation, kidnapping and tracking.
 
-Usage: nice .venv/bin/python benchmarks/localization.py [--worlds office rooms] [--runs N] [--workers 2]
-       [--scenarios global kidnap tracking] [--out results/bench-localization]
+Usage: nice .venv/bin/python benchmarks/localization.py [--worlds office rooms] [--runs N] [--first-seed 0]
+       [--workers 2] [--scenarios global kidnap tracking] [--out results/bench-localization]
 
 Every seeded run records one stream of the wandering robot (scans, odometry,
 truth) and replays it through every filter, so that all see the same data:
@@ -144,13 +144,14 @@ def main(argv: list[str]) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--worlds", nargs="+", default=["office", "rooms"])
     ap.add_argument("--runs", type=int, default=10, help="seeded runs per world and scenario")
+    ap.add_argument("--first-seed", type=int, default=0, help="seeds first-seed ... first-seed + runs - 1")
     ap.add_argument("--scenarios", nargs="+", default=["global", "kidnap", "tracking"])
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default="results/bench-localization")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(w, s, seed) for w in world_specs(args.worlds) for s in args.scenarios for seed in range(args.runs)]
+    jobs = [(w, s, seed) for w in world_specs(args.worlds) for s in args.scenarios for seed in range(args.first_seed, args.first_seed + args.runs)]
     rows: list[dict] = []
     t0 = time.perf_counter()
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # one thread per worker process
