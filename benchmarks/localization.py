@@ -151,7 +151,8 @@ def main(argv: list[str]) -> None:
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(w, s, seed) for w in world_specs(args.worlds) for s in args.scenarios for seed in range(args.first_seed, args.first_seed + args.runs)]
+    seeds = range(args.first_seed, args.first_seed + args.runs)
+    jobs = [(w, s, seed) for w in world_specs(args.worlds) for s in args.scenarios for seed in seeds]
     rows: list[dict] = []
     t0 = time.perf_counter()
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # one thread per worker process

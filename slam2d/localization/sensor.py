@@ -113,11 +113,11 @@ class BeamModel:
             return np.zeros(len(particles)), 0
         expected = self.expected_ranges(particles, scan.sensor_pose, angles)
         p = beam_probability(ranges[None], expected, self.cfg, self.range_max)
-        worst = self.cfg.z_rand / self.range_max
+        floor, n, weight = self.cfg.z_rand / self.range_max, len(ranges), self.cfg.beam_weight  # every beam missed
         if self.cfg.combine == "amcl":
-            ll, worst = np.log1p((p**3).sum(axis=1)), math.log1p(len(ranges) * worst**3)
+            ll, worst = np.log1p((p**3).sum(axis=1)), math.log1p(n * floor**3)
         else:
-            ll, worst = self.cfg.beam_weight * np.log(p).sum(axis=1), len(ranges) * self.cfg.beam_weight * math.log(worst)
+            ll, worst = weight * np.log(p).sum(axis=1), n * weight * math.log(floor)
         return out_of_walls(self.map, self.cfg, particles, ll, worst), len(ranges)
 
 
