@@ -119,7 +119,7 @@ def ablate(
 @app.command("dump-config")
 def dump_config(
     config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT,
-    command: str = typer.Option("run", "--command", help="whose config: run, segment or plan"),
+    command: str = typer.Option("run", "--command", help="whose config: run, segment, plan, navigate or explore"),
 ) -> None:
     """Print the fully resolved config (defaults included) as YAML."""
     from slam2d import config as config_mod
@@ -127,7 +127,7 @@ def dump_config(
 
     try:
         model = command_model(command, "--command")
-        cfg = _load(config, set_, plugin) if command == "run" else config_mod.load(config, set_, model)
+        cfg = _load(config, set_, plugin, model)
         typer.echo(config_mod.dump(resolved(cfg)), nl=False)
     except InputError as err:
         _fail(err)
@@ -359,11 +359,11 @@ def navigate(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Drive the simulated robot to a goal (online SLAM on by default); print the results folder."""
-    from slam2d.navigation.run import run_navigate
+    from slam2d.navigation.run import NavigateConfig, run_navigate
 
     with _command(quiet):
         extra = [f"navigation.goal=[{goal}]"] if goal else []
-        folder = run_navigate(_load(config, [*set_, *extra], plugin))
+        folder = run_navigate(_load(config, [*set_, *extra], plugin, NavigateConfig))
     typer.echo(f"results: {folder}")
 
 
@@ -406,11 +406,12 @@ def localize(
     typer.echo(f"results: {folder}")
 
 
-def _load(config, set_: list[str], plugins: list[str]):
-    """The config file (or defaults) with ``--set`` overrides and ``--plugin`` files or modules added."""
+def _load(config, set_: list[str], plugins: list[str], model=None):
+    """The config file (or defaults) with ``--set`` overrides and ``--plugin`` files or modules added;
+    ``model``: the command's config model (default ExperimentConfig)."""
     from slam2d import config as config_mod
 
-    cfg = config_mod.load(config, set_)
+    cfg = config_mod.load(config, set_, model)
     if plugins:
         cfg.plugins = [*cfg.plugins, *(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugins)]
     return cfg

@@ -153,6 +153,8 @@ COMMANDS = {
     "run": ("slam2d.config:ExperimentConfig", "slam2d.experiment:run_experiment"),
     "segment": ("slam2d.segmentation.config:SegmentConfig", "slam2d.segmentation.run:run_segment"),
     "plan": ("slam2d.planning.config:PlanConfig", "slam2d.planning.run:run_plan"),
+    "navigate": ("slam2d.navigation.run:NavigateConfig", "slam2d.navigation.run:run_navigate"),
+    "explore": ("slam2d.exploration.config:ExploreConfig", "slam2d.exploration.run:run_explore"),
 }
 """Commands whose configs ``slam2d ablate`` sweeps: (config model, runner taking the config)."""
 
@@ -163,7 +165,7 @@ def _named(target: str):
 
 
 def command_model(command: str, key: str = "command"):
-    """The config model of ``command`` (run, segment or plan); InputError naming ``key`` otherwise."""
+    """The config model of ``command`` (a key of :data:`COMMANDS`); InputError naming ``key`` otherwise."""
     if command not in COMMANDS:
         raise InputError(key, f"unknown command {config_mod.short_repr(command)} ({', '.join(COMMANDS)})")
     return _named(COMMANDS[command][0])
@@ -171,7 +173,7 @@ def command_model(command: str, key: str = "command"):
 
 def run_command(cfg, quiet: bool = False) -> Path:
     """Run the config of any command of :data:`COMMANDS` into its results folder; return the folder."""
-    if isinstance(cfg, ExperimentConfig):
+    if type(cfg) is ExperimentConfig:
         return run_experiment(cfg, quiet=quiet)
     for model, runner in COMMANDS.values():
         if type(cfg) is _named(model):
@@ -364,7 +366,7 @@ SWEEP_KEYS = ("name", "command", "base", "config", "grid", "variants", "workers"
 def read_sweep(path: str | Path) -> Sweep:
     """Read a sweep file and check every variant's config before any runs.
 
-    Keys: ``command`` (run, segment or plan; default run); ``base`` (config path relative to
+    Keys: ``command`` (run, segment, plan, navigate or explore; default run); ``base`` (config path relative to
     the sweep file) or ``config`` (inline mapping); ``variants`` ([{name, set: {dotted key:
     value}}]) and/or ``grid`` ({dotted key: [values]}, Cartesian product), both given: every
     variant with every grid point; ``workers`` (default 2); ``summary`` (rows grouped by the

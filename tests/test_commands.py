@@ -66,8 +66,10 @@ def test_dump_config_of_each_command():
     dumped = yaml.safe_load(out)
     assert code == 0 and dumped["planning"]["hierarchy"] == "none"
     assert dumped["segmentation"]["method"] == "morphological"
-    code, out = _cli("dump-config", "--command", "explore")
-    assert code == 2 and "--command: unknown command 'explore'" in out
+    code, out = _cli("dump-config", "--command", "explore", "--set", "exploration.strategy=utility")
+    assert code == 0 and yaml.safe_load(out)["exploration"]["strategy"] == "utility"
+    code, out = _cli("dump-config", "--command", "localise")
+    assert code == 2 and "--command: unknown command 'localise'" in out
 
 
 def test_segment_config_and_flags_give_one_result(tmp_path):
@@ -151,7 +153,7 @@ def test_segment_sweep_variants_times_grid_with_summary(tmp_path):
 def test_sweep_checks_command_and_summary(tmp_path):
     path = _segment_sweep(tmp_path, ["m.png"])
     data = yaml.safe_load(path.read_text())
-    for key, value, message in [("command", "explore", "command: unknown command 'explore'"),
+    for key, value, message in [("command", "localise", "command: unknown command 'localise'"),
                                 ("summary", {"mean": ["recall"]}, "summary: expected a mapping with 'by'"),
                                 ("summary", {"by": ["map"], "avg": ["recall"]}, "summary: unknown key 'avg'")]:
         path.write_text(yaml.safe_dump({**data, key: value}))
@@ -160,6 +162,27 @@ def test_sweep_checks_command_and_summary(tmp_path):
     path.write_text(yaml.safe_dump({**data, "variants": [{"name": "x", "set": {"segmentation.methd": "voronoi"}}]}))
     with pytest.raises(InputError, match="variant 'x.*unknown key 'segmentation.methd'"):
         read_sweep(path)
+
+
+def test_navigate_sweep_runs_each_planner_and_explore_sweeps_are_checked(tmp_path):
+    """`command: navigate` drives the robot once per variant (the navigation metrics in the table);
+    an explore sweep validates its exploration section before running anything."""
+    sweep = tmp_path / "nav.yaml"
+    sweep.write_text(yaml.safe_dump({
+        "name": "nav", "command": "navigate", "workers": 1,
+        "config": {"navigation": {"slam": False, "goal": [10.0, 4.5]}, "output": {"figures": False}},
+        "grid": {"navigation.planner": ["dwa", "fsm"]}}))
+    folder, rows = run_sweep(sweep, quiet=True)
+    assert [r["error"] for r in rows] == ["", ""]
+    table = _csv(folder / "table.csv")
+    assert sorted(r["navigation.planner"] for r in table) == ["dwa", "fsm"]
+    assert all(r["status"] == "reached" for r in table), table
+    for r in rows:
+        written = yaml.safe_load((folder / r["folder"] / "config.yaml").read_text())
+        assert written["navigation"]["planner"] in r["variant"]
+    sweep.write_text(yaml.safe_dump({"command": "explore", "grid": {"exploration.strategy": ["utility", "bogus"]}}))
+    with pytest.raises(InputError, match="exploration.strategy"):
+        read_sweep(sweep)
 
 
 def test_sweep_of_real_floor_plans_matches_single_runs(tmp_path, data_file):

@@ -31,6 +31,11 @@ GIF_FRAMES = 120  # frames of the animation at most
 GIF_FPS = 10
 
 
+class NavigateConfig(ExperimentConfig):
+    """An experiment config run by ``slam2d navigate``: its ``navigation`` section drives the robot
+    (the type tells a sweep which command runs its variants)."""
+
+
 def run_navigate(cfg: ExperimentConfig) -> Path:
     """Run ``cfg``'s navigation; return the results folder."""
     from slam2d.experiment import results_folder
