@@ -21,6 +21,7 @@ __all__ = [
     "rotation",
     "as_pose",
     "adjoint",
+    "logmap",
     "compose_covariance",
 ]
 
@@ -138,10 +139,27 @@ def _interpolate_one(stamps: np.ndarray, poses: np.ndarray, q: float) -> np.ndar
 
 
 def adjoint(pose) -> np.ndarray:
-    """Adjoint (3, 3) of an SE(2) pose in (x, y, theta) tangent order, as gtsam.Pose2.AdjointMap."""
-    x, y, th = as_pose(pose)
-    c, s = np.cos(th), np.sin(th)
-    return np.array([[c, -s, y], [s, c, -x], [0.0, 0.0, 1.0]])
+    """Adjoints (..., 3, 3) of SE(2) poses (..., 3) in (x, y, theta) tangent order, as gtsam.Pose2.AdjointMap."""
+    p = as_pose(pose)
+    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+    out = np.zeros(p.shape[:-1] + (3, 3))
+    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = c, -s, p[..., 1]
+    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = s, c, -p[..., 0]
+    out[..., 2, 2] = 1.0
+    return out
+
+
+def logmap(pose) -> np.ndarray:
+    """SE(2) logarithms (..., 3) of poses (..., 3), as gtsam.Pose2.Logmap."""
+    p = as_pose(pose)
+    x, y, w = p[..., 0], p[..., 1], wrap_angle(p[..., 2])
+    c1, s = np.cos(w) - 1.0, np.sin(w)
+    small = np.abs(w) < 1e-10
+    det = np.where(small, 1.0, c1 * c1 + s * s)
+    ux, uy = c1 * x + s * y, -s * x + c1 * y  # R^T t - t
+    scale = np.where(small, 0.0, w / det)
+    vx, vy = np.where(small, x, -uy * scale), np.where(small, y, ux * scale)  # R(pi/2) (R^T t - t) w / det
+    return np.stack([vx, vy, w], -1)
 
 
 def compose_covariance(cov_a, b, cov_b) -> np.ndarray:

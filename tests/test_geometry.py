@@ -93,6 +93,16 @@ def test_adjoint_matches_gtsam(a):
     assert np.allclose(geometry.adjoint(a), P(a).AdjointMap(), atol=1e-9)
 
 
+@settings(max_examples=50, deadline=None)
+@given(pose, pose)
+def test_adjoint_and_logmap_of_many_poses_match_gtsam(a, b):
+    import gtsam
+
+    both = np.array([a, b])
+    assert np.allclose(geometry.adjoint(both), [P(a).AdjointMap(), P(b).AdjointMap()], atol=1e-9)
+    assert np.allclose(geometry.logmap(both), [gtsam.Pose2.Logmap(P(a)), gtsam.Pose2.Logmap(P(b))], atol=1e-7)
+
+
 def test_compose_covariance_matches_sampling():
     rng = np.random.default_rng(0)
     a, b = np.array([1.0, 0.5, 0.3]), np.array([0.8, -0.2, -0.5])

@@ -34,16 +34,6 @@ SUPPORT_WINDOW = 10  # vertices: the most each end of a partner loop (or a loop'
 CHI2_3DOF_99 = 11.344866730144373  # chi-square 99 % quantile, 3 degrees of freedom
 
 
-def _adjoint(p: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) adjoints of poses (..., 3), as gtsam.Pose2.AdjointMap."""
-    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
-    out = np.zeros(p.shape[:-1] + (3, 3))
-    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = c, -s, p[..., 1]
-    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = s, c, -p[..., 0]
-    out[..., 2, 2] = 1.0
-    return out
-
-
 def _sandwich(a: np.ndarray, s: np.ndarray) -> np.ndarray:
     """a s a^T over leading dimensions."""
     return a @ s @ np.swapaxes(a, -1, -2)
@@ -52,18 +42,6 @@ def _sandwich(a: np.ndarray, s: np.ndarray) -> np.ndarray:
 def _mahalanobis2(r: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """(P,) r^T cov^-1 r for residuals (P, 3) and covariances (P, 3, 3)."""
     return np.einsum("pi,pi->p", r, np.linalg.solve(cov, r[..., None])[..., 0])
-
-
-def logmap(p: np.ndarray) -> np.ndarray:
-    """(..., 3) SE(2) logarithm of poses (..., 3), as gtsam.Pose2.Logmap."""
-    x, y, w = p[..., 0], p[..., 1], geometry.wrap_angle(p[..., 2])
-    c1, s = np.cos(w) - 1.0, np.sin(w)
-    small = np.abs(w) < 1e-10
-    det = np.where(small, 1.0, c1 * c1 + s * s)
-    ux, uy = c1 * x + s * y, -s * x + c1 * y  # R^T t - t
-    scale = np.where(small, 0.0, w / det)
-    vx, vy = np.where(small, x, -uy * scale), np.where(small, y, ux * scale)  # R(pi/2) (R^T t - t) w / det
-    return np.stack([vx, vy, w], -1)
 
 
 def edge_rows(graph: g2o.PoseGraphFile) -> tuple[np.ndarray, np.ndarray]:
@@ -82,7 +60,7 @@ def edge_chi2(graph: g2o.PoseGraphFile, poses) -> np.ndarray:
     """(M,) squared whitened residual of every edge at ``poses`` (N, 3), no robust kernel."""
     a, b = edge_rows(graph)
     poses = np.asarray(poses, dtype=np.float64)
-    r = logmap(geometry.between(graph.measurements, geometry.between(poses[a], poses[b])))
+    r = geometry.logmap(geometry.between(graph.measurements, geometry.between(poses[a], poses[b])))
     return np.einsum("mi,mij,mj->m", r, graph.information, r)
 
 
@@ -109,7 +87,7 @@ class OdometryChain:
         covariances (P, 3, 3) in the frame of ``y`` (ranks of one segment)."""
         rel = geometry.between(self.dead[x], self.dead[y])
         world = np.where((y >= x)[:, None, None], self.prefix[y] - self.prefix[x], self.prefix[x] - self.prefix[y])
-        return rel, _sandwich(np.linalg.inv(_adjoint(self.dead[y])), world)
+        return rel, _sandwich(np.linalg.inv(geometry.adjoint(self.dead[y])), world)
 
 
 def odometry_chain(graph: g2o.PoseGraphFile) -> OdometryChain:
@@ -124,7 +102,7 @@ def odometry_chain(graph: g2o.PoseGraphFile) -> OdometryChain:
     c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
     moves = np.column_stack([c * step[:, 0] - s * step[:, 1], s * step[:, 0] + c * step[:, 1]])
     dead = np.column_stack([np.vstack([[0.0, 0.0], np.cumsum(moves, 0)]), theta])
-    world = _sandwich(_adjoint(dead[1:]), cov)
+    world = _sandwich(geometry.adjoint(dead[1:]), cov)
     prefix = np.concatenate([np.zeros((1, 3, 3)), np.cumsum(world, 0)])
     return OdometryChain(dead, prefix, np.r_[0, np.cumsum(~linked)])
 
@@ -137,7 +115,7 @@ def _loops_forward(graph: g2o.PoseGraphFile):
     a, b = ra[loops], rb[loops]
     z, cov = graph.measurements[loops].copy(), np.linalg.inv(graph.information[loops])
     flip = a > b
-    cov[flip] = _sandwich(_adjoint(z[flip]), cov[flip])  # covariance of the inverse measurement
+    cov[flip] = _sandwich(geometry.adjoint(z[flip]), cov[flip])  # covariance of the inverse measurement
     z[flip] = geometry.inverse(z[flip])
     a[flip], b[flip] = b[flip], a[flip]
     return loops, a, b, z, cov
@@ -161,14 +139,14 @@ def pairwise_support(graph: g2o.PoseGraphFile, window: int = SUPPORT_WINDOW,
         k, m = k[same], m[same]
         o_ac, c_ac = chain.relative(a[k], a[m])
         o_bd, c_bd = chain.relative(b[k], b[m])
-        r = logmap(geometry.between(geometry.compose(z[k], o_bd), geometry.compose(o_ac, z[m])))
-        s = (_sandwich(_adjoint(geometry.inverse(o_bd)), cov[k]) + c_bd
-             + _sandwich(_adjoint(geometry.inverse(z[m])), c_ac) + cov[m])
+        r = geometry.logmap(geometry.between(geometry.compose(z[k], o_bd), geometry.compose(o_ac, z[m])))
+        s = (_sandwich(geometry.adjoint(geometry.inverse(o_bd)), cov[k]) + c_bd
+             + _sandwich(geometry.adjoint(geometry.inverse(z[m])), c_ac) + cov[m])
         good = _mahalanobis2(r, s) <= gate
         support[k[good]] = support[m[good]] = True
     short = np.flatnonzero((b - a <= window) & (seg[a] == seg[b]))
     o, c = chain.relative(a[short], b[short])
-    support[short[_mahalanobis2(logmap(geometry.between(z[short], o)), cov[short] + c) <= gate]] = True
+    support[short[_mahalanobis2(geometry.logmap(geometry.between(z[short], o)), cov[short] + c) <= gate]] = True
     out = np.ones(len(graph.i), bool)
     out[loops] = support
     return out
