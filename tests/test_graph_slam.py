@@ -37,59 +37,6 @@ def test_without_loop_closure_the_graph_keeps_the_frontend_chain():
     assert np.allclose(chained, plain, atol=1e-6)
 
 
-def _fused_run(odom_sigma_deg, wild_step_at=None, steps=600, seed=0):
-    """A 0.25 m-per-scan path; the frontend's heading noise is 0.3 deg per scan (honestly reported),
-    the odometry's ``odom_sigma_deg``. Returns the heading error RMS (deg) per scan of the fused
-    chain and of the frontend alone, and the back end's stats."""
-    from slam2d.backend.slam import GraphSlamBackend
-    from slam2d.config import BackendConfig
-    from slam2d.types import Scan
-
-    rng = np.random.default_rng(seed)
-    sigma_f = np.array([0.005, 0.005, np.deg2rad(0.3)])
-    true = np.column_stack([np.full(steps, 0.25), np.zeros(steps), np.deg2rad(2.0) * np.sin(np.arange(steps) / 20)])
-    frontend = true + rng.normal(0, sigma_f, (steps, 3))
-    odometry = true + rng.normal(0, [0.005, 0.005, np.deg2rad(odom_sigma_deg)], (steps, 3))
-    if wild_step_at is not None:
-        odometry[wild_step_at] += [0.8, 0.3, np.deg2rad(40.0)]
-    cfg = BackendConfig(name="pose_graph")
-    cfg.loop_closure.enabled = False
-    backend = GraphSlamBackend(cfg)
-    odom_pose, no_points = np.zeros(3), np.full(4, np.nan)
-    for k in range(steps + 1):
-        if k:
-            odom_pose = geometry.compose(odom_pose, odometry[k - 1])
-        scan = Scan(float(k), no_points, np.linspace(-1, 1, 4), 0.1, 30.0, odom=odom_pose.copy(), index=k)
-        delta = frontend[k - 1] if k else np.zeros(3)
-        backend.add(scan, FrontendResult(delta=delta, information=np.diag(1 / sigma_f**2), confidence=1.0))
-    poses = backend.finish()
-    est_steps = geometry.between(poses[:-1], poses[1:])
-
-    def rms(steps_):
-        return float(np.rad2deg(np.sqrt(np.mean(geometry.wrap_angle(steps_[:, 2] - true[:, 2]) ** 2))))
-
-    return rms(est_steps), rms(frontend), backend.stats
-
-
-def test_odometry_that_agrees_with_the_scans_is_fused():
-    """Odometry three times steadier than the matcher: the learnt noise lets it count, the chain's heading steps
-    are clearly better than the frontend's alone."""
-    fused, frontend, stats = _fused_run(odom_sigma_deg=0.1)
-    assert stats["odometry fused"] > 500
-    assert fused < 0.6 * frontend, (fused, frontend)
-
-
-def test_odometry_that_drifts_adds_nothing_and_a_wild_step_is_not_fused():
-    """Odometry ten times noisier than the matcher barely moves the chain; a single wild step (0.8 m, 40 deg)
-    is counted as a disagreement and left out."""
-    fused, frontend, stats = _fused_run(odom_sigma_deg=3.0, wild_step_at=300)
-    assert fused < 1.02 * frontend, (fused, frontend)
-    assert stats["odometry disagreed"] >= 1
-    fused, frontend, stats = _fused_run(odom_sigma_deg=0.1, wild_step_at=300)
-    assert stats["odometry disagreed"] >= 1
-    assert fused < 0.6 * frontend, (fused, frontend)
-
-
 @register_frontend("test_landmark_odometry")
 class LandmarkOdometry:
     """Odometry plus exact range-bearing observations of fixed pillars (uses ground truth)."""

@@ -8,36 +8,18 @@ matcher's score, enters the graph under the robust kernel, and is removed
 after the batch optimisation if the optimised graph cannot accommodate it
 (chi-square test on its residual, see ``PoseGraph.optimize_batch``). Poses
 for every scan are keyframe poses composed with the scan's offset from its keyframe.
-
-Wheel odometry joins each keyframe's between factor as a second measurement,
-weighted by how well it has agreed with the frontend so far: its noise is the
-robust spread (1.4826 x median absolute value, per component) of the
-odometry-minus-frontend residuals over the last ``ODOMETRY_HISTORY`` keyframe
-intervals in which the frontend matched every scan, never below the frontend's
-own noise (the residual holds both: odometry counts at most as much as the
-match). A frontend that passes odometry on teaches nothing. Odometry that agrees with
-the scans to a tenth of a degree per keyframe (the Freiburg clinic's) then
-counts about as much as the match; odometry that drifts degrees per metre
-(Intel's, MIT-CSAIL's) adds nothing. A residual beyond the chi-square 99 %
-bound of both noises is not fused and counted as ``odometry disagreed``.
 """
 
 from __future__ import annotations
 
-from collections import Counter, deque
+from collections import Counter
 
 import numpy as np
 
 from slam2d import geometry
-from slam2d.backend.pose_graph import CHI2_3DOF_99
 from slam2d.config import BackendConfig
 from slam2d.frontends.base import FrontendResult
 from slam2d.types import Scan
-
-
-ODOMETRY_HISTORY = 500  # keyframe intervals whose odometry-vs-frontend residuals set the odometry noise
-ODOMETRY_MIN_HISTORY = 20  # ... fewer: odometry is not fused
-IDENTICAL = 1e-9  # m, rad: a residual this small means the frontend passed the odometry on (nothing learnt)
 
 
 class GraphSlamBackend:
@@ -57,28 +39,20 @@ class GraphSlamBackend:
         self._cov = np.zeros((3, 3))
         self._travelled = 0.0
         self._searches = 0  # loop searches so far
-        self._keyframe_odom = np.zeros(3)  # odometry pose of the latest keyframe's scan
-        self._matched_every_scan = True  # the frontend matched every scan since the latest keyframe
-        self._odometry_residuals: deque[np.ndarray] = deque(maxlen=ODOMETRY_HISTORY)
 
     def add(self, scan: Scan, result: FrontendResult) -> None:
         """Take one scan and its frontend result (``result.delta`` unused for the first)."""
         if not self._scan_keyframe:
             self._new_keyframe(scan, np.asarray(scan.odom, float), None, None, result.landmarks)
-            self._keyframe_odom = np.asarray(scan.odom, float)
             return
         cov = np.linalg.inv(result.information)
         self._cov = geometry.compose_covariance(self._cov, result.delta, cov)
         self._delta = geometry.compose(self._delta, result.delta)
         self._travelled += float(np.hypot(*result.delta[:2]))
-        self._matched_every_scan &= result.confidence > 0
         if self._is_keyframe(self._delta):
             prev = self._scan_keyframe[-1]
-            odom = np.asarray(scan.odom, float)
-            delta, information = self._with_odometry(geometry.between(self._keyframe_odom, odom))
-            pose = geometry.compose(self.graph.pose(prev), delta)
-            self._new_keyframe(scan, pose, delta, information, result.landmarks)
-            self._keyframe_odom, self._matched_every_scan = odom, True
+            pose = geometry.compose(self.graph.pose(prev), self._delta)
+            self._new_keyframe(scan, pose, self._delta, np.linalg.inv(self._cov), result.landmarks)
         else:
             self._scan_keyframe.append(self._scan_keyframe[-1])
             self._scan_offset.append(self._delta.copy())
@@ -96,25 +70,6 @@ class GraphSlamBackend:
     def scan_anchors(self, start: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Keyframe key (M,) and pose in that keyframe's frame (M, 3) of scans ``start`` onwards."""
         return np.array(self._scan_keyframe[start:], dtype=int), np.array(self._scan_offset[start:]).reshape(-1, 3)
-
-    def _with_odometry(self, odom_delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The keyframe delta (3,) and information (3, 3) of the frontend's composed delta fused with
-        the odometry's ``odom_delta`` (3,) under the odometry noise learnt so far (see the module doc)."""
-        delta, information = self._delta, np.linalg.inv(self._cov)
-        residual = geometry.between(delta, odom_delta)
-        fuse = len(self._odometry_residuals) >= ODOMETRY_MIN_HISTORY and np.all(np.isfinite(odom_delta))
-        if fuse:
-            spread = 1.4826 * np.median(np.abs(np.array(self._odometry_residuals)), axis=0)
-            odom_information = np.diag(1.0 / np.maximum(spread, np.sqrt(np.diag(self._cov))) ** 2)
-            if residual @ np.linalg.solve(self._cov + np.linalg.inv(odom_information), residual) > CHI2_3DOF_99:
-                self.stats["odometry disagreed"] += 1
-            else:
-                information = information + odom_information
-                delta = geometry.compose(delta, np.linalg.solve(information, odom_information @ residual))
-                self.stats["odometry fused"] += 1
-        if self._matched_every_scan and np.all(np.isfinite(residual)) and np.abs(residual).max() > IDENTICAL:
-            self._odometry_residuals.append(residual)
-        return delta, information
 
     def _is_keyframe(self, delta: np.ndarray) -> bool:
         return bool(
