@@ -63,6 +63,14 @@ def _match(stamps: np.ndarray, query: np.ndarray, tolerance: float) -> tuple[np.
     return k, np.abs(stamps[k] - query) <= tolerance
 
 
+def _endpoints(stamps: np.ndarray, relations: Relations, tolerance: float):
+    """Index into ``stamps`` (any order) of each relation's two ends, and whether both lie within ``tolerance`` s."""
+    order = np.argsort(stamps, kind="stable")
+    k1, ok1 = _match(stamps[order], relations.t1, tolerance)
+    k2, ok2 = _match(stamps[order], relations.t2, tolerance)
+    return order[k1], order[k2], ok1 & ok2
+
+
 def _mean_std(values: np.ndarray) -> tuple[float, float]:
     """Mean and sample std (n - 1, as Cartographer); NaN when undefined."""
     mean = float(np.mean(values)) if len(values) else float("nan")
@@ -87,11 +95,8 @@ def relations_metric(stamps, poses, relations: Relations, tolerance: float = 1e-
         raise ValueError(f"{len(stamps)} stamps but {len(poses)} poses")
     if len(stamps) == 0:
         raise ValueError("empty trajectory")
-    order = np.argsort(stamps, kind="stable")
-    k1, ok1 = _match(stamps[order], relations.t1, tolerance)
-    k2, ok2 = _match(stamps[order], relations.t2, tolerance)
-    ok = ok1 & ok2
-    p1, p2 = poses[order[k1[ok]]], poses[order[k2[ok]]]
+    i1, i2, ok = _endpoints(stamps, relations, tolerance)
+    p1, p2 = poses[i1[ok]], poses[i2[ok]]
     err = geometry.compose(geometry.between(p1, p2), geometry.inverse(relations.delta[ok]))
     trans = np.hypot(err[:, 0], err[:, 1])
     rot = np.rad2deg(np.abs(err[:, 2]))
@@ -122,15 +127,13 @@ def relations_frame(stamps, odometry, mounts, relations: Relations, tolerance: f
     odometry = geometry.as_pose(odometry).reshape(-1, 3)
     mounts = geometry.as_pose(mounts).reshape(-1, 3)
     stamps = np.asarray(stamps, dtype=np.float64).reshape(-1)
-    order = np.argsort(stamps, kind="stable")
-    k1, ok1 = _match(stamps[order], relations.t1, tolerance)
-    k2, ok2 = _match(stamps[order], relations.t2, tolerance)
-    test = ok1 & ok2 & (np.abs(relations.t2 - relations.t1) <= FRAME_TEST_MAX_S)
+    i1, i2, test = _endpoints(stamps, relations, tolerance)
+    test &= np.abs(relations.t2 - relations.t1) <= FRAME_TEST_MAX_S
     test &= np.abs(relations.delta[:, 2]) >= FRAME_TEST_MIN_TURN
     evidence: dict = {"tested": int(test.sum())}
     if not test.any() or not np.abs(mounts[:, :2]).any():
         return "laser", evidence
-    i1, i2 = order[k1[test]], order[k2[test]]
+    i1, i2 = i1[test], i2[test]
     for frame, poses in (("base", odometry), ("laser", geometry.compose(odometry, mounts))):
         d = geometry.between(poses[i1], poses[i2])
         evidence[f"{frame}_median_m"] = float(np.median(np.hypot(*(d[:, :2] - relations.delta[test, :2]).T)))
