@@ -119,7 +119,8 @@ def ablate(
 @app.command("dump-config")
 def dump_config(
     config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT,
-    command: str = typer.Option("run", "--command", help="whose config: run, segment, plan, navigate or explore"),
+    command: str = typer.Option("run", "--command",
+                                help="whose config: run, segment, plan, navigate, explore or localize"),
 ) -> None:
     """Print the fully resolved config (defaults included) as YAML."""
     from slam2d import config as config_mod
@@ -388,21 +389,21 @@ def explore(
 
 @app.command()
 def localize(
-    map_path: str = typer.Argument(..., help="map.yaml (a slam2d run or map_server), floor-plan PNG, or 'office'"),
+    map_path: Optional[str] = typer.Argument(None, help="map.yaml (a slam2d run or map_server), floor-plan PNG, "
+                                             "or 'office' (the config's map)"),
     dataset: Optional[Path] = typer.Option(None, help="experiment YAML whose dataset is the scan log "
                                            "(default: the simulated robot wandering the map's world)"),
-    config: Optional[Path] = typer.Option(None, "--config", "-c", help="localize YAML (mode, preset, mcl, ...)"),
+    config: Optional[Path] = CONFIG_OPT,
     set_: list[str] = SET_OPT,
-    root: Path = OUT_OPT,
+    root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Monte Carlo localisation on a known map: estimate vs truth, errors, particle clouds, metrics."""
-    from slam2d.localization.run import load_localize_config, run_localize
+    from slam2d.localization.run import run_localize
 
     with _command(quiet):
-        cfg = load_localize_config(config, set_)
-        experiment = _load(dataset, [], []) if dataset else None
-        folder = run_localize(map_path, cfg, experiment, root)
+        cfg = _command_config("localize", config, set_, {"map": map_path, "dataset": dataset, "output.root": root})
+        folder = run_localize(cfg)
     typer.echo(f"results: {folder}")
 
 

@@ -155,6 +155,7 @@ COMMANDS = {
     "plan": ("slam2d.planning.config:PlanConfig", "slam2d.planning.run:run_plan"),
     "navigate": ("slam2d.navigation.run:NavigateConfig", "slam2d.navigation.run:run_navigate"),
     "explore": ("slam2d.exploration.config:ExploreConfig", "slam2d.exploration.run:run_explore"),
+    "localize": ("slam2d.localization.config:LocalizeConfig", "slam2d.localization.run:run_localize"),
 }
 """Commands whose configs ``slam2d ablate`` sweeps: (config model, runner taking the config)."""
 
@@ -366,7 +367,7 @@ SWEEP_KEYS = ("name", "command", "base", "config", "grid", "variants", "workers"
 def read_sweep(path: str | Path) -> Sweep:
     """Read a sweep file and check every variant's config before any runs.
 
-    Keys: ``command`` (run, segment, plan, navigate or explore; default run); ``base`` (config path relative to
+    Keys: ``command`` (a key of :data:`COMMANDS`; default run); ``base`` (config path relative to
     the sweep file) or ``config`` (inline mapping); ``variants`` ([{name, set: {dotted key:
     value}}]) and/or ``grid`` ({dotted key: [values]}, Cartesian product), both given: every
     variant with every grid point; ``workers`` (default 2); ``summary`` (rows grouped by the

@@ -68,6 +68,9 @@ def test_dump_config_of_each_command():
     assert dumped["segmentation"]["method"] == "morphological"
     code, out = _cli("dump-config", "--command", "explore", "--set", "exploration.strategy=utility")
     assert code == 0 and yaml.safe_load(out)["exploration"]["strategy"] == "utility"
+    code, out = _cli("dump-config", "--command", "localize", "--set", "preset=amcl", "--set", "figures=false")
+    dumped = yaml.safe_load(out)  # the short keys land in their sections
+    assert code == 0 and dumped["localization"]["preset"] == "amcl" and dumped["output"]["figures"] is False
     code, out = _cli("dump-config", "--command", "localise")
     assert code == 2 and "--command: unknown command 'localise'" in out
 
@@ -182,6 +185,30 @@ def test_navigate_sweep_runs_each_planner_and_explore_sweeps_are_checked(tmp_pat
         assert written["navigation"]["planner"] in r["variant"]
     sweep.write_text(yaml.safe_dump({"command": "explore", "grid": {"exploration.strategy": ["utility", "bogus"]}}))
     with pytest.raises(InputError, match="exploration.strategy"):
+        read_sweep(sweep)
+
+
+def test_localize_sweep_runs_each_preset(tmp_path):
+    """`command: localize` localises once per variant on a small floor plan: both presets track the
+    simulated robot, each with its own update trigger and particle count (amcl keeps its maximum)."""
+    plan = _write_plan(tmp_path)
+    sweep = tmp_path / "loc.yaml"
+    sweep.write_text(yaml.safe_dump({
+        "name": "loc", "command": "localize", "workers": 2,
+        "config": {"map": str(plan), "localization": {"mode": "tracking", "seconds": 10},
+                   "output": {"figures": False, "root": str(tmp_path / "out")}},
+        "grid": {"localization.preset": ["slam2d", "amcl"]}}))
+    folder, rows = run_sweep(sweep, quiet=True)
+    table = {r["localization.preset"]: r for r in _csv(folder / "table.csv")}
+    assert sorted(table) == ["amcl", "slam2d"] and [r["error"] for r in rows] == ["", ""]
+    for row in table.values():
+        assert 0 < float(row["position_rmse"]) < 0.2 and int(row["updates"]) > 0
+    assert int(table["amcl"]["updates"]) < int(table["slam2d"]["updates"])  # 0.2 m between updates, not 0.1 m
+    assert float(table["amcl"]["particles_median"]) == 5000 > float(table["slam2d"]["particles_median"])
+    written = yaml.safe_load((folder / table["amcl"]["folder"] / "config.yaml").read_text())
+    assert written["localization"]["mcl"]["max_particles"] == 5000  # the preset resolved
+    sweep.write_text(yaml.safe_dump({"command": "localize", "grid": {"localization.preset": ["amcl", "bogus"]}}))
+    with pytest.raises(InputError, match="localization.preset"):
         read_sweep(sweep)
 
 

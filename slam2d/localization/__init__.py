@@ -1,6 +1,6 @@
 """slam2d.localization: Monte Carlo localisation on a known map (augmented MCL, KLD sampling)."""
 
-from slam2d.localization.config import LocalizeConfig, MclConfig, amcl_config, preset
+from slam2d.localization.config import LocalizationConfig, LocalizeConfig, MclConfig, amcl_config, preset
 from slam2d.localization.maps import KnownMap
 from slam2d.localization.mcl import Estimate, ParticleFilter, kld_limit
 from slam2d.localization.navigation import MclPoseSource
@@ -8,6 +8,7 @@ from slam2d.localization.navigation import MclPoseSource
 __all__ = [
            "Estimate",
            "KnownMap",
+           "LocalizationConfig",
            "LocalizeConfig",
            "MclConfig",
            "MclPoseSource",

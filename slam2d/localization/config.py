@@ -6,11 +6,11 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
-from slam2d.config import Section
+from slam2d.config import CommandConfig, Section
 
-__all__ = ["PRESETS", "MclConfig", "amcl_config", "preset"]
+__all__ = ["PRESETS", "LocalizationConfig", "LocalizeConfig", "MclConfig", "amcl_config", "preset"]
 
 
 class MclConfig(Section):
@@ -97,11 +97,9 @@ def preset(name: str) -> MclConfig:
     return PRESETS[name]()
 
 
-class LocalizeConfig(Section):
-    """``slam2d localize``: one localisation run on a known map — a config in, a results folder out."""
+class LocalizationConfig(Section):
+    """What is localised and how: the scan stream (the simulated robot or a log) and the filter's parameters."""
 
-    name: str = Field("localize", description="results folder name")
-    seed: int = Field(0, ge=0, lt=2**63, description="one seed for the drive and the filter")
     mode: Literal["global", "tracking"] = Field("global", description="no initial pose, or a rough one")
     initial_pose: tuple[float, float, float] | None = Field(
         None, description="tracking: x, y (m), heading (rad); None: the first true (or reference) pose")
@@ -117,10 +115,9 @@ class LocalizeConfig(Section):
     reference: str | None = Field(None, description="log runs: TUM reference (default: trajectory.tum beside "
                                   "the map)")
     max_scans: int | None = Field(None, gt=0, description="log runs: stop after this many scans")
-    figures: bool = True
 
     def filter_config(self) -> MclConfig:
-        """The preset with the ``mcl`` keys over it (unknown keys are an error)."""
+        """The preset with the ``mcl`` keys over it (an InputError names an unknown or bad key)."""
         from pydantic import ValidationError
 
         from slam2d.errors import InputError
@@ -132,3 +129,38 @@ class LocalizeConfig(Section):
             key = ".".join(str(p) for p in e["loc"])
             what = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
             raise InputError(f"mcl.{key}", what) from None
+
+
+class LocalizeConfig(CommandConfig):
+    """``slam2d localize``: the map (a file, or ``office``), the scan log (or the simulated robot) and the
+    ``localization`` section. The section's keys are also accepted at the top level (``--set preset=amcl``,
+    a flat localize YAML), as is ``figures`` (``output.figures``)."""
+
+    dataset: str | None = Field(None, description="experiment YAML whose dataset section is the scan log "
+                                "(None: the simulated robot wandering the map's world)")
+    localization: LocalizationConfig = LocalizationConfig()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _short_keys(cls, data):
+        """Top-level keys of the ``localization`` section moved into it; ``figures`` into ``output``."""
+        if not isinstance(data, dict):
+            return data
+        data = dict(data)
+        _move(data, "localization", set(LocalizationConfig.model_fields))
+        _move(data, "output", {"figures"})
+        return data
+
+    def filter_config(self) -> MclConfig:
+        """The filter's parameters (:meth:`LocalizationConfig.filter_config`)."""
+        return self.localization.filter_config()
+
+
+def _move(data: dict, section: str, keys: set[str]) -> None:
+    """Move the top-level ``keys`` of ``data`` into its mapping ``section`` (a given key wins over the section's);
+    a section that is not a mapping is left for validation to report."""
+    given = {k: data[k] for k in keys & set(data)}
+    if given and isinstance(data.get(section, {}), dict):
+        data[section] = {**data.get(section, {}), **given}
+        for k in given:
+            del data[k]

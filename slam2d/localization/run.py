@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from slam2d import geometry
 from slam2d.errors import InputError
@@ -29,63 +28,71 @@ from slam2d.localization.scenario import Stream, Track
 
 log = logging.getLogger(__name__)
 
-__all__ = ["load_localize_config", "localize", "log_stream", "metrics_of", "run_localize"]
+__all__ = ["localize", "log_stream", "metrics_of", "run_localize"]
+
+KNOWN_MAP_RESOLUTION = 0.05  # m per pixel of a floor-plan image unless `resolution` says otherwise
 
 
-def load_localize_config(path: Path | None, overrides: list[str]) -> LocalizeConfig:
-    """The localize config in ``path`` (or defaults) with ``--set key=value`` overrides; one-line errors."""
-    from pydantic import ValidationError
-
-    from slam2d import config as config_mod
-
-    data = config_mod.load_dict(path) if path else {}
-    for key, value in map(config_mod.parse_override, overrides):
-        config_mod.set_key(data, key, value)
-    try:
-        cfg = LocalizeConfig.model_validate(data)
-    except ValidationError as err:
-        raise config_mod._format_error(err, str(path) if path else "localize config") from None
-    cfg.filter_config()  # the mcl keys are checked before any work
-    return cfg
-
-
-def run_localize(map_path, cfg: LocalizeConfig, dataset=None, root: str | Path = "results") -> Path:
-    """Localise on ``map_path`` with the scans of ``dataset`` (an ExperimentConfig; None: the simulator)
-    into a new results folder under ``root``; returns it."""
+def run_localize(cfg: LocalizeConfig) -> Path:
+    """Localise on ``cfg.map`` with the scans of ``cfg.dataset`` (None: the simulated robot) into a new
+    results folder under ``cfg.output.root``; return it."""
     from slam2d.experiment import results_folder
 
-    known = KnownMap.load(map_path)  # before any folder is made
-    with results_folder(root, cfg.name, "--out") as (work, published):
-        metrics = localize(known, cfg, work, map_path=Path(str(map_path)), dataset=dataset)
+    cfg.filter_config()  # the mcl keys are checked before any work
+    map_path = _map_path(cfg.map)
+    known = KnownMap.load(map_path, cfg.resolution or KNOWN_MAP_RESOLUTION)
+    dataset = _dataset(cfg.dataset)
+    with results_folder(cfg.output.root, cfg.name or "localize") as (work, published):
+        metrics = localize(known, cfg, work, map_path=map_path, dataset=dataset)
         log.info("position RMSE %.3f m, heading RMSE %.2f deg, median %d particles, %.1f ms per update",
                  metrics["position_rmse"], metrics["heading_rmse_deg"], metrics["particles_median"],
                  metrics["update_ms_median"])  # fmt: skip
     return published[0]
 
 
+def _map_path(name: str | None) -> Path:
+    """The map file ``name`` names (here or under SLAM2D_DATA), or ``office``."""
+    from slam2d.datasets.registry import resolve_data_path
+
+    if name is None:
+        raise InputError("map", "no map given (map: FILE in the config, or slam2d localize MAP)")
+    return Path(name) if name == "office" else resolve_data_path(name, key="map")
+
+
+def _dataset(path: str | None):
+    """The experiment config whose dataset section is the scan log, or None (the simulator)."""
+    if path is None:
+        return None
+    from slam2d import config as config_mod
+    from slam2d.datasets.registry import resolve_data_path
+
+    return config_mod.load(resolve_data_path(path, key="dataset"))
+
+
 def localize(known: KnownMap, cfg: LocalizeConfig, out: Path, map_path: Path | None = None,
              dataset=None) -> dict[str, Any]:  # fmt: skip
     """One run into the folder ``out``; returns the metrics."""
+    from slam2d import config as config_mod
     from slam2d.experiment import json_text
     from slam2d.localization.mcl import ParticleFilter
     from slam2d.localization.scenario import replay
 
-    mcl = cfg.filter_config()
-    (out / "config.yaml").write_text(yaml.safe_dump({**cfg.model_dump(mode="json"), "mcl": mcl.model_dump()},
-                                                    sort_keys=False))  # fmt: skip
+    loc, mcl = cfg.localization, cfg.filter_config()
+    resolved = cfg.model_copy(update={"localization": loc.model_copy(update={"mcl": mcl.model_dump()})})
+    (out / "config.yaml").write_text(config_mod.dump(resolved))
     stream, truth_name = (_sim_stream(known, cfg, map_path) if dataset is None
                           else log_stream(dataset, cfg, map_path))  # fmt: skip
     if not stream.scans:
         raise InputError("dataset", "no scans to localise with")
     pf = ParticleFilter(known, mcl, stream.scans[0].range_max, seed=cfg.seed)
-    if cfg.mode == "global":
+    if loc.mode == "global":
         pf.init_global()
     else:
-        start = cfg.initial_pose if cfg.initial_pose is not None else stream.truth[0]
+        start = loc.initial_pose if loc.initial_pose is not None else stream.truth[0]
         if not np.isfinite(np.asarray(start, dtype=np.float64)).all():
             raise InputError("initial_pose", "tracking needs an initial pose (no reference pose at the first scan)")
         pf.init_pose(start)
-    track = replay(pf, stream, "updates" if cfg.figures else ())
+    track = replay(pf, stream, "updates" if cfg.output.figures else ())
     metrics = metrics_of(stream, track, pf)
     metrics["reference"] = truth_name
     _write_results(out, stream, track, metrics, known, cfg)
@@ -100,7 +107,7 @@ def _sim_stream(known: KnownMap, cfg: LocalizeConfig, map_path: Path | None) -> 
     from slam2d.localization.scenario import wander
     from slam2d.sim.world import load_world
 
-    world_name = cfg.world
+    world_name = cfg.localization.world
     if world_name is None:
         if map_path is not None and (str(map_path) == "office" or map_path.suffix.lower() == ".png"):
             world_name = str(map_path)
@@ -108,7 +115,8 @@ def _sim_stream(known: KnownMap, cfg: LocalizeConfig, map_path: Path | None) -> 
             raise InputError("world", "a simulated run on a map.yaml needs a world: --set world=office (or a PNG), "
                              "or a log: --dataset EXPERIMENT.yaml")
     world = load_world(world_name)
-    return wander(world, known, cfg.seconds, cfg.seed, kidnap_at=cfg.kidnap, min_jump=cfg.min_jump), "truth"
+    loc = cfg.localization
+    return wander(world, known, loc.seconds, cfg.seed, kidnap_at=loc.kidnap, min_jump=loc.min_jump), "truth"
 
 
 def log_stream(dataset, cfg: LocalizeConfig, map_path: Path | None) -> tuple[Stream, str]:
@@ -117,10 +125,11 @@ def log_stream(dataset, cfg: LocalizeConfig, map_path: Path | None) -> tuple[Str
     from slam2d.datasets.registry import open_dataset
     from slam2d.evaluation.trajectory import read_tum
 
-    source = open_dataset(dataset.dataset.model_copy(update={"max_scans": cfg.max_scans or
+    loc = cfg.localization
+    source = open_dataset(dataset.dataset.model_copy(update={"max_scans": loc.max_scans or
                                                              dataset.dataset.max_scans}), seed=cfg.seed)
     scans = list(source)
-    ref_path = Path(cfg.reference) if cfg.reference else (map_path.parent / "trajectory.tum" if map_path else None)
+    ref_path = Path(loc.reference) if loc.reference else (map_path.parent / "trajectory.tum" if map_path else None)
     stamps = np.array([s.stamp for s in scans])
     truth = np.full((len(scans), 3), np.nan)
     name = "none"
@@ -130,8 +139,8 @@ def log_stream(dataset, cfg: LocalizeConfig, map_path: Path | None) -> tuple[Str
         if inside.any():
             truth[inside] = geometry.interpolate(ref.stamps, ref.poses, stamps[inside])
         name = str(ref_path)
-    elif cfg.reference:
-        raise InputError("reference", f"{cfg.reference}: trajectory file not found")
+    elif loc.reference:
+        raise InputError("reference", f"{loc.reference}: trajectory file not found")
     odom = np.array([s.odom for s in scans]).reshape(-1, 3)
     moved = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(odom[:, :2], axis=0).T))])
     return Stream(scans, truth, moved, []), name
@@ -196,7 +205,7 @@ def _write_results(out: Path, stream: Stream, track: Track, metrics: dict, known
                             track.particles, track.share])  # fmt: skip
     np.savetxt(out / "error.csv", rows, delimiter=",", fmt="%.6g",
                header="t_s,position_error_m,heading_error_deg,particles,cluster_share", comments="")
-    if cfg.figures:
+    if cfg.output.figures:
         _figures(out, stream, track, known, cfg)
 
 
@@ -209,8 +218,8 @@ def _snapshot_choice(stream: Stream, track: Track, cfg) -> dict[str, int]:
     if len(kept) == 0:
         return {}
     t = stream.stamps - stream.stamps[0]
-    if cfg.snapshots:
-        wanted = {f"t{s:g}s": int(np.searchsorted(t, s)) for s in cfg.snapshots}
+    if cfg.localization.snapshots:
+        wanted = {f"t{s:g}s": int(np.searchsorted(t, s)) for s in cfg.localization.snapshots}
     else:
         conv = converged_at(track)
         wanted = {"first_update": int(kept[0])}
