@@ -72,21 +72,29 @@ def _command(quiet: bool, what: str = "no results folder written"):
             _fail(err)
 
 
+VIZ_OPT = typer.Option(False, "--viz", help="stream the run to the rerun viewer ([viz] extra)")
+VIZ_SAVE_OPT = typer.Option(None, "--viz-save", help="record the live view to FILE.rrd instead")
+
+
+def _viz_target(viz: bool, viz_save: Optional[Path]):
+    """What the live view streams to: ``"viewer"``, the ``.rrd`` file, or None (no view)."""
+    if viz and viz_save:
+        raise InputError("--viz-save", "give --viz (a live viewer) or --viz-save FILE.rrd, not both")
+    return viz_save or ("viewer" if viz else None)
+
+
 @app.command()
 def run(
     config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT,
-    quiet: bool = QUIET_OPT,
-    viz: bool = typer.Option(False, "--viz", help="stream scans, pose, loops and map to rerun ([viz] extra)"),
-    viz_save: Optional[Path] = typer.Option(None, "--viz-save", help="record the live view to FILE.rrd instead"),
+    quiet: bool = QUIET_OPT, viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT,
 ) -> None:
     """Run one experiment; print the results folder."""
     from slam2d.experiment import run_experiment
 
     with _command(quiet):
-        if viz and viz_save:
-            raise InputError("--viz-save", "give --viz (a live viewer) or --viz-save FILE.rrd, not both")
+        target = _viz_target(viz, viz_save)
         cfg = _load(config, set_, plugin)
-        folder = run_experiment(cfg, quiet=quiet, viz=viz_save or ("viewer" if viz else None))
+        folder = run_experiment(cfg, quiet=quiet, viz=target)
     typer.echo(f"results: {folder}")
 
 
@@ -375,15 +383,16 @@ def explore(
         None, help="nearest_frontier, explore_lite, nearest_candidate, farthest_candidate or utility"
     ),
     set_: list[str] = SET_OPT,
-    quiet: bool = QUIET_OPT,
+    quiet: bool = QUIET_OPT, viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT,
 ) -> None:
     """Explore the simulated world with SLAM in the loop until no goal is left; print the results folder."""
     from slam2d.exploration import config as explore_config
     from slam2d.exploration.run import run_explore
 
     with _command(quiet):
+        target = _viz_target(viz, viz_save)
         extra = [f"exploration.strategy={strategy}"] if strategy else []
-        folder = run_explore(explore_config.load(config, [*set_, *extra]))
+        folder = run_explore(explore_config.load(config, [*set_, *extra]), target)
     typer.echo(f"results: {folder}")
 
 
@@ -396,14 +405,15 @@ def localize(
     config: Optional[Path] = CONFIG_OPT,
     set_: list[str] = SET_OPT,
     root: Optional[Path] = OUT_SET_OPT,
-    quiet: bool = QUIET_OPT,
+    quiet: bool = QUIET_OPT, viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT,
 ) -> None:
     """Monte Carlo localisation on a known map: estimate vs truth, errors, particle clouds, metrics."""
     from slam2d.localization.run import run_localize
 
     with _command(quiet):
+        target = _viz_target(viz, viz_save)
         cfg = _command_config("localize", config, set_, {"map": map_path, "dataset": dataset, "output.root": root})
-        folder = run_localize(cfg)
+        folder = run_localize(cfg, target)
     typer.echo(f"results: {folder}")
 
 

@@ -91,7 +91,7 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | N
     source = open_dataset(cfg.dataset, seed=cfg.seed)
     relations = _load_relations(cfg)
     pipeline = SlamPipeline(cfg)
-    with _live_view(viz, cfg) as view, _progress(source, quiet) as advance:
+    with live_view(viz, cfg.name, "run", cfg.mapping) as view, _progress(source, quiet) as advance:
         result = pipeline.run(source, on_scan=lambda: (check_stop(), advance and advance()), view=view)
     t_slam = time.perf_counter()
     log.info("%d scans processed in %.1f s", len(result.scans), t_slam - t0)
@@ -119,14 +119,16 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | N
 
 
 @contextmanager
-def _live_view(viz: str | Path | None, cfg: ExperimentConfig):
-    """Yield None, or the :class:`slam2d.viz.LiveView` that ``viz`` asks for (closed after the block)."""
+def live_view(viz: str | Path | None, name: str, kind: str, *args):
+    """Yield None when ``viz`` is None (nothing of rerun is imported), else the view of
+    :func:`slam2d.viz.open_view` for a ``kind`` of run (run, localize, explore) made with ``args``,
+    streaming to ``viz`` (``"viewer"`` or ``FILE.rrd``) and closed after the block."""
     if viz is None:
         yield None
         return
     from slam2d.viz import open_view
 
-    view = open_view(viz, cfg.name, cfg.mapping)
+    view = open_view(viz, name, kind, *args)
     try:
         yield view
     finally:

@@ -55,15 +55,17 @@ class ExplorationRun:
     metrics: dict = field(default_factory=dict)
 
 
-def run_explore(cfg: ExploreConfig) -> Path:
-    """Run ``cfg``'s exploration; return the results folder."""
-    from slam2d.experiment import _jsonable, results_folder
+def run_explore(cfg: ExploreConfig, viz: str | Path | None = None) -> Path:
+    """Run ``cfg``'s exploration; return the results folder. ``viz``: ``"viewer"`` or ``FILE.rrd``, the
+    robot, goals, map and frontiers streamed to rerun (:class:`slam2d.viz.ExploreView`)."""
+    from slam2d.experiment import _jsonable, live_view, results_folder
 
     cfg = resolved(cfg)
     with results_folder(cfg.output.root, cfg.name) as (work, published):
         log.info("slam2d explore '%s' (%s) -> %s", cfg.name, cfg.exploration.strategy, cfg.output.root)
         (work / "config.yaml").write_text(config_mod.dump(cfg))
-        run = explore(cfg)
+        with live_view(viz, cfg.name, "explore", cfg.mapping) as view:
+            run = explore(cfg, view=view)
         _write(work, cfg, run)
         (work / "metrics.json").write_text(json.dumps(_jsonable(run.metrics), indent=2))
         m = run.metrics
@@ -169,8 +171,9 @@ class _Loop:
         return now - self.best[1] > self.ecfg.goal_timeout
 
 
-def explore(cfg: ExploreConfig, progress=None) -> ExplorationRun:
-    """One exploration run of ``cfg`` (no files written); ``progress(now, coverage)`` is told every second."""
+def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
+    """One exploration run of ``cfg`` (no files written); ``progress(now, coverage)`` is told every second;
+    ``view`` (a :class:`slam2d.viz.ExploreView`) logs every control step."""
     from slam2d.navigation.navigator import ACTIVE, REACHED, clearance
 
     t_wall = time.perf_counter()
@@ -190,6 +193,8 @@ def explore(cfg: ExploreConfig, progress=None) -> ExplorationRun:
     while not stop:
         now = step.scan.stamp - t0
         pose = loop.slam.pose
+        if view is not None:
+            view.step(now, pose, loop.slam.grid, loop.goal)
         if now >= next_sample:
             curve.append((now, driven, cover(loop.slam.grid)))
             next_sample += 1.0
@@ -256,6 +261,8 @@ def explore(cfg: ExploreConfig, progress=None) -> ExplorationRun:
     grid = loop.slam.grid
     now = step.scan.stamp - t0
     curve.append((now, driven, cover(grid)))
+    if view is not None:
+        view.step(now, loop.slam.pose, grid, None, force=True)
     if ecfg.animation:
         snaps.append(_snapshot(loop, len(truth)))
     run = ExplorationRun(loop.world, grid, np.array(truth), np.array(est), np.array(stamps), loop.explorer,

@@ -33,17 +33,19 @@ __all__ = ["localize", "log_stream", "metrics_of", "run_localize"]
 KNOWN_MAP_RESOLUTION = 0.05  # m per pixel of a floor-plan image unless `resolution` says otherwise
 
 
-def run_localize(cfg: LocalizeConfig) -> Path:
+def run_localize(cfg: LocalizeConfig, viz: str | Path | None = None) -> Path:
     """Localise on ``cfg.map`` with the scans of ``cfg.dataset`` (None: the simulated robot) into a new
-    results folder under ``cfg.output.root``; return it."""
-    from slam2d.experiment import results_folder
+    results folder under ``cfg.output.root``; return it. ``viz``: ``"viewer"`` or ``FILE.rrd``, the
+    particles streamed to rerun (:class:`slam2d.viz.ParticleView`)."""
+    from slam2d.experiment import live_view, results_folder
 
     cfg.filter_config()  # the mcl keys are checked before any work
     map_path = _map_path(cfg.map)
     known = KnownMap.load(map_path, cfg.resolution or KNOWN_MAP_RESOLUTION)
     dataset = _dataset(cfg.dataset)
-    with results_folder(cfg.output.root, cfg.name or "localize") as (work, published):
-        metrics = localize(known, cfg, work, map_path=map_path, dataset=dataset)
+    name = cfg.name or "localize"
+    with results_folder(cfg.output.root, name) as (work, published), live_view(viz, name, "localize", known) as view:
+        metrics = localize(known, cfg, work, map_path=map_path, dataset=dataset, view=view)
         log.info("position RMSE %.3f m, heading RMSE %.2f deg, median %d particles, %.1f ms per update",
                  metrics["position_rmse"], metrics["heading_rmse_deg"], metrics["particles_median"],
                  metrics["update_ms_median"])  # fmt: skip
@@ -70,8 +72,8 @@ def _dataset(path: str | None):
 
 
 def localize(known: KnownMap, cfg: LocalizeConfig, out: Path, map_path: Path | None = None,
-             dataset=None) -> dict[str, Any]:  # fmt: skip
-    """One run into the folder ``out``; returns the metrics."""
+             dataset=None, view=None) -> dict[str, Any]:  # fmt: skip
+    """One run into the folder ``out`` (``view``: a live view of the filter, or None); returns the metrics."""
     from slam2d import config as config_mod
     from slam2d.experiment import json_text
     from slam2d.localization.mcl import ParticleFilter
@@ -92,7 +94,7 @@ def localize(known: KnownMap, cfg: LocalizeConfig, out: Path, map_path: Path | N
         if not np.isfinite(np.asarray(start, dtype=np.float64)).all():
             raise InputError("initial_pose", "tracking needs an initial pose (no reference pose at the first scan)")
         pf.init_pose(start)
-    track = replay(pf, stream, "updates" if cfg.output.figures else ())
+    track = replay(pf, stream, "updates" if cfg.output.figures else (), view)
     metrics = metrics_of(stream, track, pf)
     metrics["reference"] = truth_name
     _write_results(out, stream, track, metrics, known, cfg)

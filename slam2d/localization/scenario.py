@@ -121,10 +121,10 @@ class Track:
 SNAPSHOT_PARTICLES = 400  # particles kept per snapshot (an even subset)
 
 
-def replay(pf: ParticleFilter, stream: Stream, snapshot_at=()) -> Track:
+def replay(pf: ParticleFilter, stream: Stream, snapshot_at=(), view=None) -> Track:
     """Feed every scan of ``stream`` to ``pf`` (initialised). At the scan indices ``snapshot_at``
     (or at every update for ``"updates"``) keep up to SNAPSHOT_PARTICLES particles, their weights
-    and the estimate."""
+    and the estimate. ``view`` (a :class:`slam2d.viz.ParticleView`) logs each scan's step."""
     import time
 
     n = len(stream.scans)
@@ -137,6 +137,8 @@ def replay(pf: ParticleFilter, stream: Stream, snapshot_at=()) -> Track:
             ms.append((time.perf_counter() - t0) * 1000)
         e = pf.estimate
         est[i], count[i], share[i], sd[i] = pf.pose(scan.odom), e.particles, e.share, e.sd_xy
+        if view is not None:
+            view.step(i, scan.stamp - stream.scans[0].stamp, pf, est[i], stream.truth[i], updated)
         if (updated and snapshot_at == "updates") or (snapshot_at != "updates" and i in snapshot_at):
             keep = np.linspace(0, len(pf.particles) - 1, min(SNAPSHOT_PARTICLES, len(pf.particles))).astype(int)
             snaps[i] = (pf.particles[keep].copy(), np.exp(pf.log_w[keep]), est[i].copy())
