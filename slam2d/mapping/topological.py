@@ -98,16 +98,22 @@ def region_graph(labels, resolution, origin=(0.0, 0.0), row0_top=True) -> nx.Gra
 
 
 def _region_centres(labels: np.ndarray):
-    """(label, (row, col) of the region's cell nearest its centroid, cell count) for every label > 0."""
+    """(label, (row, col) of the region's cell nearest its centroid, cell count) for every label > 0;
+    among cells equally near, the first in raster order."""
     rows, cols = np.nonzero(labels > 0)
     lab = labels[rows, cols]
-    ids, inv, count = np.unique(lab, return_inverse=True, return_counts=True)
-    mr = np.bincount(inv, rows) / count
-    mc = np.bincount(inv, cols) / count
-    d2 = (rows - mr[inv]) ** 2 + (cols - mc[inv]) ** 2
-    order = np.lexsort((d2, inv))
-    first = order[np.r_[True, inv[order][1:] != inv[order][:-1]]] if len(order) else order
-    return [(int(i), (int(rows[j]), int(cols[j])), int(n)) for i, j, n in zip(ids, first, count)]
+    count = np.bincount(lab)
+    ids = np.flatnonzero(count)
+    ids = ids[ids > 0]
+    mr = np.bincount(lab, rows) / np.maximum(count, 1)
+    mc = np.bincount(lab, cols) / np.maximum(count, 1)
+    d2 = (rows - mr[lab]) ** 2 + (cols - mc[lab]) ** 2
+    least = np.full(len(count), np.inf)
+    np.minimum.at(least, lab, d2)
+    nearest = d2 == least[lab]
+    _, first = np.unique(lab[nearest], return_index=True)
+    first = np.flatnonzero(nearest)[first]
+    return [(int(i), (int(rows[j]), int(cols[j])), int(count[i])) for i, j in zip(ids, first)]
 
 
 def _boundary_cells(labels: np.ndarray, offsets=_OFFSETS) -> dict:

@@ -65,30 +65,51 @@ def grow_regions(seeds, free) -> np.ndarray:
 
 
 def _components(mask: np.ndarray, resolution: float, area_min: float, area_max: float):
-    """8-connected components of ``mask`` and which have an area strictly in (area_min, area_max) m²."""
+    """8-connected components of ``mask``, which have an area strictly in (area_min, area_max) m², and
+    which at most area_min (label 0, the background, is neither)."""
     lab, n = ndimage.label(mask, structure=EIGHT)
     area = np.bincount(lab.ravel(), minlength=n + 1) * resolution**2
     ok = (area > area_min) & (area < area_max)
-    ok[0] = False
-    return lab, ok
+    small = area <= area_min
+    ok[0] = small[0] = False
+    return lab, ok, small
 
 
 def morphological(free, resolution, room_area_min=0.8, room_area_max=47.0, max_erosion=3.65) -> np.ndarray:
     """Erode the free space one cell at a time (3 x 3); a component whose area
     lies within (room_area_min, room_area_max) m² when it splits off is a room
     seed and is taken out; seeds are grown back (ipa: 73 erosions at 0.05 m,
-    hence ``max_erosion`` 3.65 m)."""
+    hence ``max_erosion`` 3.65 m).
+
+    The components at one erosion lie inside those of the one before, so a component too small to be
+    a room never holds one: it is dropped with the seeds, and each erosion labels only the bounding
+    box of the cells still in play."""
     free, res = _check(free, resolution)
     depth = ndimage.distance_transform_cdt(free, metric="chessboard")  # erosions a cell survives
     seeds = np.zeros(free.shape, np.int32)
+    live = free.copy()  # cells that may still join a seed
+    box = (slice(0, free.shape[0]), slice(0, free.shape[1]))
     for k in range(1, int(round(max_erosion / res)) + 1):
-        mask = (depth > k) & (seeds == 0)
-        if not mask.any():
+        box = _bounding_box((depth[box] > k) & live[box], box)
+        if box is None:
             break
-        lab, ok = _components(mask, res, room_area_min, room_area_max)
-        hit = ok[lab]
-        seeds[hit] = lab[hit] + seeds.max()
+        lab, ok, small = _components((depth[box] > k) & live[box], res, room_area_min, room_area_max)
+        if ok.any():
+            hit = ok[lab]
+            seeds[box][hit] = lab[hit] + seeds.max()
+        if ok.any() or small.any():
+            live[box] &= ~(ok | small)[lab]
     return grow_regions(seeds, free)
+
+
+def _bounding_box(mask: np.ndarray, box: tuple[slice, slice]) -> tuple[slice, slice] | None:
+    """The slices of the smallest box holding the True cells of ``mask``, the part ``box`` of a larger
+    array, in that array's indices; None if there are none."""
+    rows, cols = np.flatnonzero(mask.any(1)), np.flatnonzero(mask.any(0))
+    if len(rows) == 0:
+        return None
+    r0, c0 = box[0].start, box[1].start
+    return slice(r0 + rows[0], r0 + rows[-1] + 1), slice(c0 + cols[0], c0 + cols[-1] + 1)
 
 
 def distance(free, resolution, room_area_min=0.35, room_area_max=163.0) -> np.ndarray:
@@ -101,7 +122,7 @@ def distance(free, resolution, room_area_min=0.35, room_area_max=163.0) -> np.nd
     dist = np.minimum(np.rint(ndimage.distance_transform_edt(core)), 255)  # cells, as an 8-bit image
     best, best_count = np.zeros(free.shape, np.int32), 0
     for t in range(int(dist.max()) - 1, 0, -1):
-        lab, ok = _components(dist > t, res, room_area_min * (1 - 1e-9), room_area_max * (1 + 1e-9))
+        lab, ok, _ = _components(dist > t, res, room_area_min * (1 - 1e-9), room_area_max * (1 + 1e-9))
         if ok.sum() >= best_count and ok.any():
             best, best_count = np.where(ok[lab], lab, 0), int(ok.sum())
     return grow_regions(best, free)
