@@ -72,7 +72,7 @@ def _command(quiet: bool, what: str = "no results folder written"):
             _fail(err)
 
 
-VIZ_OPT = typer.Option(False, "--viz", help="stream the run to the rerun viewer ([viz] extra)")
+VIZ_OPT = typer.Option(False, "--viz", help="stream the run to the rerun viewer (the \\[viz] extra)")
 VIZ_SAVE_OPT = typer.Option(None, "--viz-save", help="record the live view to FILE.rrd instead")
 
 
