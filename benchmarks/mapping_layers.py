@@ -9,9 +9,10 @@ occupied cells are stored four ways, each lossless (checked): dense uint8
 share of the full log-odds grid (the thesis's < 5 % rule), the quadtree's
 build time and node share of its 4^depth lattice, batched occupancy lookups of
 10^6 uniform random points in the map's extent by the quadtree vs dense numpy
-indexing (median of 5, the two alternated; same answers checked), the line map's JSON size vs
-the dense grid and its symmetric Chamfer distance to the wall cells (boundary
-cells of the occupied mask), and the wall mesh's size (quads; its footprint is
+indexing (median of 5, the two alternated; same answers checked), the line map's
+compact binary size (``LineMap.to_bytes``, round trip checked bit for bit) and
+JSON size vs the dense grid and its symmetric Chamfer distance to the wall
+cells (boundary cells of the occupied mask), and the wall mesh's size (quads; its footprint is
 the line map itself) and whether the walls as boxes one cell thick are closed
 surfaces (every edge shared by two triangles). A second table scores
 both line extractors on the simulator office (true walls known).
@@ -29,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d.mapping.export import LOADED_LOG_ODDS
-from slam2d.mapping.geometric import chamfer, extract_line_map, line_scores
+from slam2d.mapping.geometric import LineMap, chamfer, extract_line_map, line_scores
 from slam2d.mapping.layers import load_grid
 from slam2d.mapping.mesh import wall_arrays, wall_mesh
 from slam2d.mapping.occupancy import OccupancyGrid
@@ -82,6 +83,8 @@ def measure(name: str, grid: OccupancyGrid, n_points: int, repeat: int, rng) -> 
     (qt_s, qt), (np_s, dense) = interleaved(lambda: tree.occupied(xy), lambda: dense_lookup(mask, grid, xy), repeat)
     assert np.array_equal(qt, dense)
     line_s, lines = timed(lambda: extract_line_map(mask, grid.resolution, grid.origin), 1)
+    packed = lines.to_bytes()
+    assert all(np.array_equal(a, b) for a, b in zip(LineMap.from_bytes(packed).polylines, lines.polylines, strict=True))
     v, t = wall_arrays(lines.segments)
     closed = wall_mesh(lines.segments, thickness=grid.resolution).is_edge_manifold(allow_boundary_edges=False)
     return dict(map=name, shape=f"{grid.shape[0]} x {grid.shape[1]}", occupied=100 * mask.mean(),
@@ -89,7 +92,7 @@ def measure(name: str, grid: OccupancyGrid, n_points: int, repeat: int, rng) -> 
                 quadtree=len(stream), qt_share=100 * len(stream) / mask.size, trinary=100 * len(trinary) / mask.size,
                 nodes=100 * tree.node_count / 4.0**tree.depth,
                 depth=tree.depth, build_ms=1e3 * build_s, ratio=qt_s / np_s, qt_ms=1e3 * qt_s, np_ms=1e3 * np_s,
-                lines=len(lines.to_json()), line_ratio=mask.size / len(lines.to_json()), line_s=line_s,
+                lines=len(packed), line_ratio=mask.size / len(packed), lines_json=len(lines.to_json()), line_s=line_s,
                 polylines=len(lines.polylines), chamfer=chamfer(lines.segments, mask, grid.resolution, grid.origin),
                 mesh_v=len(v), mesh_t=len(t), closed="yes" if closed else "no")
 
@@ -102,12 +105,12 @@ def office_scores() -> list[str]:
     w, h = int(round(22 / res)), int(round(14 / res))
     x, y = np.meshgrid(origin[0] + (np.arange(w) + 0.5) * res, origin[1] + (np.arange(h) + 0.5) * res)
     occ = world.occupied(np.column_stack([x.ravel(), y.ravel()])).reshape(h, w)
-    rows = ["| extractor | precision | recall | segments | polylines | JSON B |", "|---|---|---|---|---|---|"]
+    rows = ["| extractor | precision | recall | segments | polylines | binary B | JSON B |", "|---|---|---|---|---|---|---|"]
     for method in ("contour", "hough"):
         lines = extract_line_map(occ, res, origin, method=method)
         s = line_scores(lines.segments, world.segments, tol=0.05, angle_tol_deg=1.0, occupied=world.occupied)
         rows.append(f"| {method} | {s['precision']:.3f} | {s['recall']:.3f} | {len(lines.segments)} | "
-                    f"{len(lines.polylines)} | {len(lines.to_json())} |")
+                    f"{len(lines.polylines)} | {len(lines.to_bytes())} | {len(lines.to_json())} |")
     return rows
 
 
@@ -123,7 +126,8 @@ def main() -> None:
     rows = [measure(n, load_grid(p), args.points, args.repeat, rng) for n, p in zip(names, paths + list(args.maps))]
     columns = ["map", "cells", "occupied %", "non-zero %", "dense B", "COO B", "hash B", "quadtree B",
                "quadtree / dense %", "trinary quadtree / dense %", "nodes / 4^d %", "depth", "build ms",
-               "lookup 10^6 ms (quadtree / numpy)", "ratio", "lines JSON B", "grid / lines", "polylines", "Chamfer m",
+               "lookup 10^6 ms (quadtree / numpy)", "ratio", "lines B", "grid / lines", "lines JSON B", "polylines",
+               "Chamfer m",
                "mesh V / T", "solid walls closed", "lines s"]
     print("| " + " | ".join(columns) + " |")
     print("|" + "---|" * len(columns))
@@ -131,10 +135,11 @@ def main() -> None:
         cells = [r["map"], r["shape"], f"{r['occupied']:.2f}", f"{r['nonzero']:.1f}", r["dense"], r["coo"], r["hashed"],
                  r["quadtree"], f"{r['qt_share']:.2f}", f"{r['trinary']:.2f}", f"{r['nodes']:.3f}", r["depth"],
                  f"{r['build_ms']:.1f}", f"{r['qt_ms']:.1f} / {r['np_ms']:.1f}", f"{r['ratio']:.2f}", r["lines"],
-                 f"{r['line_ratio']:.0f}", r["polylines"], f"{r['chamfer']:.3f}", f"{r['mesh_v']} / {r['mesh_t']}",
+                 f"{r['line_ratio']:.0f}", r["lines_json"], r["polylines"], f"{r['chamfer']:.3f}",
+                 f"{r['mesh_v']} / {r['mesh_t']}",
                  r["closed"], f"{r['line_s']:.2f}"]
         print("| " + " | ".join(map(str, cells)) + " |")
-    thesis = [THESIS, "600 x 600", "0.735", "-", "360000"] + ["-"] * 5 + ["0.26", "10"] + ["-"] * 10
+    thesis = [THESIS, "600 x 600", "0.735", "-", "360000"] + ["-"] * 5 + ["0.26", "10"] + ["-"] * 11
     print("| " + " | ".join(thesis) + " |")
     print()
     print("\n".join(office_scores()))

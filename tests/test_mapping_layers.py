@@ -246,7 +246,41 @@ def test_line_map_of_the_office_finds_its_walls():
     lines = extract_line_map(occ, res, origin)
     score = line_scores(lines.segments, world.segments, tol=0.05, angle_tol_deg=1.0, occupied=world.occupied)
     assert score["precision"] >= 0.95 and score["recall"] >= 0.95, score
-    assert len(lines.to_json()) * 20 < occ.size  # far smaller than the grid
+    assert len(lines.to_bytes()) * 100 < occ.size  # far smaller than the grid
+
+
+def test_binary_line_map_round_trips_losslessly():
+    from slam2d.mapping.geometric import LineMap, extract_line_map
+
+    _, occ, res, origin = _office_grid()
+    lines = extract_line_map(occ, res, origin)
+    data = lines.to_bytes()
+    back = LineMap.from_bytes(data)
+    assert (back.resolution, back.origin, back.shape) == (res, origin, occ.shape)
+    assert len(back.polylines) == len(lines.polylines)
+    assert all(np.array_equal(a, b) for a, b in zip(back.polylines, lines.polylines))  # bit for bit
+    assert back.to_bytes() == data
+    ring = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 0.0]])  # closed: stored without its last vertex
+    far = np.array([[-7.5, 3.2], [412.0, -96.3]])  # negative and multi-byte differences
+    hand = LineMap([ring, far, np.array([[0.511, 0.0], [0.6, 0.0]])], 0.05, (-1.0, -1.0), (60, 80))
+    back = LineMap.from_bytes(hand.to_bytes())
+    assert np.allclose(back.polylines[0], ring, atol=1e-9) and np.allclose(back.polylines[1], far, atol=1e-9)
+    assert np.allclose(back.polylines[2], [[0.5, 0.0], [0.6, 0.0]])  # off the half-cell lattice: rounded to it
+    assert LineMap.from_bytes(LineMap([], 0.1, (0.0, 0.0), (3, 4)).to_bytes()).polylines == []
+    with pytest.raises(ValueError, match="magic"):
+        LineMap.from_bytes(b"{" + data)
+
+
+def test_a_jagged_slanted_wall_stays_a_few_segments():
+    from slam2d.mapping.geometric import chamfer, extract_line_map
+
+    rows, cols = np.mgrid[:80, :200]
+    across = (rows - 20) * np.cos(np.radians(10)) - (cols - 10) * np.sin(np.radians(10))  # cells from the centre line
+    noise = np.random.default_rng(0).normal(0.0, 0.4, rows.shape)
+    occ = (np.abs(across + noise) < 1.0) & (cols >= 10) & (cols < 190)  # 2 cells thick, 9 m long, ragged faces
+    lines = extract_line_map(occ, 0.05)
+    assert len(lines.segments) <= 20, len(lines.segments)  # 60 when every one-cell jag is a vertex
+    assert chamfer(lines.segments, occ, 0.05) < 0.03
 
 
 def test_line_map_json_and_svg(tmp_path):
@@ -320,12 +354,17 @@ def test_run_writes_the_chosen_layers_and_map_makes_them_again(tmp_path):
     cfg = config.load(None, ["dataset.max_scans=40", "mapping.resolution=0.1", f"output.root={tmp_path / 'r'}",
                              "mapping.layers=[grid,sparse,quadtree,lines,mesh]"])
     folder = run_experiment(cfg, quiet=True)
-    for name in ("map.pgm", "map_sparse.npz", "map.quadtree", "map_trinary.quadtree", "quadtree.png", "lines.json",
-                 "lines.svg",
+    for name in ("map.pgm", "map_sparse.npz", "map.quadtree", "map_trinary.quadtree", "quadtree.png", "lines.bin",
+                 "lines.json", "lines.svg",
                  "walls.ply", "walls.png", "layers.json"):
         assert (folder / name).is_file(), name
     stats = json.loads((folder / "layers.json").read_text())
     assert stats["quadtree"]["bytes"] < stats["grid"]["dense_uint8_bytes"] / 10
+    from slam2d.mapping.geometric import LineMap
+
+    binary, text = LineMap.load_bytes(folder / "lines.bin"), LineMap.load(folder / "lines.json")
+    assert stats["lines"]["bytes"] == (folder / "lines.bin").stat().st_size < stats["lines"]["json_bytes"]
+    assert all(np.allclose(a, b, atol=1e-3) for a, b in zip(binary.polylines, text.polylines))
     from slam2d.mapping.export import load_map_server
 
     grid = load_map_server(folder / "map.yaml")

@@ -13,21 +13,29 @@ merges the segments (its merge left as future work). Two segment sources
 Then, the merge: pieces shorter than ``min_length`` dropped; collinear segments
 that overlap or touch joined (:func:`merge_collinear`); ends of non-parallel
 segments whose lines meet close to both snapped to the corner and linked into
-polylines (:func:`link_corners`). :class:`LineMap` stores the polylines (JSON,
-SVG over the grid, PNG); its ``segments`` are the thesis's endpoint table
-(eq. 12). :func:`line_scores` measures a line map against true walls.
+polylines (:func:`link_corners`); vertices snapped to a half-cell lattice
+(:data:`QUANTUM`) and the polylines ordered in a nearest-end tour. :class:`LineMap`
+stores the polylines (compact binary, JSON, SVG over the grid, PNG); its
+``segments`` are the thesis's endpoint table (eq. 12). :func:`line_scores`
+measures a line map against true walls.
 """
 
 from __future__ import annotations
 
 import json
+import struct
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 __all__ = ["hough_segments", "contour_segments", "extract_line_map", "merge_collinear", "link_corners", "LineMap",
-           "line_scores", "chamfer"]
+           "line_scores", "chamfer", "QUANTUM"]
+
+QUANTUM = 0.5
+"""Vertex lattice step of a line map, in cells: :func:`extract_line_map` snaps its vertices to it (moving
+each by at most a quarter cell) and :meth:`LineMap.to_bytes` stores them as integers on it."""
 
 
 def hough_segments(occupied, resolution: float, origin=(0.0, 0.0), *, canny_sigma: float = 1.0,
@@ -283,6 +291,46 @@ class LineMap:
     def load(cls, path) -> LineMap:
         return cls.from_json(Path(path).read_text())
 
+    def to_bytes(self) -> bytes:
+        """Compact binary form: a 5-byte magic, then deflate (raw, filtered) of a header (resolution, origin,
+        shape, lattice step m, polyline count), each polyline's vertex count (doubled, + 1 if closed: its last
+        vertex is not stored) and every vertex as the difference from the one before on the :data:`QUANTUM`
+        lattice, as zigzag varints. Lossless for vertices on the lattice (as :func:`extract_line_map` makes
+        them)."""
+        quantum = QUANTUM * self.resolution
+        k = [_lattice(p, self.origin, quantum) for p in self.polylines]
+        closed = np.array([len(p) > 2 and bool(np.all(p[0] == p[-1])) for p in k], bool)
+        kept = [p[:-1] if c else p for p, c in zip(k, closed)]
+        n = np.array([len(p) for p in kept], np.int64)
+        xy = np.concatenate(kept) if kept else np.zeros((0, 2), np.int64)
+        header = _BINARY.pack(self.resolution, *self.origin, *self.shape, quantum, len(n))
+        steps = np.diff(xy, axis=0, prepend=np.zeros((1, 2), np.int64))  # the first from the origin
+        body = _varints(np.concatenate([2 * n + closed, steps.ravel()]))
+        deflate = zlib.compressobj(9, zlib.DEFLATED, -15, 9, zlib.Z_FILTERED)
+        return _BINARY_MAGIC + deflate.compress(header + body) + deflate.flush()
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> LineMap:
+        if data[: len(_BINARY_MAGIC)] != _BINARY_MAGIC:
+            raise ValueError("not a slam2d binary line map (magic)")
+        raw = zlib.decompress(data[len(_BINARY_MAGIC) :], -15)
+        res, ox, oy, h, w, quantum, count = _BINARY.unpack_from(raw)
+        codes = _read_varints(raw[_BINARY.size :])
+        n, closed = codes[:count] >> 1, codes[:count] & 1 == 1
+        xy = np.cumsum(codes[count:].reshape(-1, 2), axis=0)
+        parts = np.split(xy, np.cumsum(n)[:-1]) if count else []
+        parts = [np.vstack([p, p[:1]]) if c else p for p, c in zip(parts, closed)]
+        return cls([_from_lattice(p, (ox, oy), quantum) for p in parts], res, (ox, oy), (h, w))
+
+    def save_bytes(self, path) -> Path:
+        path = Path(path)
+        path.write_bytes(self.to_bytes())
+        return path
+
+    @classmethod
+    def load_bytes(cls, path) -> LineMap:
+        return cls.from_bytes(Path(path).read_bytes())
+
     def to_svg(self, grid_log_odds: np.ndarray | None = None, px_per_m: float = 20.0) -> str:
         """SVG (metres, y up, ``px_per_m`` px a metre) of the polylines over the grid (log-odds (H, W)) when given."""
         h, w = self.shape
@@ -324,6 +372,60 @@ class LineMap:
         path = Path(path)
         fig.savefig(path, bbox_inches="tight")
         return path
+
+
+_BINARY_MAGIC = b"SL2L\x01"
+_BINARY = struct.Struct("<3d2Id I")  # resolution m, origin (x, y) m, shape (H, W), lattice step m, polylines
+
+
+def _lattice(xy, origin, quantum: float) -> np.ndarray:
+    """Integer lattice coordinates (..., 2) of points ``xy`` (..., 2) m on the grid of step ``quantum`` m
+    through ``origin``."""
+    return np.round((np.asarray(xy, float) - np.asarray(origin, float)) / quantum).astype(np.int64)
+
+
+def _from_lattice(k, origin, quantum: float) -> np.ndarray:
+    """Points (..., 2) m of integer lattice coordinates ``k`` (the inverse of :func:`_lattice`)."""
+    return np.asarray(origin, float) + np.asarray(k, np.int64) * quantum
+
+
+def _varints(values) -> bytes:
+    """LEB128 bytes of the zigzag codes of int64 ``values`` (one byte for |v| < 64, two below 8192)."""
+    v = np.asarray(values, np.int64)
+    z = ((v << 1) ^ (v >> 63)).astype(np.uint64)
+    shift = np.arange(10, dtype=np.uint64) * np.uint64(7)
+    n = 1 + ((z[:, None] >> shift[1:]) > 0).sum(axis=1)
+    more = np.arange(10) < (n - 1)[:, None]
+    byte = ((z[:, None] >> shift) & np.uint64(0x7F)) | (more.astype(np.uint64) << np.uint64(7))
+    return byte.astype(np.uint8)[np.arange(10) < n[:, None]].tobytes()
+
+
+def _read_varints(data: bytes) -> np.ndarray:
+    """int64 values of the zigzag LEB128 bytes ``data`` (the inverse of :func:`_varints`)."""
+    b = np.frombuffer(data, np.uint8)
+    last = b < 0x80
+    which = np.cumsum(last) - last  # value index of each byte
+    first = np.concatenate([[0], np.flatnonzero(last)[:-1] + 1])
+    shift = (7 * (np.arange(len(b)) - first[which])).astype(np.uint64)
+    z = np.zeros(int(last.sum()), np.uint64)
+    np.add.at(z, which, (b & 0x7F).astype(np.uint64) << shift)
+    return (z >> np.uint64(1)).astype(np.int64) ^ -(z & np.uint64(1)).astype(np.int64)
+
+
+def _tour(polylines: list[np.ndarray]) -> list[np.ndarray]:
+    """The polylines in a greedy nearest-end tour from the first vertex of the first, each entered at its
+    nearer end (reversed if need be): short jumps between them, cheap in :meth:`LineMap.to_bytes`."""
+    if not polylines:
+        return []
+    ends = np.array([[p[0], p[-1]] for p in polylines])  # (N, 2 ends, 2)
+    todo, here, out = np.ones(len(polylines), bool), ends[0, 0], []
+    for _ in polylines:
+        d = np.where(todo[:, None], np.linalg.norm(ends - here, axis=2), np.inf)
+        i, end = np.unravel_index(np.argmin(d), d.shape)
+        todo[i] = False
+        out.append(polylines[i][::-1] if end else polylines[i])
+        here = out[-1][-1]
+    return out
 
 
 def _grid_png_base64(log_odds: np.ndarray) -> str:
@@ -379,21 +481,25 @@ simulator office) or the thesis's Canny + probabilistic Hough."""
 
 
 def extract_line_map(occupied, resolution: float, origin=(0.0, 0.0), *, method: str = "contour",
-                     min_length: float | None = None, angle_tol_deg: float = 3.0, offset_tol: float | None = None,
-                     gap: float | None = None, corner_gap: float | None = None, seed: int = 0) -> LineMap:
+                     simplify_tol: float | None = None, min_length: float | None = None, angle_tol_deg: float = 3.0,
+                     offset_tol: float | None = None, gap: float | None = None, corner_gap: float | None = None,
+                     seed: int = 0) -> LineMap:
     """The line map of a grid's occupied cells ``occupied`` (H, W) bool (row = y); lengths in m.
 
-    Segments from ``method`` (see :data:`EXTRACTORS`; contours simplified to 1
-    cell, Hough with its 0.15 m gap); pieces shorter than ``min_length`` (2
-    cells) dropped; collinear ones within ``offset_tol`` (1 cell) and ``gap``
-    (2 cells) merged; corners within ``corner_gap`` (3 cells) linked.
+    Segments from ``method`` (see :data:`EXTRACTORS`; contours simplified to
+    ``simplify_tol`` (2 cells: a wall's one-cell jags are not corners), Hough
+    with its 0.15 m gap); pieces shorter than ``min_length`` (2 cells) dropped;
+    collinear ones within ``offset_tol`` (1 cell) and ``gap`` (2 cells) merged;
+    corners within ``corner_gap`` (3 cells) linked; vertices snapped to the
+    :data:`QUANTUM` lattice, polylines in a nearest-end tour.
     """
     occupied = np.asarray(occupied, bool)
-    cells = dict(min_length=2.0, offset_tol=1.0, gap=2.0, corner_gap=3.0)
-    given = dict(min_length=min_length, offset_tol=offset_tol, gap=gap, corner_gap=corner_gap)
+    cells = dict(simplify_tol=2.0, min_length=2.0, offset_tol=1.0, gap=2.0, corner_gap=3.0)
+    given = dict(simplify_tol=simplify_tol, min_length=min_length, offset_tol=offset_tol, gap=gap,
+                 corner_gap=corner_gap)
     p = {k: cells[k] * resolution if v is None else float(v) for k, v in given.items()}
     if method == "contour":
-        seg = contour_segments(occupied, resolution, origin, resolution)
+        seg = contour_segments(occupied, resolution, origin, p["simplify_tol"])
     elif method == "hough":
         seg = hough_segments(occupied, resolution, origin, min_length=max(p["min_length"], 2 * resolution),
                              seed=seed)
@@ -401,8 +507,10 @@ def extract_line_map(occupied, resolution: float, origin=(0.0, 0.0), *, method: 
         raise ValueError(f"unknown line extractor {method!r} (one of {', '.join(EXTRACTORS)})")
     _, length, _ = _frame(seg)
     seg = merge_collinear(seg[length >= p["min_length"]], angle_tol_deg, p["offset_tol"], p["gap"])
-    params = dict(method=method, angle_tol_deg=angle_tol_deg, seed=seed, **p)
-    return LineMap(link_corners(seg, p["corner_gap"]), resolution, tuple(map(float, origin)), occupied.shape, params)
+    quantum = QUANTUM * resolution
+    lines = [_from_lattice(_lattice(q, origin, quantum), origin, quantum) for q in link_corners(seg, p["corner_gap"])]
+    params = dict(method=method, angle_tol_deg=angle_tol_deg, seed=seed, quantum=quantum, **p)
+    return LineMap(_tour(lines), resolution, tuple(map(float, origin)), occupied.shape, params)
 
 
 # --------------------------------------------------------------------------- evaluation

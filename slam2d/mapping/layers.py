@@ -3,8 +3,8 @@
 ``grid`` is ``map.pgm`` + ``map.yaml`` (written by the caller, always);
 ``sparse`` ``map_sparse.npz`` (the COO table); ``quadtree`` ``map.quadtree``
 (occupied cells; + ``quadtree.png``, the first six levels) and
-``map_trinary.quadtree`` (free / occupied / unknown, uniform children pruned); ``lines`` ``lines.json`` +
-``lines.svg`` (+ ``lines.png``); ``mesh`` ``walls.ply`` + ``walls.png``.
+``map_trinary.quadtree`` (free / occupied / unknown, uniform children pruned); ``lines`` ``lines.bin`` (the
+compact form) + ``lines.json`` + ``lines.svg`` (+ ``lines.png``); ``mesh`` ``walls.ply`` + ``walls.png``.
 Sizes and counts go to ``layers.json``.
 """
 
@@ -96,11 +96,13 @@ def _trinary(grid: OccupancyGrid, folder: Path, cfg: MappingConfig) -> int:
 
 
 def _lines(lines, grid: OccupancyGrid, folder: Path, figures: bool) -> dict:
-    size = lines.save(folder / "lines.json").stat().st_size
+    size = lines.save_bytes(folder / "lines.bin").stat().st_size
+    json_size = lines.save(folder / "lines.json").stat().st_size
     (folder / "lines.svg").write_text(lines.to_svg(grid.log_odds))
     if figures:
         lines.save_png(folder / "lines.png", grid.log_odds)
-    return {"file": "lines.json", "bytes": size, "polylines": len(lines.polylines), "segments": len(lines.segments),
+    return {"file": "lines.bin", "bytes": size, "grid_to_lines": grid.log_odds.size / size, "json_file": "lines.json",
+            "json_bytes": json_size, "polylines": len(lines.polylines), "segments": len(lines.segments),
             "length_m": lines.length()}
 
 
