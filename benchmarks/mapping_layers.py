@@ -105,7 +105,7 @@ def office_scores() -> list[str]:
     w, h = int(round(22 / res)), int(round(14 / res))
     x, y = np.meshgrid(origin[0] + (np.arange(w) + 0.5) * res, origin[1] + (np.arange(h) + 0.5) * res)
     occ = world.occupied(np.column_stack([x.ravel(), y.ravel()])).reshape(h, w)
-    rows = ["| extractor | precision | recall | segments | polylines | binary B | JSON B |", "|---|---|---|---|---|---|---|"]
+    rows = ["| extractor | precision | recall | segments | polylines | binary B | JSON B |", "|" + "---|" * 7]
     for method in ("contour", "hough"):
         lines = extract_line_map(occ, res, origin, method=method)
         s = line_scores(lines.segments, world.segments, tol=0.05, angle_tol_deg=1.0, occupied=world.occupied)

@@ -362,7 +362,7 @@ def test_run_writes_the_chosen_layers_and_map_makes_them_again(tmp_path):
     assert stats["quadtree"]["bytes"] < stats["grid"]["dense_uint8_bytes"] / 10
     from slam2d.mapping.geometric import LineMap
 
-    binary, text = LineMap.load_bytes(folder / "lines.bin"), LineMap.load(folder / "lines.json")
+    binary, text = LineMap.load(folder / "lines.bin"), LineMap.load(folder / "lines.json")
     assert stats["lines"]["bytes"] == (folder / "lines.bin").stat().st_size < stats["lines"]["json_bytes"]
     assert all(np.allclose(a, b, atol=1e-3) for a, b in zip(binary.polylines, text.polylines))
     from slam2d.mapping.export import load_map_server

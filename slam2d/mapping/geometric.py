@@ -283,13 +283,19 @@ class LineMap:
                    tuple(d["origin"]), tuple(d["shape"]), d.get("params", {}))
 
     def save(self, path) -> Path:
+        """Write the binary form to a ``.bin`` path, JSON to any other."""
         path = Path(path)
-        path.write_text(self.to_json())
+        if path.suffix == ".bin":
+            path.write_bytes(self.to_bytes())
+        else:
+            path.write_text(self.to_json())
         return path
 
     @classmethod
     def load(cls, path) -> LineMap:
-        return cls.from_json(Path(path).read_text())
+        """Read a line map written by :meth:`save` (binary from ``.bin``, else JSON)."""
+        path = Path(path)
+        return cls.from_bytes(path.read_bytes()) if path.suffix == ".bin" else cls.from_json(path.read_text())
 
     def to_bytes(self) -> bytes:
         """Compact binary form: a 5-byte magic, then deflate (raw, filtered) of a header (resolution, origin,
@@ -321,15 +327,6 @@ class LineMap:
         parts = np.split(xy, np.cumsum(n)[:-1]) if count else []
         parts = [np.vstack([p, p[:1]]) if c else p for p, c in zip(parts, closed)]
         return cls([_from_lattice(p, (ox, oy), quantum) for p in parts], res, (ox, oy), (h, w))
-
-    def save_bytes(self, path) -> Path:
-        path = Path(path)
-        path.write_bytes(self.to_bytes())
-        return path
-
-    @classmethod
-    def load_bytes(cls, path) -> LineMap:
-        return cls.from_bytes(Path(path).read_bytes())
 
     def to_svg(self, grid_log_odds: np.ndarray | None = None, px_per_m: float = 20.0) -> str:
         """SVG (metres, y up, ``px_per_m`` px a metre) of the polylines over the grid (log-odds (H, W)) when given."""

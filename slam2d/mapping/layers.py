@@ -96,7 +96,7 @@ def _trinary(grid: OccupancyGrid, folder: Path, cfg: MappingConfig) -> int:
 
 
 def _lines(lines, grid: OccupancyGrid, folder: Path, figures: bool) -> dict:
-    size = lines.save_bytes(folder / "lines.bin").stat().st_size
+    size = lines.save(folder / "lines.bin").stat().st_size
     json_size = lines.save(folder / "lines.json").stat().st_size
     (folder / "lines.svg").write_text(lines.to_svg(grid.log_odds))
     if figures:
