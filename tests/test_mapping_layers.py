@@ -328,6 +328,29 @@ def test_thick_walls_are_watertight_solids(tmp_path):
     assert render_mesh(mesh, tmp_path / "walls.png").stat().st_size > 1000
 
 
+def test_footprint_hausdorff_is_half_the_thickness_and_follows_a_shift():
+    from slam2d.mapping.mesh import footprint_edges, footprint_hausdorff, wall_mesh
+
+    seg = [[[0.0, 0.0], [2.0, 0.0]]]
+    box = wall_mesh(seg, thickness=0.1, floor_extent=(-1.0, 3.0, -1.0, 1.0))
+    assert len(footprint_edges(box)) == 4  # the box's base outline; its bottom diagonal and the floor left out
+    assert footprint_hausdorff(box, seg) == pytest.approx((0.05, 0.05, 0.05), abs=1e-4)
+    assert footprint_hausdorff(wall_mesh(seg), seg)[0] == pytest.approx(0.0, abs=1e-9)
+    shifted = wall_mesh(seg).translate((0.0, 0.3, 0.0))
+    assert footprint_hausdorff(shifted, seg)[0] == pytest.approx(0.3, abs=1e-4)
+    longer = [[[0.0, 0.0], [2.0, 0.0]], [[0.0, 1.0], [0.0, 1.5]]]  # a wall with no mesh: only lines -> outline sees it
+    h, outline_to_lines, lines_to_outline = footprint_hausdorff(wall_mesh(seg), longer)
+    assert outline_to_lines == pytest.approx(0.0, abs=1e-9) and h == lines_to_outline == pytest.approx(1.5, abs=1e-4)
+
+
+def test_touching_boxes_are_watertight_one_by_one_not_as_a_whole():
+    from slam2d.mapping.mesh import solids_watertight, wall_mesh
+
+    corner = wall_mesh([[[0.0, 0.0], [2.0, 0.0]], [[2.0, 0.0], [2.0, 1.0]]], thickness=0.1)
+    assert solids_watertight(corner) == (2, 2) and not corner.is_watertight()  # the boxes overlap at the corner
+    assert solids_watertight(wall_mesh([[[0.0, 0.0], [2.0, 0.0]]])) == (0, 1)  # a quad is open
+
+
 # --------------------------------------------------------------------------- run outputs and the map command
 
 

@@ -7,6 +7,11 @@ direction crossed with z, pointing to the right of p1 -> p2. With a
 ``thickness`` each segment is instead a closed box (12 triangles, normals out),
 so every wall is a watertight solid. The floor is one rectangle at z = 0 over
 the map's extent, normal +z (the thesis's ground grid is a drawing aid).
+
+Checks: :func:`solids_watertight` (open3d's ``is_watertight`` of each connected
+piece: boxes that touch at a corner intersect, so the whole mesh is never
+watertight) and :func:`footprint_hausdorff` (the walls' outline at z = 0 against
+the line map).
 """
 
 from __future__ import annotations
@@ -15,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["WALL_HEIGHT", "wall_arrays", "floor_arrays", "wall_mesh", "save_mesh", "render_mesh"]
+__all__ = ["WALL_HEIGHT", "wall_arrays", "floor_arrays", "wall_mesh", "save_mesh", "render_mesh", "solids_watertight",
+           "footprint_edges", "footprint_hausdorff"]
 
 WALL_HEIGHT = 2.5
 """Default wall height h, m (the thesis gives none)."""
@@ -65,6 +71,58 @@ def wall_mesh(segments, height: float = WALL_HEIGHT, thickness: float = 0.0, flo
     mesh.compute_triangle_normals()
     mesh.compute_vertex_normals()
     return mesh
+
+
+def solids_watertight(mesh) -> tuple[int, int]:
+    """(watertight, all) connected pieces of the mesh, each tested by open3d's ``is_watertight`` on its own."""
+    import open3d as o3d
+
+    cluster = np.asarray(mesh.cluster_connected_triangles()[0])
+    v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    order = np.argsort(cluster, kind="stable")
+    pieces = np.split(t[order], np.flatnonzero(np.diff(cluster[order])) + 1) if len(t) else []
+    good = 0
+    for tri in pieces:
+        used, local = np.unique(tri, return_inverse=True)
+        piece = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(v[used]),
+                                          o3d.utility.Vector3iVector(local.reshape(-1, 3).astype(np.int32)))
+        good += piece.is_watertight()
+    return good, len(pieces)
+
+
+def footprint_edges(mesh, tol: float = 1e-9) -> np.ndarray:
+    """The walls' outline (E, 2, 2) m: edges with both ends at z = 0 (within ``tol`` m) of triangles that rise
+    above it (box bottoms and the floor left out)."""
+    v, t = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    ground = np.abs(v[:, 2]) <= tol
+    t = t[~ground[t].all(axis=1)]
+    edges = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    edges = np.unique(np.sort(edges[ground[edges].all(axis=1)], axis=1), axis=0)
+    return v[edges][:, :, :2]
+
+
+def _dense_points(seg: np.ndarray, step: float) -> np.ndarray:
+    """Points (S, 2) m on segments (K, 2, 2) m, ends included, at most ``step`` m apart."""
+    n = np.ceil(np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1) / step).astype(int) + 1
+    start = np.cumsum(n) - n
+    k = np.repeat(np.arange(len(seg)), n)
+    f = (np.arange(n.sum()) - start[k]) / np.maximum(n[k] - 1, 1)
+    return seg[k, 0] + f[:, None] * (seg[k, 1] - seg[k, 0])
+
+
+def footprint_hausdorff(mesh, line_map, step: float = 0.005) -> tuple[float, float, float]:
+    """Hausdorff distance (m) between the mesh's outline at z = 0 (:func:`footprint_edges`) and the line map
+    (a ``LineMap`` or segments (K, 2, 2) m), both sampled every ``step`` m (error < step / 2): (max, outline
+    to lines, lines to outline); NaN when either is empty."""
+    from scipy.spatial import cKDTree
+
+    seg = np.asarray(getattr(line_map, "segments", line_map), float).reshape(-1, 2, 2)
+    outline = footprint_edges(mesh)
+    if len(seg) == 0 or len(outline) == 0:
+        return (float("nan"),) * 3
+    a, b = _dense_points(outline, step), _dense_points(seg, step)
+    ab, ba = float(cKDTree(b).query(a)[0].max()), float(cKDTree(a).query(b)[0].max())
+    return max(ab, ba), ab, ba
 
 
 def save_mesh(mesh, path) -> Path:
