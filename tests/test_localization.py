@@ -243,6 +243,33 @@ def test_augmented_mcl_recovers_from_a_kidnap_where_plain_mcl_does_not():
     assert outcomes["plain"] is None
 
 
+def test_walls_missing_from_the_map_do_not_pass_for_a_kidnapping():
+    """The map lacks the walls within 1.5 m of a corner the robot drives past (as a door opened
+    since mapping, glass, or a wall worn off a SLAM grid): the filter keeps tracking without a
+    recovery particle; scoring every beam in w_slow / w_fast, it takes the stretch for a
+    kidnapping and jumps away."""
+    world = World.office()
+    full = KnownMap.from_world(world)
+    stream = wander(world, full, 40.0, seed=3)
+    corner = stream.truth[len(stream.truth) // 3, :2]  # (17.1, 3.9): a corner of the office
+    rows, cols = np.nonzero(full.occupied)
+    x, y = full.origin[0] + (cols + 0.5) * full.resolution, full.origin[1] + (rows + 0.5) * full.resolution
+    gone = np.hypot(x - corner[0], y - corner[1]) < 1.5
+    occupied = full.occupied.copy()
+    occupied[rows[gone], cols[gone]] = False
+    known = KnownMap(occupied, full.free | full.occupied, full.resolution, full.origin, "worn")
+    outcomes = {}
+    for best in (MclConfig().recovery_best_beams, 1.0):
+        pf = ParticleFilter(known, MclConfig(recovery_best_beams=best), 12.0, seed=3)
+        pf.init_pose(stream.truth[0], 0.1, 0.05)
+        worst = replay(pf, stream).position_error.max()
+        outcomes[best] = (pf.injected, worst)
+    injected, worst = outcomes[MclConfig().recovery_best_beams]
+    assert MclConfig().recovery_best_beams < 1.0 and injected == 0 and worst < 0.2
+    injected, worst = outcomes[1.0]
+    assert injected > 1000 and worst > 5.0
+
+
 def test_same_seed_same_particles_other_seed_other_particles():
     known, stream = _office_kidnap_stream()
     scans = stream.scans[:40]

@@ -35,6 +35,10 @@ class MclConfig(Section):
     # augmented MCL (Thrun et al. 2005, Table 8.3)
     alpha_slow: float = Field(0.001, ge=0, le=1, description="long-term average likelihood decay (0: off)")
     alpha_fast: float = Field(0.1, ge=0, le=1, description="short-term average likelihood decay (0: off)")
+    recovery_best_beams: float = Field(0.5, gt=0, le=1, description="while the pose is certain, the recovery "
+                                       "is judged on this share of the beams, the best-fitting at each particle: "
+                                       "a map lacking part of what the laser sees (an opened door, glass, a wall "
+                                       "worn off a SLAM grid) is no kidnapping (1: every beam always, as amcl)")
     recovery_candidates: int = Field(20, gt=0, description="random particles are drawn by the scan's likelihood "
                                      "from this many times as many uniform poses (1: uniform, as amcl)")
     hypothesis_fit: bool = Field(True, description="each cluster's total weight follows the scan's likelihood at "
@@ -80,7 +84,8 @@ def amcl_config(recovery: bool = False) -> MclConfig:
         alpha_fast=0.1 if recovery else 0.0, free_clearance=0.0, alpha1=0.2, alpha2=0.2, alpha3=0.2, alpha4=0.2,
         model="likelihood_field", beams=30, z_hit=0.95, z_rand=0.05, sigma_hit=0.2, sigma_hit_uncertain=0.2,
         max_dist=2.0, combine="amcl", wall_poses=True, hypothesis_fit=False,
-        beam_weight=1.0, global_candidates=1, recovery_candidates=1, initial_sd_xy=0.5, initial_sd_theta=math.pi / 12,
+        beam_weight=1.0, global_candidates=1, recovery_candidates=1, recovery_best_beams=1.0, initial_sd_xy=0.5,
+        initial_sd_theta=math.pi / 12,
     )  # fmt: skip
 
 

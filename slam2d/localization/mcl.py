@@ -8,7 +8,9 @@ kidnapping (random particles, Thrun et al. 2005 Table 8.3). Every scan goes to
 sensor model (likelihood field or beams; each cluster's total weight by the
 scan's likelihood at its mean pose), then low-variance resampling when the
 effective sample size drops, drawing random free-space poses with probability
-max(0, 1 - w_fast / w_slow) and keeping as many particles as KLD sampling
+max(0, 1 - w_fast / w_slow) (while confident, averages of the likelihood of the
+best-fitting half of the beams, so that a map lacking part of what the laser
+sees does not pass for a kidnapping) and keeping as many particles as KLD sampling
 (Fox 2003) asks. The pose is the weighted mean of the heaviest cluster of
 particles (connected histogram bins), with its covariance; between updates it
 follows the odometry. Everything is vectorised over particles (numba for the
@@ -35,6 +37,7 @@ from slam2d.types import Scan
 __all__ = ["Estimate", "ParticleFilter", "clusters", "kld_limit", "low_variance_indices", "sample_motion"]
 
 _MIN_TRANS = 0.01  # m: below this a motion has no heading of its own (rot1 = 0), as in amcl
+CONFIDENT_NOISE = 0.1  # random share below which a confident filter draws no random particle
 LOCAL_SPREAD = np.array([0.3, 0.3, 0.1])  # m, m, rad: sd of recovery candidates around the current particles
 
 
@@ -179,7 +182,7 @@ class ParticleFilter:
         self._free = known.free_cells(self.cfg.free_clearance)
         self.particles = np.zeros((0, 3))
         self.log_w = np.zeros(0)
-        self.w_slow = self.w_fast = 0.0
+        self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)  # of all beams, of the best-fitting share
         self.updates = self.resamples = self.injected = 0
         self._odom: np.ndarray | None = None  # odometry at the last update
         self._estimate: Estimate | None = None
@@ -232,7 +235,7 @@ class ParticleFilter:
         self._candidates = False
         self.particles = poses
         self.log_w = np.full(len(poses), -math.log(len(poses)))
-        self.w_slow = self.w_fast = 0.0
+        self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
         self._estimate = self._labels = None
 
     # the filter ------------------------------------------------------------
@@ -266,9 +269,10 @@ class ParticleFilter:
         self.particles = pool[low_variance_indices(np.exp(ll - logsumexp(ll)), n, self.rng)]
         self.log_w = np.full(n, -math.log(n))
         self.updates += 1
-        if beams > 0:
-            self._average(float(logsumexp(ll) - math.log(len(pool))), beams)
-            self.w_slow = max(self.w_slow, self._best_fit(ll, beams))
+        if beams > 0 and self._recovering():
+            for i, (fit, counted) in enumerate(self._recovery_fits(pool, scan, ll, beams)):
+                self._average(i, float(logsumexp(fit) - math.log(len(pool))), counted)
+                self.w_slow[i] = max(self.w_slow[i], self._best_fit(fit, counted))
         self._estimate = self._cluster_estimate()
 
     def _best_fit(self, loglik: np.ndarray, beams: int) -> float:
@@ -293,7 +297,9 @@ class ParticleFilter:
         fine = self.sensor.log_likelihood(poses, scan)[0] if sharp else coarse
         self.updates += 1
         if beams > 0:
-            self._average(float(logsumexp(self.log_w + coarse[:p])), beams)
+            if self._recovering():
+                for i, (fit, counted) in enumerate(self._recovery_fits(self.particles, scan, coarse[:p], beams)):
+                    self._average(i, float(logsumexp(self.log_w + fit)), counted)
             joint = self.log_w + fine[:p]
             if refit:
                 joint = joint + (old + fine[p:] - _group_logsumexp(joint, self._labels, k))[self._labels]
@@ -302,13 +308,24 @@ class ParticleFilter:
             self._resample(scan)
         self._estimate = self._cluster_estimate()
 
-    def _average(self, log_total: float, beams: int) -> None:
-        """Update w_slow and w_fast from the weighted mean likelihood (per beam for the product model)."""
+    def _recovering(self) -> bool:
+        return self.cfg.alpha_slow > 0 and self.cfg.alpha_fast > 0
+
+    def _recovery_fits(self, poses: np.ndarray, scan: Scan, loglik: np.ndarray, beams: int) -> list:
+        """What the two pairs of w_slow / w_fast average, each as (log-likelihood (P,), beams counted):
+        ``loglik`` (the smoother field's, all ``beams``), and the sharp model's of the best
+        ``recovery_best_beams`` share of the beams at each of ``poses`` (none when that share is 1)."""
+        fits = [(loglik, beams)]
+        if self.cfg.recovery_best_beams < 1.0:
+            fits.append(self.sensor.log_likelihood(poses, scan, best=self.cfg.recovery_best_beams))
+        return fits
+
+    def _average(self, i: int, log_total: float, beams: int) -> None:
+        """Update the i-th w_slow and w_fast from the weighted mean likelihood (per beam for the product model)."""
         cfg = self.cfg
         w_avg = math.exp(log_total / (beams * cfg.beam_weight)) if cfg.combine == "product" else math.exp(log_total)
-        for name, alpha in (("w_slow", cfg.alpha_slow), ("w_fast", cfg.alpha_fast)):
-            old = getattr(self, name)
-            setattr(self, name, w_avg if old == 0.0 else old + alpha * (w_avg - old))
+        for w, alpha in ((self.w_slow, cfg.alpha_slow), (self.w_fast, cfg.alpha_fast)):
+            w[i] = w_avg if w[i] == 0.0 else w[i] + alpha * (w_avg - w[i])
 
     def _resample_due(self) -> bool:
         if self.cfg.resample_ess > 0:
@@ -317,11 +334,20 @@ class ParticleFilter:
         return self.updates % self.cfg.resample_interval == 0
 
     def random_share(self) -> float:
-        """Probability max(0, 1 - w_fast / w_slow) of a random particle at resampling (0 with recovery off)."""
-        cfg = self.cfg
-        if cfg.alpha_slow <= 0 or cfg.alpha_fast <= 0 or self.w_slow <= 0:
+        """Probability max(0, 1 - w_fast / w_slow) of a random particle at resampling (0 with recovery off).
+
+        While the filter is confident the averages are those of the best-fitting share of the beams:
+        a map that lacks part of what the laser sees (an opened door, glass, a wall worn off a SLAM
+        grid) is no kidnapping, a place where even those beams stop fitting is. Once it is not,
+        those of every beam: it searches on until a place explains the whole scan, not half of it.
+        While confident, a share up to ``CONFIDENT_NOISE`` is the averages' noise and draws nothing:
+        a single random particle on a look-alike corridor would outscore a place whose map lacks a wall."""
+        confident = self.cfg.recovery_best_beams < 1.0 and self.confident()
+        i = 1 if confident else 0
+        if not self._recovering() or self.w_slow[i] <= 0:
             return 0.0
-        return max(0.0, 1.0 - self.w_fast / self.w_slow)
+        share = 1.0 - self.w_fast[i] / self.w_slow[i]
+        return share if share > (CONFIDENT_NOISE if confident else 0.0) else 0.0
 
     def _resample(self, scan: Scan) -> None:
         """Low-variance resampling with random free-space poses, as many as KLD sampling asks.
@@ -346,7 +372,7 @@ class ParticleFilter:
         if n_random:
             self.injected += n_random
             if cfg.combine == "amcl":  # amcl restarts its averages after injecting
-                self.w_slow = self.w_fast = 0.0
+                self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
 
     def kld_count(self, poses: np.ndarray) -> int:
         """The first n such that the n leading ``poses`` reach KLD's count for their bins (max if none)."""

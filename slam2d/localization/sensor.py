@@ -56,24 +56,28 @@ class LikelihoodField:
         p = cfg.z_hit * np.exp(-(d**2) / (2 * self.sigma_hit**2)) + cfg.z_rand / range_max
         return p**3 if cfg.combine == "amcl" else cfg.beam_weight * np.log(p)
 
-    def log_likelihood(self, particles: np.ndarray, scan: Scan) -> tuple[np.ndarray, int]:
-        """Log-likelihood (P,) of ``scan`` at ``particles`` (P, 3), and the number of beams used."""
+    def log_likelihood(self, particles: np.ndarray, scan: Scan, best: float = 1.0) -> tuple[np.ndarray, int]:
+        """Log-likelihood (P,) of ``scan`` at ``particles`` (P, 3), and the number of beams it counts:
+        all, or with ``best`` < 1 that share of them, the best-scoring at each particle."""
         ranges, angles = select_beams(scan, self.cfg.beams)
         if len(ranges) == 0:
             return np.zeros(len(particles)), 0
         ends = np.column_stack([ranges * np.cos(angles), ranges * np.sin(angles)])
+        keep = len(ranges) if best >= 1.0 else max(1, math.ceil(best * len(ranges)))
         m = self.map
         total = _field_sum(np.ascontiguousarray(particles), np.asarray(scan.sensor_pose, dtype=np.float64),
-                           ends, self.table, self.outside, m.origin[0], m.origin[1], m.resolution)  # fmt: skip
-        total = out_of_walls(m, self.cfg, particles, total, len(ranges) * self.outside)
-        return (np.log1p(total) if self.cfg.combine == "amcl" else total), len(ranges)
+                           ends, self.table, self.outside, m.origin[0], m.origin[1], m.resolution, keep)  # fmt: skip
+        total = out_of_walls(m, self.cfg, particles, total, keep * self.outside)
+        return (np.log1p(total) if self.cfg.combine == "amcl" else total), keep
 
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
-def _field_sum(particles, sensor, ends, table, outside, ox, oy, res):  # pragma: no cover - compiled
-    """Sum over beams of the table's score at each particle's beam end points, (P,)."""
-    n, h, w = len(particles), table.shape[0], table.shape[1]
+def _field_sum(particles, sensor, ends, table, outside, ox, oy, res, keep):  # pragma: no cover - compiled
+    """Sum over beams of the table's score at each particle's beam end points (the ``keep`` highest
+    of them when fewer than all), (P,)."""
+    n, nb, h, w = len(particles), len(ends), table.shape[0], table.shape[1]
     out = np.empty(n)
+    scores = np.empty((n if keep < nb else 0, nb))
     inv = 1.0 / res
     for i in numba.prange(n):
         c, s = math.cos(particles[i, 2]), math.sin(particles[i, 2])
@@ -82,14 +86,14 @@ def _field_sum(particles, sensor, ends, table, outside, ox, oy, res):  # pragma:
         st = particles[i, 2] + sensor[2]
         cs, ss = math.cos(st), math.sin(st)
         acc = 0.0
-        for b in range(len(ends)):
+        for b in range(nb):
             col = int(math.floor((sx + cs * ends[b, 0] - ss * ends[b, 1] - ox) * inv))
             row = int(math.floor((sy + ss * ends[b, 0] + cs * ends[b, 1] - oy) * inv))
-            if 0 <= row < h and 0 <= col < w:
-                acc += table[row, col]
-            else:
-                acc += outside
-        out[i] = acc
+            v = table[row, col] if 0 <= row < h and 0 <= col < w else outside
+            acc += v
+            if keep < nb:
+                scores[i, b] = v
+        out[i] = acc if keep >= nb else np.sort(scores[i])[nb - keep :].sum()
     return out
 
 
@@ -106,19 +110,23 @@ class BeamModel:
                         np.asarray(angles, dtype=np.float64), m.occupied, m.origin[0], m.origin[1],
                         m.resolution, self.range_max)  # fmt: skip
 
-    def log_likelihood(self, particles: np.ndarray, scan: Scan) -> tuple[np.ndarray, int]:
-        """Log-likelihood (P,) of ``scan`` at ``particles`` (P, 3), and the number of beams used."""
+    def log_likelihood(self, particles: np.ndarray, scan: Scan, best: float = 1.0) -> tuple[np.ndarray, int]:
+        """Log-likelihood (P,) of ``scan`` at ``particles`` (P, 3), and the number of beams it counts
+        (with ``best`` < 1 that share of them, the best-scoring at each particle)."""
         ranges, angles = select_beams(scan, self.cfg.beams, skip_max=False)
         if len(ranges) == 0:
             return np.zeros(len(particles)), 0
         expected = self.expected_ranges(particles, scan.sensor_pose, angles)
         p = beam_probability(ranges[None], expected, self.cfg, self.range_max)
-        floor, n, weight = self.cfg.z_rand / self.range_max, len(ranges), self.cfg.beam_weight  # every beam missed
+        n = len(ranges) if best >= 1.0 else max(1, math.ceil(best * len(ranges)))
+        if n < p.shape[1]:
+            p = np.sort(p, axis=1)[:, p.shape[1] - n :]
+        floor, weight = self.cfg.z_rand / self.range_max, self.cfg.beam_weight  # every beam missed
         if self.cfg.combine == "amcl":
             ll, worst = np.log1p((p**3).sum(axis=1)), math.log1p(n * floor**3)
         else:
             ll, worst = weight * np.log(p).sum(axis=1), n * weight * math.log(floor)
-        return out_of_walls(self.map, self.cfg, particles, ll, worst), len(ranges)
+        return out_of_walls(self.map, self.cfg, particles, ll, worst), n
 
 
 def out_of_walls(known: KnownMap, cfg: MclConfig, particles: np.ndarray, score: np.ndarray, worst: float):
