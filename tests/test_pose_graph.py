@@ -356,6 +356,19 @@ def test_replay_mit_survives_failed_cholesky_and_beats_batch_from_file_poses(dat
     assert solve_g2o(graph, init="file").final_error > 300  # a worse local minimum from the file's initial poses
 
 
+def test_replay_with_batched_updates_counts_every_factor_and_reaches_the_optimum(data_file):
+    """An iSAM2 update per 10 keyframes holds the same factors as one per keyframe, and the final
+    batch reaches the same optimum (benchmarks/posegraph_incremental.py measures the time)."""
+    graph = read_g2o(data_file("posegraphs/intel.g2o"))
+    cfg = BackendConfig(name="pose_graph", robust="none")
+    every, each = replay_g2o(graph, cfg, every=10), replay_g2o(graph, cfg)
+    counts = (len(graph.ids) - 1, len(graph.i) - len(graph.ids) + 1)  # odometry edges, loops
+    assert (every.num_odometry, every.num_loops) == (each.num_odometry, each.num_loops) == counts
+    assert g2o_error(graph, every.optimize_batch()) == pytest.approx(g2o_error(graph, each.optimize_batch()), rel=1e-6)
+    with pytest.raises(InputError, match="gate"):
+        replay_g2o(graph, cfg, gate=10.0, every=10)
+
+
 def test_batch_removes_loop_the_optimised_graph_cannot_accommodate():
     """Under a robust kernel the false loop keeps a large residual; the batch step removes only it."""
     truth = square()

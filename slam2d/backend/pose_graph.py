@@ -682,11 +682,15 @@ def loop_metrics(inlier, injected) -> dict:
     }
 
 
-def replay_g2o(graph: g2o.PoseGraphFile, cfg: BackendConfig | None = None, gate: float | None = None) -> PoseGraph:
+def replay_g2o(graph: g2o.PoseGraphFile, cfg: BackendConfig | None = None, gate: float | None = None,
+               every: int = 1) -> PoseGraph:
     """Feed a g2o graph into a PoseGraph as a SLAM run would: vertices 0..N-1 in order as
     keyframes (edge k -> k+1 as odometry, the file's pose as initial value) with an iSAM2
     update each; then every other edge ending there as a loop, skipped when ``gate`` is
-    set and its ``loop_consistency`` exceeds it, and one more update if any was added."""
+    set and its ``loop_consistency`` exceeds it, and one more update if any was added.
+    With ``every`` > 1 (no gate), one update per ``every`` keyframes and their loops."""
+    if every > 1 and gate is not None:
+        raise InputError("replay_g2o", "the consistency gate needs an update per keyframe (every = 1)")
     n = len(graph.ids)
     if not np.array_equal(graph.ids, np.arange(n)):
         raise InputError("replay_g2o", "vertex ids must be 0..N-1")
@@ -705,7 +709,8 @@ def replay_g2o(graph: g2o.PoseGraphFile, cfg: BackendConfig | None = None, gate:
         else:
             e = odometry[v - 1]
             pg.add_keyframe(graph.poses[v], graph.measurements[e], graph.information[e])
-        pg.update()
+        if every == 1:
+            pg.update()
         added = 0
         for k in loops.get(v, []):
             a, b, m, info = graph.i[k], graph.j[k], graph.measurements[k], graph.information[k]
@@ -714,7 +719,7 @@ def replay_g2o(graph: g2o.PoseGraphFile, cfg: BackendConfig | None = None, gate:
                 continue
             pg.add_loop(a, b, m, info)
             added += 1
-        if added:
+        if (every == 1 and added) or (every > 1 and ((v + 1) % every == 0 or v == n - 1)):
             pg.update()
     return pg
 
