@@ -38,8 +38,8 @@ class _Handler(BaseHTTPRequestHandler):
             self.send_header("Content-Range", f"bytes {start}-{len(PAYLOAD) - 1}/{len(PAYLOAD)}")
         self.send_header("Content-Length", str(len(body)))
         self.end_headers()
+        self.server.log.append((wanted, len(body)))  # before the body: the client may return as soon as it has it
         self.wfile.write(body)
-        self.server.log.append((wanted, len(body)))
 
     def log_message(self, *args):
         pass
