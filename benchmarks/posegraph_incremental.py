@@ -3,8 +3,8 @@
 Replays a g2o graph into ``PoseGraph`` as a SLAM run would (vertices in order as keyframes,
 the edge to the next vertex as odometry, every other edge as a loop when its later end is
 added) with an iSAM2 update every ``--every`` keyframes, under each relinearisation setting
-(threshold m / rad, check every ``skip`` updates), then optionally the final batch
-optimisation the SLAM back end runs at the end. Reports wall seconds and the GTSAM error
+(threshold m / rad, check every ``skip`` updates), then the final batch optimisation
+the SLAM back end runs at the end. Reports wall seconds and the GTSAM error
 beside the batch solve (chordal start + LM, as ``slam2d optimize``) in the same run.
 
     nice .venv/bin/python benchmarks/posegraph_incremental.py [--graph M3500] [--every 1 10 100]

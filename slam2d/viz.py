@@ -180,9 +180,8 @@ class ParticleView(_View):
 
     def __init__(self, rec, known):
         super().__init__(rec)
-        cells = np.argwhere(known.occupied)  # (row, col); rows along y from the origin corner
-        centres = np.asarray(known.origin) + (cells[:, ::-1] + 0.5) * known.resolution
-        self._cells("world/map", centres, known.resolution, MAP_COLOUR, static=True)
+        self._cells("world/map", known.cell_to_world(np.argwhere(known.occupied)), known.resolution, MAP_COLOUR,
+                    static=True)
 
     def step(self, index: int, seconds: float, pf, estimate: np.ndarray, truth: np.ndarray, updated: bool) -> None:
         """Scan ``index`` at ``seconds`` s: the ``estimate`` and ``truth`` poses (3,), and the

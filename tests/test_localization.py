@@ -252,11 +252,10 @@ def test_walls_missing_from_the_map_do_not_pass_for_a_kidnapping():
     full = KnownMap.from_world(world)
     stream = wander(world, full, 40.0, seed=3)
     corner = stream.truth[len(stream.truth) // 3, :2]  # (17.1, 3.9): a corner of the office
-    rows, cols = np.nonzero(full.occupied)
-    x, y = full.origin[0] + (cols + 0.5) * full.resolution, full.origin[1] + (rows + 0.5) * full.resolution
-    gone = np.hypot(x - corner[0], y - corner[1]) < 1.5
+    cells = np.argwhere(full.occupied)
+    gone = cells[np.hypot(*(full.cell_to_world(cells) - corner).T) < 1.5]
     occupied = full.occupied.copy()
-    occupied[rows[gone], cols[gone]] = False
+    occupied[gone[:, 0], gone[:, 1]] = False
     known = KnownMap(occupied, full.free | full.occupied, full.resolution, full.origin, "worn")
     outcomes = {}
     for best in (MclConfig().recovery_best_beams, 1.0):

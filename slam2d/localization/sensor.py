@@ -40,6 +40,11 @@ def select_beams(scan: Scan, count: int, skip_max: bool = True) -> tuple[np.ndar
     return np.minimum(r[idx], scan.range_max), np.asarray(scan.angles, dtype=np.float64)[idx]
 
 
+def kept_beams(beams: int, best: float) -> int:
+    """How many of ``beams`` a likelihood over the ``best`` share of them counts (at least one)."""
+    return beams if best >= 1.0 else max(1, math.ceil(best * beams))
+
+
 class LikelihoodField:
     """Per-cell beam scores of the likelihood field: log p (product) or p^3 (amcl), float64 (H, W);
     ``sigma_hit`` (m) overrides the config's."""
@@ -63,7 +68,7 @@ class LikelihoodField:
         if len(ranges) == 0:
             return np.zeros(len(particles)), 0
         ends = np.column_stack([ranges * np.cos(angles), ranges * np.sin(angles)])
-        keep = len(ranges) if best >= 1.0 else max(1, math.ceil(best * len(ranges)))
+        keep = kept_beams(len(ranges), best)
         m = self.map
         total = _field_sum(np.ascontiguousarray(particles), np.asarray(scan.sensor_pose, dtype=np.float64),
                            ends, self.table, self.outside, m.origin[0], m.origin[1], m.resolution, keep)  # fmt: skip
@@ -118,7 +123,7 @@ class BeamModel:
             return np.zeros(len(particles)), 0
         expected = self.expected_ranges(particles, scan.sensor_pose, angles)
         p = beam_probability(ranges[None], expected, self.cfg, self.range_max)
-        n = len(ranges) if best >= 1.0 else max(1, math.ceil(best * len(ranges)))
+        n = kept_beams(len(ranges), best)
         if n < p.shape[1]:
             p = np.sort(p, axis=1)[:, p.shape[1] - n :]
         floor, weight = self.cfg.z_rand / self.range_max, self.cfg.beam_weight  # every beam missed

@@ -90,10 +90,13 @@ def morphological(free, resolution, room_area_min=0.8, room_area_max=47.0, max_e
     live = free.copy()  # cells that may still join a seed
     box = (slice(0, free.shape[0]), slice(0, free.shape[1]))
     for k in range(1, int(round(max_erosion / res)) + 1):
-        box = _bounding_box((depth[box] > k) & live[box], box)
-        if box is None:
+        mask = (depth[box] > k) & live[box]
+        inner = _bounding_box(mask)
+        if inner is None:
             break
-        lab, ok, small = _components((depth[box] > k) & live[box], res, room_area_min, room_area_max)
+        mask = mask[inner]
+        box = tuple(slice(outer.start + part.start, outer.start + part.stop) for outer, part in zip(box, inner))
+        lab, ok, small = _components(mask, res, room_area_min, room_area_max)
         if ok.any():
             hit = ok[lab]
             seeds[box][hit] = lab[hit] + seeds.max()
@@ -102,14 +105,12 @@ def morphological(free, resolution, room_area_min=0.8, room_area_max=47.0, max_e
     return grow_regions(seeds, free)
 
 
-def _bounding_box(mask: np.ndarray, box: tuple[slice, slice]) -> tuple[slice, slice] | None:
-    """The slices of the smallest box holding the True cells of ``mask``, the part ``box`` of a larger
-    array, in that array's indices; None if there are none."""
+def _bounding_box(mask: np.ndarray) -> tuple[slice, slice] | None:
+    """The slices of the smallest box holding the True cells of ``mask``; None if there are none."""
     rows, cols = np.flatnonzero(mask.any(1)), np.flatnonzero(mask.any(0))
     if len(rows) == 0:
         return None
-    r0, c0 = box[0].start, box[1].start
-    return slice(r0 + rows[0], r0 + rows[-1] + 1), slice(c0 + cols[0], c0 + cols[-1] + 1)
+    return slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
 
 
 def distance(free, resolution, room_area_min=0.35, room_area_max=163.0) -> np.ndarray:
