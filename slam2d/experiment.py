@@ -13,6 +13,7 @@ import importlib
 import itertools
 import json
 import logging
+import multiprocessing
 import os
 import re
 import resource
@@ -703,7 +704,10 @@ def _execute_local(cfgs: list[ExperimentConfig], workers: int):
     """Variants in worker processes; on an interrupt the queued ones are dropped and the running ones stopped."""
     if not cfgs:
         return
-    pool = ProcessPoolExecutor(max_workers=max(1, workers), initializer=_init_sweep_worker)
+    # forkserver, not fork: a worker forked from a process that has run numba's parallel kernels (GNU
+    # OpenMP) aborts as soon as it runs them itself (a localize sweep started after a localisation)
+    pool = ProcessPoolExecutor(max_workers=max(1, workers), mp_context=multiprocessing.get_context("forkserver"),
+                               initializer=_init_sweep_worker)
     try:
         futures = {pool.submit(_run_variant, c): i for i, c in enumerate(cfgs)}
         for fut in as_completed(futures):

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from slam2d import config
 from slam2d.cli import app
 from slam2d.errors import InputError
-from slam2d.experiment import read_sweep, run_command, run_sweep
+from slam2d.experiment import SweepStopped, read_sweep, run_command, run_sweep
 from slam2d.planning.config import PlanConfig
 from slam2d.segmentation.config import SegmentConfig
 
@@ -210,6 +210,28 @@ def test_localize_sweep_runs_each_preset(tmp_path):
     sweep.write_text(yaml.safe_dump({"command": "localize", "grid": {"localization.preset": ["amcl", "bogus"]}}))
     with pytest.raises(InputError, match="localization.preset"):
         read_sweep(sweep)
+
+
+def test_localize_sweep_after_a_localisation_in_the_same_process(tmp_path):
+    """The sweep's workers do not inherit the OpenMP state of numba's parallel kernels run here first
+    (a forked worker running them again aborted, and the sweep reported itself stopped)."""
+    from slam2d.localization.config import LocalizeConfig
+    from slam2d.localization.run import run_localize
+
+    plan = _write_plan(tmp_path)
+    run_localize(LocalizeConfig(map=str(plan), localization={"mode": "tracking", "seconds": 2},
+                                output={"figures": False, "root": str(tmp_path / "first")}))
+    sweep = tmp_path / "loc.yaml"
+    sweep.write_text(yaml.safe_dump({
+        "name": "loc", "command": "localize", "workers": 1,
+        "config": {"map": str(plan), "localization": {"mode": "tracking", "seconds": 2},
+                   "output": {"figures": False, "root": str(tmp_path / "out")}},
+        "variants": [{"name": "one", "set": {"localization.preset": "slam2d"}}]}))
+    try:
+        _, rows = run_sweep(sweep, quiet=True)
+    except SweepStopped as stop:  # a KeyboardInterrupt: it would end the whole test session
+        pytest.fail(f"the sweep's worker died: {stop}")
+    assert [r["error"] for r in rows] == [""] and float(rows[0]["position_rmse"]) < 0.2
 
 
 def test_sweep_of_real_floor_plans_matches_single_runs(tmp_path, data_file):
