@@ -1,7 +1,7 @@
 """Closed-loop navigation benchmark: random start/goal pairs per world, with and without people.
 
 Usage: .venv/bin/python benchmarks/navigation.py [--worlds office rooms] [--pairs N] [--planners dwa fsm]
-       [--people 0 5] [--slam on off] [--seed S]
+       [--people 0 5] [--slam on off] [--seed S] [--set KEY=VALUE ...] [--workers N]
 
 Each run is `slam2d navigate` without the results folder (``slam2d.navigation.run.simulate``):
 the simulated robot drives from a random free start to a random free goal at least
@@ -16,9 +16,11 @@ median pose error of the pose driven on, and the real-time factor.
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import statistics
 import sys
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -82,20 +84,26 @@ def reachable_regions(world):
     return region
 
 
-def run_row(specs, n, planner, people, slam, seed) -> dict:
+def _run(overrides: dict) -> dict:
+    """One closed-loop run's metrics (in a worker process)."""
+    return simulate(config.load(None, overrides)).metrics
+
+
+def run_row(specs, n, planner, people, slam, seed, overrides=(), pool=None) -> dict:
     rng = np.random.default_rng(seed)
-    runs = []
+    jobs = []
     for spec in specs:
         for k, (start, goal) in enumerate(pairs(spec, n, rng)):
-            cfg = config.load(None, {
+            jobs.append({
                 "seed": seed + k, "dataset.simulator.world": spec, "navigation.start": start.tolist(),
                 "navigation.goal": goal.tolist(), "navigation.planner": planner, "navigation.people": people,
-                "navigation.slam": slam,
+                "navigation.slam": slam, **dict(map(config.parse_override, overrides)),
             })  # fmt: skip
-            m = simulate(cfg).metrics
-            runs.append(m)
-            print(f"  {Path(spec).stem} #{k}: {m['status']} {m['time']:.1f} s, collisions {m['collisions']}, "
-                  f"goal error {m['goal_error'] * 100:.1f} cm", file=sys.stderr, flush=True)
+    runs = []
+    for job, m in zip(jobs, pool.map(_run, jobs) if pool else map(_run, jobs)):
+        runs.append(m)
+        print(f"  {Path(job['dataset.simulator.world']).stem} seed {job['seed']}: {m['status']} {m['time']:.1f} s, "
+              f"collisions {m['collisions']}, goal error {m['goal_error'] * 100:.1f} cm", file=sys.stderr, flush=True)
     med = lambda key: statistics.median(r[key] for r in runs)  # noqa: E731
     return {
         "runs": len(runs),
@@ -119,7 +127,12 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--people", nargs="+", type=int, default=[0, 5])
     ap.add_argument("--slam", nargs="+", default=["on"], choices=["on", "off"])
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="config overrides for every run")
+    ap.add_argument("--workers", type=int, default=1, help="runs in parallel (processes)")
     args = ap.parse_args(argv)
+    # forkserver: a worker forked after numba's parallel kernels ran would abort (GNU OpenMP)
+    pool = ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("forkserver")) if (
+        args.workers > 1) else None  # fmt: skip
     specs = worlds(args.worlds)
     print("| worlds | planner | people | pose from | runs | success | runs with a collision | median time (s) "
           "| median length / optimal | median goal error (cm) | median pose RMSE (cm) | real-time factor "
@@ -128,7 +141,7 @@ def main(argv: list[str]) -> None:
     for slam in args.slam:
         for planner in args.planners:
             for people in args.people:
-                r = run_row(specs, args.pairs, planner, people, slam == "on", args.seed)
+                r = run_row(specs, args.pairs, planner, people, slam == "on", args.seed, args.set, pool)
                 print(f"| {' '.join(args.worlds)} | {planner} | {people} | {'SLAM' if slam == 'on' else 'truth'} "
                       f"| {r['runs']} | {100 * r['success']:.0f} % | {r['collided']} | {r['time']:.1f} "
                       f"| {r['ratio']:.2f} | {r['goal_cm']:.1f} | {r['pose_cm']:.1f} | {r['rtf']:.1f} "
