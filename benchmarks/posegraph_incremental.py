@@ -2,41 +2,45 @@
 
 Replays a g2o graph into ``PoseGraph`` as a SLAM run would (vertices in order as keyframes,
 the edge to the next vertex as odometry, every other edge as a loop when its later end is
-added) with an iSAM2 update every ``--every`` keyframes, under each relinearisation setting
-(threshold m / rad, check every ``skip`` updates), then the final batch optimisation
-the SLAM back end runs at the end. Reports wall seconds and the GTSAM error
-beside the batch solve (chordal start + LM, as ``slam2d optimize``) in the same run.
+added) with ``PoseGraph.update`` every ``--every`` keyframes, under each relinearisation setting
+(pose thresholds x, y m / theta rad, check every ``skip`` updates), then the final batch
+optimisation the SLAM back end runs at the end. Reports the median wall seconds of ``--repeat``
+runs, the iSAM2 updates run and the GTSAM error before and after the final batch, beside the
+batch solve (chordal start + LM, as ``slam2d optimize``; median of as many runs, after one to warm up).
 
-    nice .venv/bin/python benchmarks/posegraph_incremental.py [--graph M3500] [--every 1 10 100]
+    nice .venv/bin/python benchmarks/posegraph_incremental.py [--graph M3500] [--every 1 10] [--repeat 3]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import time
 from pathlib import Path
 
 DATA = Path(os.environ.get("SLAM2D_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets"))
-SETTINGS = ((0.01, 1), (0.1, 10))  # (relinearise threshold, relinearise skip); the first is the default
+SETTINGS = (((0.1, 0.1, 0.01), 1), ((0.01, 0.01, 0.01), 1))  # (pose thresholds, skip); the first is the default
 
 
-def replay(graph, every: int, threshold: float, skip: int) -> tuple[float, float, float]:
-    """(incremental s, final batch s, error after the final batch) of one replay."""
+def replay(graph, every: int, threshold, skip: int) -> tuple[float, float, int, float, float]:
+    """(incremental s, final batch s, iSAM2 updates, error before and after the final batch) of one replay."""
     import slam2d.backend.pose_graph as pgm
     from slam2d.config import BackendConfig
 
-    saved = pgm.RELINEARIZE_THRESHOLD, pgm.RELINEARIZE_SKIP
-    pgm.RELINEARIZE_THRESHOLD, pgm.RELINEARIZE_SKIP = threshold, skip
+    saved = pgm.RELINEARIZE_POSE, pgm.RELINEARIZE_SKIP
+    pgm.RELINEARIZE_POSE, pgm.RELINEARIZE_SKIP = threshold, skip
     try:
         t0 = time.perf_counter()
         pg = pgm.replay_g2o(graph, BackendConfig(name="pose_graph", robust="none"), every=every)
         t1 = time.perf_counter()
-        pg.optimize_batch()
+        before = pgm.g2o_error(graph, pg.estimate())
         t2 = time.perf_counter()
+        pg.optimize_batch()
+        t3 = time.perf_counter()
     finally:
-        pgm.RELINEARIZE_THRESHOLD, pgm.RELINEARIZE_SKIP = saved
-    return t1 - t0, t2 - t1, pgm.g2o_error(graph, pg.estimate())
+        pgm.RELINEARIZE_POSE, pgm.RELINEARIZE_SKIP = saved
+    return t1 - t0, t3 - t2, pg.isam_updates, before, pgm.g2o_error(graph, pg.estimate())
 
 
 def batch_seconds(graph) -> tuple[float, float]:
@@ -48,25 +52,33 @@ def batch_seconds(graph) -> tuple[float, float]:
     return time.perf_counter() - t0, g2o_error(graph, poses)
 
 
+def median_runs(fn, repeat: int) -> tuple:
+    """``fn()`` ``repeat`` times; each field's median."""
+    runs = [fn() for _ in range(repeat)]
+    return tuple(statistics.median(r[k] for r in runs) for k in range(len(runs[0])))
+
+
 def main() -> None:
     from slam2d.datasets.g2o import read_g2o
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--graph", default="M3500", help="name of a graph in SLAM2D_DATA/posegraphs")
-    ap.add_argument("--every", type=int, nargs="+", default=[1, 10, 100], help="keyframes per iSAM2 update")
+    ap.add_argument("--every", type=int, nargs="+", default=[1, 10], help="keyframes per PoseGraph.update")
+    ap.add_argument("--repeat", type=int, default=3, help="runs of each, medians reported")
     args = ap.parse_args()
     graph = read_g2o(DATA / "posegraphs" / f"{args.graph}.g2o")
-    batch_s, batch_err = batch_seconds(graph)
+    batch_seconds(graph)  # warm up (imports, first allocations)
+    batch_s, batch_err = median_runs(lambda: batch_seconds(graph), args.repeat)
     print(f"{args.graph}: {len(graph.ids)} poses, {len(graph.i)} edges; batch (chordal + LM) {batch_s:.3f} s, "
-          f"error {batch_err:.6f}\n")  # fmt: skip
-    print("| keyframes per update | relinearise threshold / skip | incremental (s) | + final batch (s) "
-          "| total × batch | error after the final batch |")  # fmt: skip
-    print("|---|---|---|---|---|---|")
+          f"error {batch_err:.6f}; medians of {args.repeat}\n")  # fmt: skip
+    print("| keyframes per update | pose relinearise thresholds / skip | iSAM2 updates | incremental (s) "
+          "| + final batch (s) | total × batch | error before / after the final batch |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|")
     for every in args.every:
         for threshold, skip in SETTINGS:
-            inc, fin, err = replay(graph, every, threshold, skip)
-            print(f"| {every} | {threshold} / {skip} | {inc:.2f} | {fin:.2f} | {(inc + fin) / batch_s:.1f} | {err:.6f} |",
-                  flush=True)  # fmt: skip
+            inc, fin, n, before, after = median_runs(lambda: replay(graph, every, threshold, skip), args.repeat)
+            print(f"| {every} | {'/'.join(map(str, threshold))} / {skip} | {n:.0f} | {inc:.2f} | {fin:.2f} "
+                  f"| {(inc + fin) / batch_s:.1f} | {before:.4f} / {after:.6f} |", flush=True)  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -5,7 +5,8 @@ Keyframe ``k`` is the gtsam key ``symbol('x', k)``, landmark ``n`` is
 between factor from its predecessor (odometry or scan matching, no robust
 kernel); loop closures are between factors with the configured robust kernel;
 landmark observations are bearing-range factors. iSAM2 keeps the incremental
-estimate; ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors.
+estimate (keyframes joined by odometry alone wait for the next loop or landmark, see
+``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors.
 
 Poses are numpy ``(x, y, theta)`` (m, m, rad); information matrices are 3x3
 inverse covariances in the frame of the measurement (GTSAM's tangent space,
@@ -31,7 +32,10 @@ from slam2d.errors import InputError
 
 log = logging.getLogger(__name__)
 
-RELINEARIZE_THRESHOLD = 0.01  # iSAM2: relinearise a variable whose delta exceeds this (m / rad)
+RELINEARIZE_POSE = (0.1, 0.1, 0.01)  # m, m, rad: iSAM2 relinearises a pose whose delta exceeds one of these
+# (a between factor is linear in the positions given the headings; 0.01 m too doubled the time on M3500 for
+# estimates between batches within 2.5 cm of the optimum instead of 2 cm, docs/posegraphs.md)
+RELINEARIZE_LANDMARK = 0.01  # m: the same for a landmark's position
 RELINEARIZE_SKIP = 1  # iSAM2: check for relinearisation at every update
 ISAM2_FACTORIZATION = "CHOLESKY"  # faster; an ill-conditioned update falls back to "QR" (see update)
 PRIOR_SIGMAS = np.array([1e-6, 1e-6, 1e-6])  # m, m, rad: anchors the first keyframe / vertex
@@ -100,7 +104,9 @@ class PoseGraph:
         self._active: list[bool] = []
         self._initial: list[np.ndarray] = []  # poses given to add_keyframe
         self._landmarks: set[int] = set()
+        self._odometry: list = []  # gtsam.Pose2 odometry into keyframe k + 1
         self.rejected_inconsistent = 0  # loops removed after the batch optimisation
+        self.isam_updates = 0  # iSAM2 updates run
         self.factorization = ISAM2_FACTORIZATION
         self._reset_isam()
 
@@ -130,9 +136,10 @@ class PoseGraph:
                 info, model = self._default_odometry_info, self._default_odometry_model
             else:
                 info = rb.check_information(information, f"odometry information {k - 1} -> {k}")
-                model = rb.noise_model(info)
+                model = gtsam.noiseModel.Gaussian.Information(info)
             factor = gtsam.BetweenFactorPose2(pose_key(k - 1), pose_key(k), _gtsam_pose(delta), model)
             self._add(_Factor("odometry", factor, k - 1, k, delta, info))
+            self._odometry.append(_gtsam_pose(delta))
         self._new_values.insert(pose_key(k), _gtsam_pose(pose))
         self._initial.append(pose)
         return k
@@ -173,7 +180,26 @@ class PoseGraph:
     # -------------------------------------------------------------- optimising
 
     def update(self) -> None:
-        """One iSAM2 update with the factors and values added since the last one.
+        """Bring the estimate up to date with the factors added since the last call.
+
+        Keyframes added with odometry alone do not reach iSAM2 while its estimate has
+        settled (no delta above a relinearisation threshold, so an update would only add
+        them): a chain of odometry leaves the optimum of the rest unchanged, so each such
+        keyframe is estimated at its predecessor's estimate composed with its odometry (which
+        replaces its initial value, also when it enters iSAM2 at once). Otherwise, and with any other factor (loop, landmark, the first
+        keyframe's prior), one iSAM2 update with everything pending; so too a call with
+        nothing new (one more iteration). Reads needing iSAM2 (``marginal_covariance``,
+        ``loop_consistency``) hand the waiting keyframes over first.
+        """
+        nothing_new = self._n_updated == len(self._initial)
+        for k in range(max(self._n_updated, 1), len(self._initial)):
+            self._new_values.update(pose_key(k), self._pose_value(k - 1).compose(self._odometry[k - 1]))
+        self._n_updated = len(self._initial)
+        if self._pending_other or nothing_new or not self._is_settled():
+            self._flush()
+
+    def _flush(self) -> None:
+        """One iSAM2 update with every factor and value pending.
 
         If Cholesky finds the system indeterminate (very anisotropic information
         matrices, as in MIT.g2o, square the condition number), iSAM2 restarts with
@@ -181,6 +207,7 @@ class PoseGraph:
         """
         import gtsam
 
+        self.isam_updates += 1
         try:
             self._isam.update(self._new_graph, self._new_values)
         except RuntimeError as err:
@@ -198,17 +225,31 @@ class PoseGraph:
                 self._reset_isam()
                 self._isam.update(self._batch_graph()[0], values)
         self._new_graph, self._new_values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        self._n_in_isam = len(self._initial)
+        self._n_in_isam = self._n_updated = len(self._initial)
+        self._pending_other = False
         self._isam_poses = None
+        self._settled = None  # unknown until asked (``_is_settled``)
+
+    def _is_settled(self) -> bool:
+        """Whether iSAM2's next update would relinearise nothing (no delta above a threshold),
+        i.e. only add what is pending; asked once per iSAM2 update."""
+        if self._settled is None:
+            import gtsam
+
+            keys, _ = self._isam.predictUpdateInfo(gtsam.NonlinearFactorGraph(), gtsam.Values(), gtsam.ISAM2UpdateParams())
+            self._settled = keys.size() == 0
+        return self._settled
 
     def estimate(self) -> np.ndarray:
-        """Current poses (K, 3) in key order; keyframes not yet updated keep their initial value."""
+        """Current poses (K, 3) in key order: keyframes waiting outside iSAM2 at their predecessor's
+        estimate composed with their odometry (see ``update``), keyframes not yet updated at their
+        initial value."""
         if self._isam_poses is None:
             import gtsam
 
             self._isam_poses = gtsam.utilities.extractPose2(self._isam.calculateEstimate()).reshape(-1, 3)
-        tail = np.array(self._initial[self._n_in_isam :]).reshape(-1, 3)
-        return np.vstack([self._isam_poses, tail])
+        tail = [self._new_values.atPose2(pose_key(k)) for k in range(self._n_in_isam, len(self._initial))]
+        return np.vstack([self._isam_poses, np.array([[p.x(), p.y(), p.theta()] for p in tail]).reshape(-1, 3)])
 
     def pose(self, key: int) -> np.ndarray:
         """Current pose (3,) of keyframe ``key`` alone (cheaper than the whole estimate)."""
@@ -279,7 +320,7 @@ class PoseGraph:
         )
         self._reset_isam()  # restart iSAM2 at the batch solution, without rejected loops
         self._new_graph, self._new_values = self._batch_graph()[0], result
-        self.update()
+        self._flush()
         self._isam_poses = gtsam.utilities.extractPose2(result).reshape(-1, 3)
         return self.estimate()
 
@@ -329,19 +370,25 @@ class PoseGraph:
     def _reset_isam(self) -> None:
         import gtsam
 
+        thresholds = gtsam.ISAM2ThresholdMap()
+        thresholds.insert(("x", np.asarray(RELINEARIZE_POSE, dtype=np.float64)))
+        thresholds.insert(("l", np.full(2, RELINEARIZE_LANDMARK)))
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(RELINEARIZE_THRESHOLD)
+        params.setRelinearizeThreshold(thresholds)
         params.relinearizeSkip = RELINEARIZE_SKIP
         params.setFactorization(self.factorization)
         self._isam = gtsam.ISAM2(params)
         self._new_graph, self._new_values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        self._n_in_isam = 0
+        self._n_in_isam = self._n_updated = 0  # keyframes in iSAM2; keyframes update() has seen
+        self._pending_other = False  # a pending factor other than odometry
+        self._settled = None  # iSAM2's next update would relinearise nothing (None: not asked)
         self._isam_poses = None
 
     def _add(self, f: _Factor) -> int:
         self._factors.append(f)
         self._active.append(True)
         self._new_graph.add(f.factor)
+        self._pending_other |= f.kind != "odometry"
         return len(self._factors) - 1
 
     def _count(self, kind: str) -> int:
@@ -391,16 +438,19 @@ class PoseGraph:
         return k
 
     def _check_updated(self, key) -> int:
+        """``key`` checked to be updated; keyframes waiting outside iSAM2 are handed over."""
         k = self._check_key(key)
-        if k >= self._n_in_isam:
+        if k >= self._n_updated:
             raise InputError("pose graph", f"keyframe {k} is not optimised yet; call update() first")
+        if k >= self._n_in_isam:
+            self._flush()
         return k
 
     def _pose_value(self, k: int):
         """Best current gtsam.Pose2 of keyframe ``k``."""
         if k < self._n_in_isam:
             return self._isam.calculateEstimatePose2(pose_key(k))
-        return _gtsam_pose(self._initial[k])
+        return self._new_values.atPose2(pose_key(k))
 
     def _point_value(self, lkey: int) -> np.ndarray:
         if self._isam.valueExists(lkey):
