@@ -2,7 +2,8 @@
 on the office and the room plans, global localisation, kidnapping and tracking.
 
 Usage: nice .venv/bin/python benchmarks/localization.py [--worlds office rooms] [--runs N] [--first-seed 0]
-       [--workers 2] [--scenarios global kidnap tracking] [--out results/bench-localization]
+       [--workers 2] [--scenarios global kidnap tracking] [--filters slam2d amcl amcl_recovery]
+       [--out results/bench-localization]
 
 Every seeded run records one stream of the wandering robot (scans, odometry,
 truth) and replays it through every filter, so that all see the same data:
@@ -60,8 +61,9 @@ def _load(spec: str):
     return world, (KnownMap.from_world(world) if spec == "office" else KnownMap.load(spec))
 
 
-def run_one(spec: str, scenario: str, seed: int) -> list[dict]:
-    """One seeded stream of ``scenario`` in world ``spec`` replayed through its filters; one row per filter."""
+def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) -> list[dict]:
+    """One seeded stream of ``scenario`` in world ``spec`` replayed through its filters (those of them
+    in ``filters`` if given); one row per filter."""
     from slam2d.localization import ParticleFilter, preset
     from slam2d.localization.scenario import (
         PERIOD,
@@ -75,7 +77,7 @@ def run_one(spec: str, scenario: str, seed: int) -> list[dict]:
     kidnap = [KIDNAP_AT] if scenario == "kidnap" else []
     stream = wander(world, known, SECONDS[scenario], seed, kidnap_at=kidnap)
     rows = []
-    for name in FILTERS[scenario]:
+    for name in [f for f in FILTERS[scenario] if not filters or f in filters]:
         pf = ParticleFilter(known, preset(name), stream.scans[0].range_max, seed=seed)
         if scenario == "global":
             pf.init_global()
@@ -127,7 +129,7 @@ def table(rows: list[dict]) -> str:
               "| median recovery (s) | tracking RMSE (m) | heading RMSE (°) | particles tracking | ms/update | runs |"),
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for world in ["all", *worlds]:
-        for name in FILTERS["global"]:
+        for name in [n for n in FILTERS["global"] if any(r["filter"] == n for r in rows)]:
             sel = [r for r in rows if r["filter"] == name and world in ("all", r["world"])]
             g = [r for r in sel if r["scenario"] == "global"]
             k = [r for r in sel if r["scenario"] == "kidnap"]
@@ -146,13 +148,15 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--runs", type=int, default=10, help="seeded runs per world and scenario")
     ap.add_argument("--first-seed", type=int, default=0, help="seeds first-seed ... first-seed + runs - 1")
     ap.add_argument("--scenarios", nargs="+", default=["global", "kidnap", "tracking"])
+    ap.add_argument("--filters", nargs="+", default=[], help="only these filters (default: all)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default="results/bench-localization")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     seeds = range(args.first_seed, args.first_seed + args.runs)
-    jobs = [(w, s, seed) for w in world_specs(args.worlds) for s in args.scenarios for seed in seeds]
+    jobs = [(w, s, seed, tuple(args.filters)) for w in world_specs(args.worlds) for s in args.scenarios
+            for seed in seeds]  # fmt: skip
     rows: list[dict] = []
     t0 = time.perf_counter()
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # one thread per worker process

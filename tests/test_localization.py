@@ -269,6 +269,19 @@ def test_walls_missing_from_the_map_do_not_pass_for_a_kidnapping():
     assert injected > 1000 and worst > 5.0
 
 
+def test_random_particles_are_drawn_when_the_weights_stay_even():
+    """After a kidnap every particle can fit the scan equally badly: the weights stay even, N_eff
+    does not drop, yet w_fast << w_slow asks for random particles: resampling is due for them."""
+    world = World.office()
+    known = KnownMap.from_world(world)
+    stream = wander(world, known, 1.0, seed=4)
+    pf = ParticleFilter(known, MclConfig(), 12.0, seed=4)
+    pf.init_pose(stream.truth[0], 0.0, 0.0)  # one pose: every particle scores the same
+    pf.w_slow, pf.w_fast = np.ones(2), np.full(2, 0.5)  # the averages as just after a kidnap
+    pf.add(stream.scans[0])
+    assert pf.random_share() > 0.1 and pf.resamples == 1 and pf.injected > 0
+
+
 def test_same_seed_same_particles_other_seed_other_particles():
     known, stream = _office_kidnap_stream()
     scans = stream.scans[:40]
@@ -324,8 +337,8 @@ def test_localize_command_writes_a_results_folder_and_none_on_bad_input(tmp_path
     from slam2d.cli import app
 
     runner = CliRunner()
-    ok = runner.invoke(app, ["localize", "office", "--set", "seconds=14", "--set", "kidnap=[6]", "--out",
-                             str(tmp_path / "ok"), "-q"])  # fmt: skip
+    ok = runner.invoke(app, ["localize", "office", "--set", "seconds=16", "--set", "kidnap=[6]", "--out",
+                             str(tmp_path / "ok"), "-q"])  # fmt: skip  (recovery within 5 s, then held 5 s)
     assert ok.exit_code == 0, ok.output
     (folder,) = (tmp_path / "ok").iterdir()
     names = {p.name for p in folder.iterdir()}

@@ -7,7 +7,7 @@ kidnapping (random particles, Thrun et al. 2005 Table 8.3). Every scan goes to
 ``update_min_a`` rad of odometry (as amcl): odometry motion model (four alphas),
 sensor model (likelihood field or beams; each cluster's total weight by the
 scan's likelihood at its mean pose), then low-variance resampling when the
-effective sample size drops, drawing random free-space poses with probability
+effective sample size drops or random particles are due, drawing random free-space poses with probability
 max(0, 1 - w_fast / w_slow) (while confident, averages of the likelihood of the
 best-fitting half of the beams, so that a map lacking part of what the laser
 sees does not pass for a kidnapping) and keeping as many particles as KLD sampling
@@ -285,6 +285,9 @@ class ParticleFilter:
     def _measure(self, scan: Scan) -> None:
         """Weigh by the scan, track the likelihood averages, resample when due, estimate.
 
+        Resampling is due when N_eff drops, and whenever :meth:`random_share` asks for random
+        particles: after a kidnap every particle can fit equally badly, so that N_eff stays high.
+
         While the pose is uncertain the weights come from the smoother field; the likelihood
         averages always do, so that they stay comparable. With ``hypothesis_fit`` the clusters'
         mean poses are scored in the same pass as the particles."""
@@ -304,7 +307,7 @@ class ParticleFilter:
             if refit:
                 joint = joint + (old + fine[p:] - _group_logsumexp(joint, self._labels, k))[self._labels]
             self.log_w = joint - logsumexp(joint)
-        if self._resample_due():
+        if self._resample_due() or self.random_share() > 0:
             self._resample(scan)
         self._estimate = self._cluster_estimate()
 
