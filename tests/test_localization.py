@@ -270,16 +270,21 @@ def test_walls_missing_from_the_map_do_not_pass_for_a_kidnapping():
 
 
 def test_random_particles_are_drawn_when_the_weights_stay_even():
-    """After a kidnap every particle can fit the scan equally badly: the weights stay even, N_eff
-    does not drop, yet w_fast << w_slow asks for random particles: resampling is due for them."""
+    """After a kidnap a confident cloud's particles can all fit the scan equally badly: the weights
+    stay even, N_eff does not drop, yet w_fast << w_slow asks for random particles: resampling is
+    due for them."""
     world = World.office()
     known = KnownMap.from_world(world)
-    stream = wander(world, known, 1.0, seed=4)
+    stream = wander(world, known, 2.0, seed=4)
     pf = ParticleFilter(known, MclConfig(), 12.0, seed=4)
     pf.init_pose(stream.truth[0], 0.0, 0.0)  # one pose: every particle scores the same
-    pf.w_slow, pf.w_fast = np.ones(2), np.full(2, 0.5)  # the averages as just after a kidnap
     pf.add(stream.scans[0])
-    assert pf.random_share() > 0.1 and pf.resamples == 1 and pf.injected > 0
+    assert pf.confident() and pf.resamples == 0
+    pf.w_slow, pf.w_fast = np.ones(2), np.full(2, 0.5)  # the averages as just after a kidnap
+    scans = iter(stream.scans[1:])
+    while not pf.add(next(scans)):  # the next update
+        pass
+    assert pf.random_share() > 0.1 and pf.injected > 0
 
 
 def test_same_seed_same_particles_other_seed_other_particles():

@@ -7,7 +7,7 @@ kidnapping (random particles, Thrun et al. 2005 Table 8.3). Every scan goes to
 ``update_min_a`` rad of odometry (as amcl): odometry motion model (four alphas),
 sensor model (likelihood field or beams; each cluster's total weight by the
 scan's likelihood at its mean pose), then low-variance resampling when the
-effective sample size drops or random particles are due, drawing random free-space poses with probability
+effective sample size drops or a confident filter's random particles are due, drawing random free-space poses with probability
 max(0, 1 - w_fast / w_slow) (while confident, averages of the likelihood of the
 best-fitting half of the beams, so that a map lacking part of what the laser
 sees does not pass for a kidnapping) and keeping as many particles as KLD sampling
@@ -285,8 +285,10 @@ class ParticleFilter:
     def _measure(self, scan: Scan) -> None:
         """Weigh by the scan, track the likelihood averages, resample when due, estimate.
 
-        Resampling is due when N_eff drops, and whenever :meth:`random_share` asks for random
-        particles: after a kidnap every particle can fit equally badly, so that N_eff stays high.
+        Resampling is due when N_eff drops, and when a confident filter's :meth:`random_share` asks
+        for random particles: after a kidnap its particles can all fit equally badly, so that N_eff
+        stays high (an uncertain filter resamples only by N_eff, so that look-alike places keep
+        their particles).
 
         While the pose is uncertain the weights come from the smoother field; the likelihood
         averages always do, so that they stay comparable. With ``hypothesis_fit`` the clusters'
@@ -307,7 +309,7 @@ class ParticleFilter:
             if refit:
                 joint = joint + (old + fine[p:] - _group_logsumexp(joint, self._labels, k))[self._labels]
             self.log_w = joint - logsumexp(joint)
-        if self._resample_due() or self.random_share() > 0:
+        if self._resample_due() or (self.confident() and self.random_share() > 0):
             self._resample(scan)
         self._estimate = self._cluster_estimate()
 
