@@ -7,7 +7,8 @@ kidnapping (random particles, Thrun et al. 2005 Table 8.3). Every scan goes to
 ``update_min_a`` rad of odometry (as amcl): odometry motion model (four alphas),
 sensor model (likelihood field or beams; each cluster's total weight by the
 scan's likelihood at its mean pose), then low-variance resampling when the
-effective sample size drops or a confident filter's random particles are due, drawing random free-space poses with probability
+effective sample size drops or a confident filter's random particles are due,
+drawing random free-space poses with probability
 max(0, 1 - w_fast / w_slow) (while confident, averages of the likelihood of the
 best-fitting half of the beams, so that a map lacking part of what the laser
 sees does not pass for a kidnapping) and keeping as many particles as KLD sampling
