@@ -267,3 +267,28 @@ def test_a_goal_closer_to_a_wall_than_the_margin_is_reached_and_one_without_room
     robot = Robot(world, [1.0, 2.0, 0.0], seed=8)
     result = run_navigation(world, robot, grid, [9.0, 3.85], "dwa")  # 0.15 m: the robot does not fit
     assert result.status == "unreachable" and "within the robot radius" in result.reason and result.steps == 0
+
+
+@pytest.mark.parametrize("unknown_free", [True, False])
+def test_a_goal_blocked_in_a_map_being_built_is_approached_until_the_map_clears(hall, unknown_free):
+    """A live map holds a person mapped in passing on the goal (the world has nothing there) until
+    the robot comes within 1.5 m: being built, the robot drives to the nearest free cell and on to
+    the goal once it clears; a fixed map's blocked goal is unreachable at once."""
+    from slam2d.mapping.occupancy import OccupancyGrid
+
+    world, grid = hall
+    goal = np.array([8.5, 2.0])
+    cells = grid.world_to_cell(np.column_stack([np.full(9, 8.5), np.linspace(1.6, 2.4, 9)]))
+    log_odds = np.where(grid.free, -2.0, 2.0)
+    ghost = log_odds.copy()
+    ghost[cells[:, 0], cells[:, 1]] = 2.0  # a 0.8 m trail across the goal
+    seen, clear = OccupancyGrid(ghost, grid.resolution, grid.origin), OccupancyGrid(log_odds, grid.resolution, grid.origin)
+    near = lambda step: np.hypot(*(step.pose[:2] - goal)) < 1.5  # noqa: E731
+    robot = Robot(world, [1.0, 2.0, 0.0], seed=8)
+    result = run_navigation(world, robot, lambda step: clear if near(step) else seen, goal, "dwa",
+                            NavigatorConfig(unknown_free=unknown_free))
+    if unknown_free:
+        assert result.success and result.goal_error <= 0.05 and result.collisions == 0
+        assert ("replan", "the goal is blocked in the map") in [e[1:] for e in result.events]
+    else:
+        assert result.status == "unreachable" and "blocked" in result.reason and result.steps == 0

@@ -78,6 +78,10 @@ class NavigatorConfig(Section):
     backoff: float = Field(0.3, ge=0, description="m backed off in a recovery (if the rear is clear)")
     off_path: float = Field(1.0, gt=0, description="m from the path that triggers a replan")
     max_time: float = Field(300.0, gt=0, description="s of simulated time, the budget of a run")
+    blocked_goal_reach: float = Field(
+        1.5, ge=0, description="m; on a map being built (unknown_free) a goal the map blocks is approached "
+        "to the nearest free cell within this, replanning at every new map, before it is unreachable"
+    )
     dwa: DwaConfig = DwaConfig()
     fsm: FsmConfig = FsmConfig()
 
@@ -114,6 +118,7 @@ class Navigator:
         self._best = (np.inf, 0.0)  # (remaining path m, time)
         self._level_mark = np.inf  # remaining path m at the first recovery of a run of them
         self._blocked_since = None
+        self._stand_in = False  # the path ends at a free cell near a goal the map blocks (see _goal_cell)
         self._manoeuvre: list[list] = []
 
     # map and plan --------------------------------------------------------
@@ -218,14 +223,21 @@ class Navigator:
 
     def _goal_cell(self, grid: PlanningGrid):
         """The goal's cell, or, when only the margin is in the way (the robot's disc fits there),
-        the nearest free cell within the margin; None if the goal has no room for the robot."""
+        the nearest free cell within the margin; when the goal has no room for the robot, None, or on
+        a map being built the nearest free cell within ``blocked_goal_reach`` (``_stand_in`` set)."""
         cell = grid.world_to_cell(self.goal[:2])
+        self._stand_in = False
         if grid.is_free(cell):
             return cell
         raw = self._raw
         rc = raw.world_to_cell(self.goal[:2])
         if not raw.in_bounds(rc) or raw.clearance()[rc[0], rc[1]] < self.robot.radius:
-            return None
+            if not self.cfg.unknown_free:
+                return None
+            # a map being built: what blocks the goal may be a person mapped in passing; drive to the
+            # nearest free cell, where the laser sees the goal again (replanned at every new map)
+            self._stand_in = True
+            return _nearest_free(grid, self.goal[:2], self.cfg.blocked_goal_reach)
         return _nearest_free(grid, self.goal[:2], self.cfg.inflation_margin + 2 * grid.resolution)
 
     def optimal_length(self, start) -> float:
@@ -250,9 +262,10 @@ class Navigator:
         if now > self.cfg.max_time:
             return self._finish(TIMEOUT, f"time budget of {self.cfg.max_time:g} s used up")
         changed = self.update_map(map_grid, now)
-        if self.path is None or (changed and self._path_blocked()):
+        if self.path is None or (changed and (self._stand_in or self._path_blocked())):
             if self.path is not None:
-                self._log(now, "replan", "the new map blocks the path")
+                self._log(now, "replan", "the goal is blocked in the map" if self._stand_in else
+                          "the new map blocks the path")
             if why := self.plan(pose):
                 return self._finish(UNREACHABLE, why)
         if self._at_goal(pose, velocity):
