@@ -106,7 +106,8 @@ class _Loop:
         self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2], RobotConfig().radius,
                                         sim.laser.range_max)  # fmt: skip
         self.robot = Robot(self.world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), seed=cfg.seed)
-        self.options = _navigator_options({"max_time": 120.0, **self.ecfg.options}, True)
+        # a goal the map comes to block is inaccessible at once: the explorer picks another
+        self.options = _navigator_options({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options}, True)
         self.slam = OnlineSlam(cfg)
         self.explorer = Explorer(self.ecfg, self.robot.cfg.radius, self.options.inflation_margin,
                                  sim.laser.range_max)  # fmt: skip
