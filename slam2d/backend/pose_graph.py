@@ -186,9 +186,9 @@ class PoseGraph:
         settled (no delta above a relinearisation threshold, so an update would only add
         them): a chain of odometry leaves the optimum of the rest unchanged, so each such
         keyframe is estimated at its predecessor's estimate composed with its odometry (which
-        replaces its initial value, also when it enters iSAM2 at once). Otherwise, and with any other factor (loop, landmark, the first
-        keyframe's prior), one iSAM2 update with everything pending; so too a call with
-        nothing new (one more iteration). Reads needing iSAM2 (``marginal_covariance``,
+        replaces its initial value, also when it enters iSAM2 at once). Otherwise, and with
+        any other factor (loop, landmark, the first keyframe's prior), one iSAM2 update with
+        everything pending; so too a call with nothing new (one more iteration). Reads needing iSAM2 (``marginal_covariance``,
         ``loop_consistency``) hand the waiting keyframes over first.
         """
         nothing_new = self._n_updated == len(self._initial)
@@ -236,7 +236,8 @@ class PoseGraph:
         if self._settled is None:
             import gtsam
 
-            keys, _ = self._isam.predictUpdateInfo(gtsam.NonlinearFactorGraph(), gtsam.Values(), gtsam.ISAM2UpdateParams())
+            nothing = gtsam.NonlinearFactorGraph(), gtsam.Values(), gtsam.ISAM2UpdateParams()
+            keys, _ = self._isam.predictUpdateInfo(*nothing)
             self._settled = keys.size() == 0
         return self._settled
 
@@ -244,12 +245,12 @@ class PoseGraph:
         """Current poses (K, 3) in key order: keyframes waiting outside iSAM2 at their predecessor's
         estimate composed with their odometry (see ``update``), keyframes not yet updated at their
         initial value."""
-        if self._isam_poses is None:
-            import gtsam
+        import gtsam
 
+        if self._isam_poses is None:
             self._isam_poses = gtsam.utilities.extractPose2(self._isam.calculateEstimate()).reshape(-1, 3)
-        tail = [self._new_values.atPose2(pose_key(k)) for k in range(self._n_in_isam, len(self._initial))]
-        return np.vstack([self._isam_poses, np.array([[p.x(), p.y(), p.theta()] for p in tail]).reshape(-1, 3)])
+        tail = gtsam.utilities.extractPose2(self._new_values).reshape(-1, 3)  # the keyframes not in iSAM2, in key order
+        return np.vstack([self._isam_poses, tail])
 
     def pose(self, key: int) -> np.ndarray:
         """Current pose (3,) of keyframe ``key`` alone (cheaper than the whole estimate)."""

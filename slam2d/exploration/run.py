@@ -107,7 +107,8 @@ class _Loop:
                                         sim.laser.range_max)  # fmt: skip
         self.robot = Robot(self.world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), seed=cfg.seed)
         # a goal the map comes to block is inaccessible at once: the explorer picks another
-        self.options = _navigator_options({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options}, True)
+        self.options = _navigator_options({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
+                                          True)  # fmt: skip
         self.slam = OnlineSlam(cfg)
         self.explorer = Explorer(self.ecfg, self.robot.cfg.radius, self.options.inflation_margin,
                                  sim.laser.range_max)  # fmt: skip
