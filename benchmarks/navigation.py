@@ -1,7 +1,7 @@
 """Closed-loop navigation benchmark: random start/goal pairs per world, with and without people.
 
 Usage: .venv/bin/python benchmarks/navigation.py [--worlds office rooms] [--pairs N] [--planners dwa fsm]
-       [--people 0 5] [--slam on off] [--seed S] [--set KEY=VALUE ...] [--workers N]
+       [--people 0 5] [--slam on off] [--seed S] [--set KEY=VALUE ...] [--only WORLD:SEED ...] [--workers N]
 
 Each run is `slam2d navigate` without the results folder (``slam2d.navigation.run.simulate``):
 the simulated robot drives from a random free start to a random free goal at least
@@ -89,11 +89,16 @@ def _run(overrides: dict) -> dict:
     return simulate(config.load(None, overrides)).metrics
 
 
-def run_row(specs, n, planner, people, slam, seed, overrides=(), pool=None) -> dict:
+def run_row(specs, n, planner, people, slam, seed, overrides=(), pool=None, only=()) -> dict:
+    """One row's metrics; ``only`` ("world:seed", the world a prefix of the file's name, e.g.
+    "lab_d:1002") keeps just those runs (the pairs are drawn as for the whole row: a run is the same alone)."""
     rng = np.random.default_rng(seed)
     jobs = []
     for spec in specs:
         for k, (start, goal) in enumerate(pairs(spec, n, rng)):
+            if only and not any(Path(spec).stem.startswith(w) and int(s) == seed + k
+                                for w, s in (o.rsplit(":", 1) for o in only)):
+                continue
             jobs.append({
                 "seed": seed + k, "dataset.simulator.world": spec, "navigation.start": start.tolist(),
                 "navigation.goal": goal.tolist(), "navigation.planner": planner, "navigation.people": people,
@@ -103,7 +108,8 @@ def run_row(specs, n, planner, people, slam, seed, overrides=(), pool=None) -> d
     for job, m in zip(jobs, pool.map(_run, jobs) if pool else map(_run, jobs)):
         runs.append(m)
         print(f"  {Path(job['dataset.simulator.world']).stem} seed {job['seed']}: {m['status']} {m['time']:.1f} s, "
-              f"collisions {m['collisions']}, goal error {m['goal_error'] * 100:.1f} cm", file=sys.stderr, flush=True)
+              f"collisions {m['collisions']}, goal error {m['goal_error'] * 100:.1f} cm"
+              + ("" if m["success"] else f" ({m['reason']})"), file=sys.stderr, flush=True)
     med = lambda key: statistics.median(r[key] for r in runs)  # noqa: E731
     return {
         "runs": len(runs),
@@ -128,6 +134,7 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--slam", nargs="+", default=["on"], choices=["on", "off"])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="config overrides for every run")
+    ap.add_argument("--only", nargs="*", default=[], metavar="WORLD:SEED", help="only these runs, e.g. lab_d:1002")
     ap.add_argument("--workers", type=int, default=1, help="runs in parallel (processes)")
     args = ap.parse_args(argv)
     # forkserver: a worker forked after numba's parallel kernels ran would abort (GNU OpenMP)
@@ -141,7 +148,7 @@ def main(argv: list[str]) -> None:
     for slam in args.slam:
         for planner in args.planners:
             for people in args.people:
-                r = run_row(specs, args.pairs, planner, people, slam == "on", args.seed, args.set, pool)
+                r = run_row(specs, args.pairs, planner, people, slam == "on", args.seed, args.set, pool, set(args.only))
                 print(f"| {' '.join(args.worlds)} | {planner} | {people} | {'SLAM' if slam == 'on' else 'truth'} "
                       f"| {r['runs']} | {100 * r['success']:.0f} % | {r['collided']} | {r['time']:.1f} "
                       f"| {r['ratio']:.2f} | {r['goal_cm']:.1f} | {r['pose_cm']:.1f} | {r['rtf']:.1f} "
