@@ -199,6 +199,17 @@ def test_doorway_of_0_8_m_passed_by_a_0_4_m_robot(planner):
     assert len(through) and (np.abs(through[:, 1] - 2.0) < 0.2).all()
 
 
+def test_a_diagonal_gap_tighter_than_the_margin_is_the_way_through():
+    """The only way between the halves is a 0.48 m diagonal gap between two wall ends: 4 cm each side
+    of a 0.4 m robot, less than radius + margin. It is planned (at a cost) and driven through."""
+    walls = [box(3.95, 0, 4.05, 2.0), box(4.35, 2.37, 4.45, 4.0)]  # corners (4.05, 2.0) and (4.35, 2.37)
+    world = World.from_polygons([box(0, 0, 8, 4), *walls], name="gap")
+    robot = Robot(world, [2.0, 3.0, 0.0], RobotConfig(radius=0.2), seed=9)
+    result = run_navigation(world, robot, world_grid(world), [6.0, 1.0], "dwa")
+    assert result.success and result.collisions == 0 and result.goal_error <= 0.05
+    assert result.min_clearance > 0.01
+
+
 def test_a_new_map_that_blocks_the_path_makes_the_navigator_replan(hall):
     world, grid = hall
     nav = Navigator([9.0, 2.0], RobotConfig(), NavigatorConfig())

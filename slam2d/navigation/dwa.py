@@ -9,7 +9,7 @@ full deceleration, stops before its disc (radius + margin) would touch a point.
 Admissible arcs are scored by
 
 - heading: the heading towards the carrot (a point ``lookahead`` metres along
-  the path) at the arc's end, or where it comes closest to the carrot if it
+  the path, nearer where the robot is close to a point: see ``TIGHT``) at the arc's end, or where it comes closest to the carrot if it
   passes it,
 - progress: how much closer to the carrot the arc comes,
 - path: how far beyond ``path_band`` from the path that closest point lies,
@@ -34,6 +34,7 @@ __all__ = ["DwaConfig", "DynamicWindow", "arcs", "thin_points"]
 
 _SQUEEZE = 0.02  # m, closest an arc passing by may bring the robot's disc to a point within the margin
 VOXEL = 0.04  # m, laser points are thinned to one per square of this side (float32 distances)
+TIGHT = (0.2, 0.3)  # m; with less clearance than the first, the carrot comes in, down to the second at none
 
 
 class DwaConfig(Section):
@@ -81,6 +82,7 @@ class DynamicWindow:
     def __init__(self, robot: RobotConfig | None = None, config: DwaConfig | None = None):
         self.robot, self.cfg = robot or RobotConfig(), config or DwaConfig()
         self.times = np.linspace(self.cfg.horizon / self.cfg.steps, self.cfg.horizon, self.cfg.steps)
+        self.lookahead = self.cfg.lookahead  # m, the carrot's distance in the last call
 
     def reset(self) -> None:
         """DWA keeps no manoeuvre between calls."""
@@ -105,14 +107,17 @@ class DynamicWindow:
         """
         pose = np.asarray(pose, dtype=np.float64)
         path = path_ahead(path, pose)
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        self.lookahead = self._lookahead(points)
         v, w = self.window(velocity)
         v, w = self._with_pursuit(v, w, pose, path)
         traj = arcs(v, w, self.times)
-        points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         unmapped = np.zeros(len(points), bool) if unmapped is None else np.asarray(unmapped, bool).reshape(-1)
         dist = self._distances(traj, points, unmapped, v.max())
-        ok, clearance = self._admissible(v, dist)
-        score = self._scores(v, traj, clearance, pose, path)
+        near, off = self._nearest_to_carrot(traj, pose, path)
+        on_path = self._keeps_to(traj, pose, path, self.cfg.margin) & ~self._moving_near(points, unmapped, v.max())
+        ok, clearance = self._admissible(v, dist, on_path)
+        score = self._scores(v, traj, clearance, pose, path, near, off)
         score[~ok] = -np.inf
         forward = ok & (v > 1e-3)
         if not ok.any():
@@ -120,9 +125,16 @@ class DynamicWindow:
         best = int(np.argmax(score))
         return Command(float(v[best]), float(w[best]), not forward.any(), "dwa")
 
+    def _lookahead(self, points) -> float:
+        """Carrot distance (m): ``lookahead``, or in a tight spot (clearance below ``TIGHT[0]``) nearer,
+        linearly down to ``TIGHT[1]``, so that the arcs follow the path rather than cut its bends."""
+        gap = float(np.sqrt(np.einsum("ij,ij->i", points, points).min())) - self.robot.radius if len(points) else np.inf
+        near, least = TIGHT
+        return float(np.clip(least + (self.cfg.lookahead - least) * gap / near, least, self.cfg.lookahead))
+
     def _with_pursuit(self, v, w, pose, path):
         """Adds the pure-pursuit command towards the carrot (clipped to the window) to the samples."""
-        carrot = in_robot_frame(pose, point_along(path, self.cfg.lookahead))
+        carrot = in_robot_frame(pose, point_along(path, self.lookahead))
         d = float(np.hypot(*carrot))
         alpha = float(np.arctan2(carrot[1], carrot[0]))
         vp = self._target_speed(pose, path)
@@ -135,7 +147,7 @@ class DynamicWindow:
         heading (cosine of the larger bearing to the carrot and to a point twice as far), and
         the speed that stops at the goal (the path's end)."""
         left = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
-        marks = [point_along(path, self.cfg.lookahead), point_along(path, 2 * self.cfg.lookahead)]
+        marks = [point_along(path, self.lookahead), point_along(path, 2 * self.lookahead)]
         ahead = in_robot_frame(pose, np.stack(marks))
         bend = np.abs(np.arctan2(ahead[:, 1], ahead[:, 0]))
         bend = bend[np.hypot(*ahead.T) > 0.05].max(initial=0.0)
@@ -146,8 +158,7 @@ class DynamicWindow:
         """Distance (S, K + 1) m from the robot's centre on each arc sample (now first) to the nearest
         point, less the grown margin of unmapped points."""
         c = self.cfg
-        reach = v_max * c.horizon + self.robot.radius + c.margin + c.obstacle_reach + 0.1
-        keep = np.einsum("ij,ij->i", points, points) < reach**2
+        keep = np.einsum("ij,ij->i", points, points) < self._reach(v_max) ** 2
         near, moving = points[keep], unmapped[keep]
         s, k = traj.shape[:2]
         if len(near) == 0:
@@ -172,14 +183,17 @@ class DynamicWindow:
         """Margin (K,) m an unmapped point has grown by at each trajectory sample time."""
         return np.minimum(self.cfg.obstacle_speed * self.times, self.cfg.obstacle_reach)
 
-    def _admissible(self, v: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _admissible(self, v: np.ndarray, dist: np.ndarray, on_path: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Whether each arc stops before its disc touches a point, and its clearance (S,) m.
 
         Where the robot is already within the margin, an arc is safe while it gets no closer,
-        or, if it ends farther away than it starts (passing by), while it keeps ``_SQUEEZE``.
+        or, if it ends farther away than it starts (passing by) or keeps to the global path
+        within the margin (``on_path`` (S,): planned where the disc fits, through a passage narrower
+        than the margin if need be; not with a point that may move nearby), while it keeps ``_SQUEEZE``.
         """
         r, now = self.robot.radius, dist[:, 0]
-        closer = np.where(dist[:, -1] >= now, np.minimum(r + _SQUEEZE, now - 1e-4), now - 1e-4)
+        passing = (dist[:, -1] >= now) | on_path
+        closer = np.where(passing, np.minimum(r + _SQUEEZE, now - 1e-4), now - 1e-4)
         limit = np.minimum(r + self.cfg.margin, closer)
         hit = dist[:, 1:] < limit[:, None]
         first = np.where(hit.any(axis=1), hit.argmax(axis=1), len(self.times))
@@ -188,22 +202,47 @@ class DynamicWindow:
         ok = (stop <= v * free_time) | (v <= 1e-9)
         return ok, dist.min(axis=1) - r
 
-    def _scores(self, v, traj, clearance, pose, path) -> np.ndarray:
-        """Weighted score (S,) of every arc (higher is better)."""
+    def _reach(self, v_max: float) -> float:
+        """Distance (m) within which points can matter to an arc."""
+        c = self.cfg
+        return v_max * c.horizon + self.robot.radius + c.margin + c.obstacle_reach + 0.1
+
+    def _moving_near(self, points, unmapped, v_max: float) -> bool:
+        """Whether a point the map does not explain (it may move) is within reach of the arcs."""
+        return bool((unmapped & (np.einsum("ij,ij->i", points, points) < self._reach(v_max) ** 2)).any())
+
+    def _keeps_to(self, traj, pose, path, band: float) -> np.ndarray:
+        """Whether every sample of each arc lies within ``band`` m of the path ahead (S,)."""
+        local = in_robot_frame(pose, path)
+        local = local[np.einsum("ij,ij->i", local, local) < (self.robot.max_speed * self.cfg.horizon + band) ** 2]
+        if len(local) == 0:
+            return np.zeros(len(traj), bool)
+        d2 = ((traj[:, :, None, :2] - local[None, None]) ** 2).sum(-1).min(axis=2)  # (S, K) to its points
+        return d2.max(axis=1) <= band**2
+
+    def _nearest_to_carrot(self, traj, pose, path) -> tuple[np.ndarray, np.ndarray]:
+        """Where each arc comes closest to the carrot (or its end), (S, 3) in the robot frame, and
+        how far (S,) m that pose lies from the path ahead."""
         c, vmax = self.cfg, self.robot.max_speed
         local = in_robot_frame(pose, path)
-        carrot = in_robot_frame(pose, point_along(path, c.lookahead))
+        carrot = in_robot_frame(pose, point_along(path, self.lookahead))
         gap = np.hypot(traj[..., 0] - carrot[0], traj[..., 1] - carrot[1])  # (S, K)
         closest = np.where(gap[:, -1] <= gap.min(axis=1) + 1e-3, gap.shape[1] - 1, gap.argmin(axis=1))
-        near = traj[np.arange(len(traj)), closest]  # where each arc comes closest to the carrot (or its end)
+        near = traj[np.arange(len(traj)), closest]
+        window = local[np.einsum("ij,ij->i", local, local) < (self.lookahead + vmax * c.horizon) ** 2]
+        window = window if len(window) else local[-1:]
+        return near, np.sqrt(((near[:, None, :2] - window[None]) ** 2).sum(-1).min(axis=1))
+
+    def _scores(self, v, traj, clearance, pose, path, near, off) -> np.ndarray:
+        """Weighted score (S,) of every arc (higher is better); ``near``, ``off`` from :meth:`_nearest_to_carrot`."""
+        c, vmax = self.cfg, self.robot.max_speed
+        carrot = in_robot_frame(pose, point_along(path, self.lookahead))
+        gap = np.hypot(traj[..., 0] - carrot[0], traj[..., 1] - carrot[1])  # (S, K)
         to_carrot = carrot - near[:, :2]
         bearing = np.arctan2(to_carrot[:, 1], to_carrot[:, 0]) - near[:, 2]
         heading = 1.0 - np.abs(np.angle(np.exp(1j * bearing))) / np.pi
         heading = np.where(gap.min(axis=1) < 0.05, 1.0, heading)  # at the carrot, any heading
         progress = (np.hypot(*carrot) - gap.min(axis=1)) / (vmax * c.horizon)
-        window = local[np.einsum("ij,ij->i", local, local) < (c.lookahead + vmax * c.horizon) ** 2]
-        window = window if len(window) else local[-1:]
-        off = np.sqrt(((near[:, None, :2] - window[None]) ** 2).sum(-1).min(axis=1))
         velocity = 1.0 - np.abs(v - self._target_speed(pose, path)) / vmax
         stray = np.maximum(off - c.path_band, 0.0) / 0.5
         return (c.heading_weight * heading + c.progress_weight * progress - c.path_weight * stray

@@ -3,8 +3,9 @@ recovery, and "unreachable" as a result; ``run_navigation`` drives a simulated r
 
 The map is an argument of every :meth:`Navigator.step` (a known grid now, the live
 SLAM grid later). The global path is grid A* (``slam2d.planning.astar``) on the map
-inflated by the robot radius plus a margin, with a soft cost near the inflated
-walls so that the path keeps to the middle of passages. The navigator replans
+inflated by the robot radius (lethal), with a steep cost where the disc would come
+within a margin of an obstacle (passages that tight are a last resort, never ruled
+out) and a soft cost falling off beyond, so that the path keeps to the middle of passages. The navigator replans
 when the map changes under the path, and recovers when the local planner reports
 itself blocked for ``blocked_time`` or the remaining path has not shortened by
 ``progress`` within ``stuck_time``: first a replan with the laser's points put
@@ -34,7 +35,7 @@ from slam2d.navigation.dwa import DwaConfig, DynamicWindow
 from slam2d.navigation.fsm import AvoidanceStateMachine, FsmConfig
 from slam2d.navigation.maps import free_mask, mark_points
 from slam2d.planning.astar import AStar
-from slam2d.planning.grid import PlanningGrid, inflate, wall_cost
+from slam2d.planning.grid import PlanningGrid
 from slam2d.sim.robot import RobotConfig
 
 __all__ = [
@@ -63,9 +64,10 @@ class NavigatorConfig(Section):
 
     planner: Literal["dwa", "fsm"] = "dwa"
     period: float = Field(0.1, gt=0, description="s, control period")
-    inflation_margin: float = Field(0.05, ge=0, description="m, map inflated by robot radius + this")
-    wall_distance: float = Field(0.3, gt=0, description="m beyond the inflation over which a soft cost falls to 0")
-    wall_weight: float = Field(1.0, ge=0, description="extra step cost at the inflated wall (1 = double)")
+    inflation_margin: float = Field(0.05, ge=0, description="m; a cell where the disc comes this close costs `tight_weight`")
+    tight_weight: float = Field(20.0, ge=0, description="extra step cost at the radius (lethal), falling to 0 over the margin")
+    wall_distance: float = Field(0.3, gt=0, description="m beyond the margin over which a soft cost falls to 0")
+    wall_weight: float = Field(1.0, ge=0, description="extra step cost at the margin's edge (1 = double)")
     unknown_free: bool = Field(False, description="occupancy maps: unknown cells are free for planning")
     goal_tolerance: float = Field(0.03, gt=0, description="m")
     yaw_tolerance: float = Field(0.035, gt=0, description="rad, when the goal has a heading")
@@ -111,7 +113,7 @@ class Navigator:
         self.replans = self.recoveries = 0
         self.planner_seconds: list[float] = []
         self.events: list[tuple[float, str, str]] = []  # (time s, "replan" / "recovery", why)
-        self._raw = self._grid = None
+        self._raw = self._grid = self._cost = None
         self._cell_blocked_at = None  # (H, W) time (s) each cell of ``_raw`` became blocked; inf: free
         self._now, self._mapped_at = 0.0, None
         self._index, self._level, self._arrived, self._last_distance = 0, 0, False, np.inf
@@ -140,7 +142,8 @@ class Navigator:
             return False
         new = PlanningGrid(np.array(free, dtype=bool), res, origin)  # a copy: the source may change
         self._cell_blocked_at = self._block_times(new)
-        self._raw, self._grid, self._mapped_at = new, self._inflate(new), None
+        self._raw, self._mapped_at = new, None
+        self._grid, self._cost = self._inflate(new)
         return True
 
     def _block_times(self, new: PlanningGrid) -> np.ndarray:
@@ -173,9 +176,16 @@ class Navigator:
         out[inside] = ~self._mapped_mask()[cells[inside, 0], cells[inside, 1]]
         return out
 
-    def _inflate(self, raw: PlanningGrid) -> PlanningGrid:
-        radius = (self.robot.radius + self.cfg.inflation_margin) / raw.resolution
-        return PlanningGrid(inflate(raw.free, radius), raw.resolution, raw.origin)
+    def _inflate(self, raw: PlanningGrid) -> tuple[PlanningGrid, np.ndarray]:
+        """(The cells where the robot's disc fits, the A* cost layer (H, W)): ``wall_weight`` where the
+        disc comes within ``inflation_margin`` of a blocked cell, rising by up to ``tight_weight`` as it
+        comes closer (through a tight gap, its middle), falling linearly to 0 over ``wall_distance`` beyond."""
+        c = self.cfg
+        gap = ndimage.distance_transform_edt(np.pad(raw.free, 1))[1:-1, 1:-1] * raw.resolution - self.robot.radius
+        beyond = gap - c.inflation_margin  # m between the disc + margin and the nearest blocked cell centre
+        tight = np.clip(-beyond / c.inflation_margin, 0.0, 1.0) if c.inflation_margin > 0 else 0.0
+        cost = c.wall_weight * np.clip(1.0 - beyond / c.wall_distance, 0.0, 1.0) + c.tight_weight * tight
+        return PlanningGrid(gap > 0, raw.resolution, raw.origin), cost
 
     def plan(self, pose, points_world=None, unmapped=None) -> str:
         """Plans from ``pose`` (3,) to the goal, with ``points_world`` (P, 2) blocked if given;
@@ -184,14 +194,14 @@ class Navigator:
         only; failing that, the plan is on the map alone."""
         tries = []
         if points_world is not None and len(points_world):
-            marked = self._inflate(mark_points(self._raw, points_world))
-            tries.append(marked)
+            marked, cost = self._inflate(mark_points(self._raw, points_world))
+            tries.append((marked, cost))
             if unmapped is not None and np.any(unmapped):
-                tries.insert(0, self._keep_clear(marked, points_world[np.asarray(unmapped, dtype=bool)]))
-        for grid in tries:
-            if not self._plan_on(grid, pose):
+                tries.insert(0, (self._keep_clear(marked, points_world[np.asarray(unmapped, dtype=bool)]), cost))
+        for grid, cost in tries:
+            if not self._plan_on(grid, cost, pose):
                 return ""
-        return self._plan_on(self._grid, pose)
+        return self._plan_on(self._grid, self._cost, pose)
 
     def _keep_clear(self, grid: PlanningGrid, points) -> PlanningGrid:
         """``grid`` with every cell within radius + margin + the DWA's ``obstacle_reach`` of ``points`` blocked."""
@@ -203,14 +213,13 @@ class Navigator:
         far = ndimage.distance_transform_edt(near) * grid.resolution > clear
         return PlanningGrid(grid.free & far, grid.resolution, grid.origin)
 
-    def _plan_on(self, grid: PlanningGrid, pose) -> str:
+    def _plan_on(self, grid: PlanningGrid, cost: np.ndarray, pose) -> str:
         goal = self._goal_cell(grid)
         if goal is None:
             return f"goal ({self.goal[0]:.2f}, {self.goal[1]:.2f}) is blocked or within the robot radius of an obstacle"
         start = _nearest_free(grid, pose[:2], _SNAP)
         if start is None:
             return f"no free cell within {_SNAP} m of the robot at ({pose[0]:.2f}, {pose[1]:.2f})"
-        cost = wall_cost(grid, self.cfg.wall_distance, self.cfg.wall_weight) if self.cfg.wall_weight > 0 else None
         result = AStar(grid, 8, cost).plan(start, goal)
         if not result.found:
             return f"no path: {result.reason}"
@@ -241,7 +250,7 @@ class Navigator:
         return _nearest_free(grid, self.goal[:2], self.cfg.inflation_margin + 2 * grid.resolution)
 
     def optimal_length(self, start) -> float:
-        """Length (m) of the shortest grid path from ``start`` (x, y) to the goal on the inflated map."""
+        """Length (m) of the shortest grid path from ``start`` (x, y) to the goal on the map inflated by the radius."""
         result = AStar(self._grid).plan_world(np.asarray(start)[:2], self.goal[:2])
         return result.length_m if result.found else np.inf
 
@@ -387,8 +396,11 @@ class Navigator:
         return Command(0.0, 0.0, False, "recover")
 
     def _rear_clear(self, points) -> bool:
-        """No laser point in the strip the robot sweeps backing off ``backoff`` m."""
-        r = self.robot.radius + self.cfg.dwa.margin
+        """No laser point in the strip the robot sweeps backing off ``backoff`` m, as wide as the disc
+        + the DWA's margin, or, wedged closer than that, as wide as the gap it has (backing off
+        brings it no closer to anything)."""
+        gap = float(np.hypot(*points.T).min()) - 1e-3 if len(points) else np.inf
+        r = max(self.robot.radius, min(self.robot.radius + self.cfg.dwa.margin, gap))
         behind = (points[:, 0] < 0) & (points[:, 0] > -(self.cfg.backoff + r)) & (np.abs(points[:, 1]) < r)
         return self.cfg.backoff > 0 and not behind.any()
 
