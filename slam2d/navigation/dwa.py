@@ -163,7 +163,9 @@ class DynamicWindow:
         s, k = traj.shape[:2]
         if len(near) == 0:
             return np.full((s, k + 1), np.inf)
-        thin = thin_points(near, VOXEL)
+        nearest = np.argsort(np.einsum("ij,ij->i", near, near), kind="stable")
+        near, moving = near[nearest], moving[nearest]
+        thin = thin_points(near, VOXEL)  # the point nearest the robot in each square: a corner is not thinned away
         near, moving = near[thin], moving[thin]
         order = np.argsort(moving, kind="stable")  # mapped points first, then the unmapped ones
         near, n_static = near[order].astype(np.float32), int((~moving).sum())
