@@ -251,6 +251,19 @@ def test_a_live_map_given_as_a_callable_is_read_at_every_step(hall):
     assert result.trajectory[np.abs(result.trajectory[:, 0] - 5.0) < 0.1, 1].min() > 3.0  # round the mapped wall
 
 
+def test_a_door_the_live_map_has_just_closed_is_still_planned_through(hall):
+    """At 1 s the map draws something across the only door (a person caught in passing; the world
+    has nothing there): planning through cells blocked for under 3 s, the robot goes on through the
+    door instead of calling the goal unreachable."""
+    walls = [box(0, 0, 10, 4), box(4.9, 0.0, 5.1, 1.6), box(4.9, 2.4, 5.1, 4.0)]
+    world = World.from_polygons(walls)
+    door, shut = world_grid(world), world_grid(World.from_polygons([*walls, box(4.9, 1.6, 5.1, 2.4)]))
+    robot = Robot(world, [1.0, 2.0, 0.0], seed=3)
+    result = run_navigation(world, robot, lambda step: shut if step.scan.stamp >= 1.0 else door, [9.0, 2.0])
+    assert result.success and result.collisions == 0 and ("replan", "the new map blocks the path") in [
+        e[1:] for e in result.events]
+
+
 def test_the_time_budget_ends_a_run_that_has_not_arrived(hall):
     world, grid = hall
     robot = Robot(world, [1.0, 2.0, 0.0], seed=0)

@@ -11,7 +11,8 @@ itself blocked for ``blocked_time`` or the remaining path has not shortened by
 ``progress`` within ``stuck_time``: first a replan with the laser's points put
 into the map, then backing off, a replan and a turn towards the new path. After
 ``max_recoveries`` recoveries without a metre of progress, or when no path
-exists on the map, the goal is unreachable; ``max_time`` bounds every run
+exists on the map (cells blocked for less than ``_SETTLED_S`` count as free if
+only they are in the way: they may be a person the live map caught), the goal is unreachable; ``max_time`` bounds every run
 (status ``timeout``). Laser points the map does not explain are passed to the
 local planner as such (DWA gives them a growing margin: they may move). Within
 ``final_approach`` of the goal a point controller closes in, then the robot
@@ -201,7 +202,13 @@ class Navigator:
         for grid, cost in tries:
             if not self._plan_on(grid, cost, pose):
                 return ""
-        return self._plan_on(self._grid, self._cost, pose)
+        why = self._plan_on(self._grid, self._cost, pose)
+        lately = np.isfinite(self._cell_blocked_at) & (self._cell_blocked_at > self._now - _SETTLED_S)
+        if why and lately.any():  # cells blocked lately may be a person mapped in passing (a door they stand in)
+            unsettled = PlanningGrid(self._raw.free | lately, self._raw.resolution, self._raw.origin)
+            if not self._plan_on(*self._inflate(unsettled), pose):
+                return ""
+        return why
 
     def _keep_clear(self, grid: PlanningGrid, points) -> PlanningGrid:
         """``grid`` with every cell within radius + margin + the DWA's ``obstacle_reach`` of ``points`` blocked."""
