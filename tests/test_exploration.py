@@ -304,18 +304,54 @@ def test_explore_command_reports_bad_input_in_one_line(tmp_path):
     assert not out.exists() or not list(out.iterdir())
 
 
-def test_pockets_are_unknown_cells_cut_off_from_the_edge_and_escape_turns_to_open_space():
-    from slam2d.exploration.explorer import enclosed_unknown
+def test_pocket_cells_are_hidden_unknown_cells_walls_close_small_gaps_and_escape_turns_to_open_space():
+    from slam2d.exploration.explorer import pocket_state
     from slam2d.exploration.run import _open_heading
 
     state = np.full((40, 40), UNKNOWN, dtype=np.int8)
     state[5:35, 5:35] = FREE
-    state[10:14, 10:12] = OCCUPIED
-    state[10:14, 12:14] = UNKNOWN  # behind a box, walled on three sides ...
-    state[9, 12:14] = state[14, 12:14] = OCCUPIED
-    state[10:14, 14] = OCCUPIED  # ... and the fourth
-    pockets = enclosed_unknown(state)
-    assert pockets[10:14, 12:14].all() and pockets.sum() == 8  # the outside (touching the edge) is no pocket
+    state[4, 4:36] = state[35, 4:36] = OCCUPIED  # the room's walls ...
+    state[4:36, 4] = state[4:36, 35] = OCCUPIED
+    state[35, 20:22] = UNKNOWN  # ... one missed for two cells, another seen free for one
+    state[4, 10] = FREE
+    state[10:20, 10:30] = UNKNOWN  # a pocket: cells with no known cell within one cell are hidden
+    scored = pocket_state(state, 4)
+    assert (scored[11:19, 11:29] == UNKNOWN).all() and (scored[10, 10:30] == FREE).all()
+    assert (scored[35, 20:22] == OCCUPIED).all() and scored[4, 10] == OCCUPIED  # no ray leaks out
+    assert (scored[:3] == UNKNOWN).all()  # the outside stays hidden, behind the closed walls
+    view = GridView(scored, 0.05, (0.0, 0.0))
+    inside, outside = (0.5 * 0.05 * 30, 0.5 * 0.05 * 30), (0.5 * 0.05 * 30, 0.05 * 38)
+    assert information_gain(view, [inside], 6.0, 360)[0] >= 8 * 18 and information_gain(view, [outside], 6.0, 360)[0] > 0
+    gained = information_gain(view, [(0.05 * 20, 0.05 * 25)], 6.0, 360)[0]  # in the room, above the pocket
+    assert gained >= 18  # sees its upper rows
     wall = np.column_stack([np.full(50, 0.25), np.linspace(-1, 1, 50)])  # a wall 5 cm in front of the disc
     heading = _open_heading(wall, 0.2)
     assert abs(abs(heading) - np.pi) < 0.5  # away from it
+
+
+def desk_room_png(tmp_path):
+    """A 4 x 3 m room (x 0.5-4.5, y 0.5-3.5, 5 cm pixels) with a 2 x 0.55 m desk 0.55 m from its south
+    wall: the space behind the desk is seen only along the gap, whose mouths are narrower than a
+    frontier region once the cells near the desk and the wall are left out."""
+    from PIL import Image
+
+    img = np.zeros((80, 100), dtype=np.uint8)
+    img[10:70, 10:90] = 255
+    img[48:59, 30:70] = 0  # the desk: x 1.5-3.5, y 1.05-1.6
+    path = tmp_path / "desk_room.png"
+    Image.fromarray(img).save(path)
+    return path
+
+
+def test_exploring_a_room_with_a_desk_near_a_wall_sees_behind_the_desk(tmp_path):
+    from slam2d.exploration.run import explore
+
+    cfg = explore_config.load(None, {
+        "dataset.simulator.world": str(desk_room_png(tmp_path)), "seed": 1, "exploration.strategy": "nearest_frontier",
+        "exploration.start": [2.5, 2.5, 0.0], "exploration.max_time": 150, "exploration.animation": False,
+    })  # fmt: skip
+    m = explore(cfg).metrics
+    assert m["stop_reason"] == "done" and not m["premature_stop"] and m["collisions"] == 0
+    assert m["coverage"] >= 0.99 and m["pocket_goals"] > 0
+    off = explore(cfg.model_copy(update={"exploration": cfg.exploration.model_copy(update={"pockets": False})}))
+    assert off.metrics["premature_stop"] and off.metrics["coverage"] < 0.97  # frontiers alone stop early

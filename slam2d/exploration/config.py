@@ -34,9 +34,10 @@ class ExplorationConfig(Section):
                                                          "obstacles at a goal")  # fmt: skip
     avoid_radius: float = Field(0.5, gt=0, description="m: goals this close to a visited or inaccessible one are skipped")
     min_frontier: float | None = Field(None, gt=0, description="m, shortest frontier region; None: the robot's width")
-    pockets: bool = Field(False, description="with no frontier (or candidate) left, visit places that see enclosed "
-                                            "unknown pockets (openings narrower than a frontier region)")  # fmt: skip
-    pocket_gain: float = Field(0.1, ge=0, description="m² of pocket a place must see to be visited")
+    pockets: bool = Field(True, description="with no frontier (or candidate) left, visit places that see hidden "
+                                           "unknown pockets (behind furniture, openings narrower than a frontier "
+                                           "region or touching an obstacle)")  # fmt: skip
+    pocket_gain: float = Field(0.1, ge=0, description="m² of hidden cells a place must see to be visited")
     # Li et al.
     node_step: float = Field(0.9, gt=0, description="m of travel between topological nodes (S_tep)")
     box_width: float = Field(0.6, gt=0, description="m, width of the three-ray box (> the robot's width)")

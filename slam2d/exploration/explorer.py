@@ -28,26 +28,39 @@ from slam2d.exploration.gridops import (
     geodesic,
     information_gain,
     inside_polygon,
+    unknown_in_sight,
 )
 from slam2d.exploration.hybrid import FINAL, HybridMap
 from slam2d.segmentation.observations import raycast_grid
 
 FRONTIER_STRATEGIES = ("nearest_frontier", "explore_lite")
-POCKET_SPACING = 0.3  # m between the places tried as views of pockets
+POCKET_SPACING = 0.2  # m between the places tried as views of pockets
+POCKET_RAYS = 360  # rays cast from each of them (one a degree, as the laser's beams)
 
 
-def enclosed_unknown(state: np.ndarray) -> np.ndarray:
-    """Unknown cells (H, W) not 4-connected through unknown cells to the grid's edge."""
+def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None = None) -> np.ndarray:
+    """The grid the views of pockets are scored on (FREE / OCCUPIED / UNKNOWN, (H, W) int8).
+
+    UNKNOWN: the *hidden* cells — unknown with no known cell within one cell, i.e. what the
+    coverage counts as unexplored — except ``retired`` ones (H, W bool). OCCUPIED: occupied cells,
+    and the cells in gaps of at most ``wall_cells`` between occupied ones (a wall's cells seen at a
+    grazing angle or missed, the corners of a box): rays do not leak through them into the unknown
+    space behind walls and inside furniture. FREE: the rest, which rays cross.
+    """
     from scipy import ndimage
 
-    labels, n = ndimage.label(state == UNKNOWN)
-    if n == 0:
-        return np.zeros(state.shape, dtype=bool)
-    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-    outside = np.zeros(n + 1, dtype=bool)
-    outside[edge] = True
-    outside[0] = True
-    return ~outside[labels]
+    unknown = state == UNKNOWN
+    hidden = unknown & ~ndimage.binary_dilation(~unknown, np.ones((3, 3), bool))
+    if retired is not None:
+        hidden &= ~retired
+    occupied = state == OCCUPIED
+    size = max(1, wall_cells) + 1
+    padded = np.pad(occupied, size)
+    closed = ndimage.binary_closing(padded, np.ones((size, size), bool))[size:-size, size:-size]
+    out = np.full(state.shape, FREE, dtype=np.int8)
+    out[hidden] = UNKNOWN
+    out[closed] = OCCUPIED
+    return out
 
 
 @dataclass(eq=False)
@@ -60,6 +73,7 @@ class Goal:
     candidate: Candidate | None = None
     waypoints: list = field(default_factory=list)
     score: float = float("nan")
+    targets: np.ndarray | None = None  # (K, 2) m: the hidden cells a pocket view was chosen to see
 
 
 class Explorer:
@@ -75,6 +89,7 @@ class Explorer:
         self.hybrid = HybridMap(cfg.node_step, cfg.box_width)
         self.visited: list[np.ndarray] = []
         self.inaccessible: list[np.ndarray] = []
+        self.retired = np.zeros((0, 2))  # (K, 2) m: hidden cells a pocket view reached did not reveal
         self.decision_seconds: list[float] = []
         self.fallbacks = self.pocket_goals = 0
 
@@ -172,18 +187,33 @@ class Explorer:
         best = found[int(np.argmin(cost))]
         return Goal(best.goal, "frontier", score=float(min(cost)))
 
+    def _pocket_state(self, view: GridView) -> np.ndarray:
+        retired = None
+        if len(self.retired):
+            cells = view.to_cell(self.retired)
+            cells = cells[view.inside(cells)]
+            retired = np.zeros(view.shape, dtype=bool)
+            retired[cells[:, 0], cells[:, 1]] = True
+        return pocket_state(view.state, int(self.radius / view.resolution), retired)
+
     def _pocket_goal(self, pose, view: GridView, distance) -> Goal | None:
-        """When no frontier is left: the nearest reachable place (sampled every POCKET_SPACING m, away
-        from visited and inaccessible goals) that sees at least ``pocket_gain`` of *enclosed* unknown
-        area — pockets whose openings are narrower than a frontier region may be (behind furniture,
-        beside a wall) — unknown cells connected to the map's edge being the unexplored outside."""
-        pockets = enclosed_unknown(view.state)
-        if not pockets.any():
+        """When no frontier (or candidate) is left: the nearest reachable place (sampled every
+        POCKET_SPACING m, and every cell along the edge of the space with room for a goal: the views
+        along walls and furniture; away from visited and inaccessible goals) that sees at least
+        ``pocket_gain`` of hidden cells (``pocket_state``) — pockets whose openings are narrower than a
+        frontier region or touch an obstacle (behind furniture, beside a wall), often seen from a few
+        places only."""
+        state = self._pocket_state(view)
+        if not (state == UNKNOWN).any():
             return None
+        from scipy import ndimage
+
         k = max(1, round(POCKET_SPACING / view.resolution))
-        sub = np.full(distance.shape, np.inf)
-        sub[::k, ::k] = distance[::k, ::k]
-        rows, cols = np.nonzero(np.isfinite(sub))
+        room = np.isfinite(distance)
+        tried = ~ndimage.binary_erosion(room) & room  # the edge of the room: views along walls and furniture
+        tried[::k, ::k] = True
+        rows, cols = np.nonzero(tried & room)
+        sub = distance
         if len(rows) == 0:
             return None
         order = np.argsort(sub[rows, cols])
@@ -192,14 +222,16 @@ class Explorer:
         avoid = self.visited + self.inaccessible
         if avoid:
             far = np.hypot(*(xy[:, None, :] - np.array(avoid)[None]).transpose(2, 0, 1)).min(axis=1)
-            cells, xy = cells[far >= self.cfg.avoid_radius], xy[far >= self.cfg.avoid_radius]
-        state = np.where(view.state == UNKNOWN, np.where(pockets, UNKNOWN, FREE), view.state).astype(np.int8)
-        gain = information_gain(GridView(state, view.resolution, view.origin), xy, self.cfg.gain_range,
-                                self.cfg.gain_rays)  # fmt: skip
+            xy = xy[far >= self.cfg.avoid_radius]
+        scored = GridView(state, view.resolution, view.origin)
+        gain = information_gain(scored, xy, self.cfg.gain_range, POCKET_RAYS)
         ok = np.nonzero(gain >= self.cfg.pocket_gain / view.resolution**2)[0]
         if len(ok) == 0:
             return None
-        return Goal(xy[ok[0]], "pocket", score=float(gain[ok[0]]))
+        goal = xy[ok[0]]
+        seen = unknown_in_sight(scored, goal, self.cfg.gain_range, POCKET_RAYS)
+        targets = view.to_world(np.column_stack(np.nonzero(seen)))
+        return Goal(goal, "pocket", score=float(gain[ok[0]]), targets=targets)
 
     def _candidate_goal(self, pose, view, distance) -> Goal | None:
         live = self.maintain(view)
@@ -266,11 +298,12 @@ class Explorer:
         """Whether the goal is no longer worth reaching: a frontier goal with no frontier cell left
         within the goal reach; a candidate whose gain fell below ``min_gain``."""
         if goal.kind == "pocket":
-            pockets = enclosed_unknown(view.state)
-            state = np.where(view.state == UNKNOWN, np.where(pockets, UNKNOWN, FREE), view.state).astype(np.int8)
-            g = information_gain(GridView(state, view.resolution, view.origin), goal.position[None],
-                                 self.cfg.gain_range, self.cfg.gain_rays)[0]  # fmt: skip
-            return bool(g < self.cfg.pocket_gain / view.resolution**2)
+            state = GridView(self._pocket_state(view), view.resolution, view.origin)
+            g = information_gain(state, goal.position[None], self.cfg.gain_range, POCKET_RAYS)[0]
+            if g < self.cfg.pocket_gain / view.resolution**2:
+                self._retire(goal)
+                return True
+            return False
         if goal.kind == "candidate":
             g = information_gain(view, goal.candidate.position[None], self.cfg.gain_range, self.cfg.gain_rays)[0]
             if g < self.cfg.min_gain / view.resolution**2:
@@ -288,8 +321,15 @@ class Explorer:
 
     def reached(self, goal: Goal) -> None:
         self.visited.append(goal.position.copy())
+        self._retire(goal)
         if goal.candidate is not None:
             goal.candidate.alive = False
+
+    def _retire(self, goal: Goal) -> None:
+        """A pocket view reached (or no longer worth it): the hidden cells it was chosen to see are no
+        target any more, seen or not (some are furniture, or need a view the robot cannot take)."""
+        if goal.targets is not None and len(goal.targets):
+            self.retired = np.concatenate([self.retired, goal.targets])
 
     def give_up(self, goal: Goal) -> None:
         self.inaccessible.append(goal.position.copy())

@@ -157,6 +157,15 @@ def information_gain(view: GridView, points, max_range: float, rays: int = 180) 
     return _gain(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution, mark)
 
 
+def unknown_in_sight(view: GridView, point, max_range: float, rays: int = 180) -> np.ndarray:
+    """The unknown cells (H, W) bool that :func:`information_gain` counts for one point (x, y) m."""
+    gxy = np.ascontiguousarray((np.asarray(point, dtype=np.float64).reshape(1, 2) - np.asarray(view.origin))
+                               / view.resolution)  # fmt: skip
+    mark = np.zeros(view.shape, dtype=np.int64)
+    _gain(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution, mark)
+    return mark == 1
+
+
 # --------------------------------------------------------------------------- straight-line reachability
 
 

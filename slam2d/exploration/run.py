@@ -37,6 +37,8 @@ VIEW_SPACING = 0.25  # m between the places the reachable area is seen from
 REPEAT_RADIUS = 0.5  # m: path within this of earlier path is repeated
 REPEAT_GAP = 2.0  # m of travel before a piece of path counts as "earlier"
 SAMPLE_STEP = 0.1  # m between path samples for the repetition metric
+POCKET_REACHED = 0.1  # m: a view of a pocket is reached closer than other goals (it may be the only one)
+POCKET_DWELL = 1.0  # s standing at a view of a pocket (a log-odds cell needs a few scans to turn free)
 
 
 @dataclass(eq=False)
@@ -103,17 +105,22 @@ class _Loop:
             self.world, sim.world, self.truth_free, self.truth_frame, cfg.seed)  # fmt: skip
         if not self.world.free(start[None, :2], 0.2)[0]:
             raise InputError("exploration.start", f"({start[0]:.2f}, {start[1]:.2f}) is not free for the robot")
-        self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2], RobotConfig().radius,
-                                        sim.laser.range_max)  # fmt: skip
         self.robot = Robot(self.world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), seed=cfg.seed)
         # a goal the map comes to block is inaccessible at once: the explorer picks another
         self.options = _navigator_options({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
                                           True)  # fmt: skip
+        # the robot's centre goes where the navigator plans: radius + inflation margin from walls
+        self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2],
+                                        self.robot.cfg.radius + self.options.inflation_margin,
+                                        sim.laser.range_max)  # fmt: skip
+        self.reachable_disc = reachable_free(self.truth_free, self.truth_frame, start[:2], self.robot.cfg.radius,
+                                             sim.laser.range_max)  # fmt: skip
         self.slam = OnlineSlam(cfg)
         self.explorer = Explorer(self.ecfg, self.robot.cfg.radius, self.options.inflation_margin,
                                  sim.laser.range_max)  # fmt: skip
         self.nav = None
         self.goal: Goal | None = None
+        self.dwell: float | None = None  # s: until when the robot stands at a view of a pocket
         self.legs: list[np.ndarray] = []
         self.goals: list[dict] = []
         self.replans = self.recoveries = self.escapes = 0
@@ -127,7 +134,7 @@ class _Loop:
     def set_goal(self, goal: Goal | None, now: float) -> None:
         from slam2d.navigation import Navigator
 
-        self.goal = goal
+        self.goal, self.dwell = goal, None
         if goal is None:
             self.nav = None
             return
@@ -221,7 +228,13 @@ def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
             step = _wait(loop, step, period, truth, est, stamps)
             continue
         d_leg = float(np.hypot(*(pose[:2] - loop.legs[0])))
-        if d_leg < ecfg.goal_reached:
+        view_leg = loop.goal.kind == "pocket" and len(loop.legs) == 1
+        if d_leg < (POCKET_REACHED if view_leg else ecfg.goal_reached):
+            if view_leg:  # stand still at a view long enough for the grid's cells to settle
+                loop.dwell = now + POCKET_DWELL if loop.dwell is None else loop.dwell
+                if now < loop.dwell:
+                    step = _wait(loop, step, period, truth, est, stamps)
+                    continue
             if len(loop.legs) > 1:
                 loop.next_leg(now)
                 continue
@@ -352,18 +365,25 @@ def truth_map(world, resolution: float = 0.05):
     return grid.free, grid
 
 
-def reachable_free(free: np.ndarray, frame, start_xy, radius: float = 0.2, max_range: float = 12.0) -> np.ndarray:
+def reachable_free(free: np.ndarray, frame, start_xy, radius: float = 0.25, max_range: float = 12.0) -> np.ndarray:
     """The area an explorer can be asked to map: free cells that the laser (``max_range`` m) sees from
     some place the robot's centre can reach from the start (the free cells farther than ``radius`` m
-    from walls, connected to the start's cell), sampled every VIEW_SPACING m."""
+    from walls, connected to the start's cell — the robot's radius plus the navigator's inflation
+    margin in a run), sampled every VIEW_SPACING m."""
     from slam2d.exploration.gridops import visible_from
 
     res = frame.resolution
     room = ndimage.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1] * res > radius
     labels, _ = ndimage.label(room, np.ones((3, 3), int))
     cell = frame.world_to_cell(np.asarray(start_xy, float))
-    if not frame.in_bounds(cell) or labels[cell[0], cell[1]] == 0:
+    if not frame.in_bounds(cell) or not free[cell[0], cell[1]]:
         raise InputError("exploration.start", "the start is not in the world's free space")
+    if labels[cell[0], cell[1]] == 0:  # a start closer to a wall than that: the nearest place with room
+        rows, cols = np.nonzero(labels)
+        d = np.hypot(rows - cell[0], cols - cell[1])
+        if len(d) == 0 or d.min() * res > 2 * radius:
+            raise InputError("exploration.start", "the start is not in the world's free space")
+        cell = np.array([rows[np.argmin(d)], cols[np.argmin(d)]])
     robot = labels == labels[cell[0], cell[1]]
     k = max(1, round(VIEW_SPACING / res))
     rows, cols = np.nonzero(robot[::k, ::k])
@@ -472,6 +492,7 @@ def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, colli
         "pocket_goals": ex.pocket_goals,
         "replans": loop.replans, "recoveries": loop.recoveries, "escapes": loop.escapes,
         "path_repetition": path_repetition(run.truth[:, :2]),
+        "coverage_disc": Coverage(loop.reachable_disc, loop.truth_frame, loop.cfg.mapping)(run.grid),
         "map_iou": cover.iou(run.grid),
         "ate_rmse": ate(run.estimate, run.truth, align=False)["rmse"],
         "decisions": len(ex.decision_seconds), "decision_ms_median": float(np.median(dec)),
