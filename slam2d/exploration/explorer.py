@@ -36,6 +36,7 @@ from slam2d.segmentation.observations import raycast_grid
 FRONTIER_STRATEGIES = ("nearest_frontier", "explore_lite")
 POCKET_SPACING = 0.2  # m between the places tried as views of pockets
 POCKET_RAYS = 360  # rays cast from each of them (one a degree, as the laser's beams)
+POCKET_BATCH = 128  # places scored at a time, nearest first
 
 
 def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None = None) -> np.ndarray:
@@ -224,14 +225,16 @@ class Explorer:
             far = np.hypot(*(xy[:, None, :] - np.array(avoid)[None]).transpose(2, 0, 1)).min(axis=1)
             xy = xy[far >= self.cfg.avoid_radius]
         scored = GridView(state, view.resolution, view.origin)
-        gain = information_gain(scored, xy, self.cfg.gain_range, POCKET_RAYS)
-        ok = np.nonzero(gain >= self.cfg.pocket_gain / view.resolution**2)[0]
-        if len(ok) == 0:
-            return None
-        goal = xy[ok[0]]
-        seen = unknown_in_sight(scored, goal, self.cfg.gain_range, POCKET_RAYS)
-        targets = view.to_world(np.column_stack(np.nonzero(seen)))
-        return Goal(goal, "pocket", score=float(gain[ok[0]]), targets=targets)
+        floor = self.cfg.pocket_gain / view.resolution**2
+        for lo in range(0, len(xy), POCKET_BATCH):  # nearest first: most decisions score a few places
+            gain = information_gain(scored, xy[lo : lo + POCKET_BATCH], self.cfg.gain_range, POCKET_RAYS)
+            ok = np.nonzero(gain >= floor)[0]
+            if len(ok):
+                goal = xy[lo + ok[0]]
+                seen = unknown_in_sight(scored, goal, self.cfg.gain_range, POCKET_RAYS)
+                targets = view.to_world(np.column_stack(np.nonzero(seen)))
+                return Goal(goal, "pocket", score=float(gain[ok[0]]), targets=targets)
+        return None
 
     def _candidate_goal(self, pose, view, distance) -> Goal | None:
         live = self.maintain(view)
