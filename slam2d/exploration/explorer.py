@@ -214,10 +214,9 @@ class Explorer:
         tried = ~ndimage.binary_erosion(room) & room  # the edge of the room: views along walls and furniture
         tried[::k, ::k] = True
         rows, cols = np.nonzero(tried & room)
-        sub = distance
         if len(rows) == 0:
             return None
-        order = np.argsort(sub[rows, cols])
+        order = np.argsort(distance[rows, cols])
         cells = np.column_stack([rows[order], cols[order]])
         xy = view.to_world(cells)
         avoid = self.visited + self.inaccessible

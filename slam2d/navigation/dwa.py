@@ -108,16 +108,18 @@ class DynamicWindow:
         pose = np.asarray(pose, dtype=np.float64)
         path = path_ahead(path, pose)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        self.lookahead = self._lookahead(points)
+        d2 = np.einsum("ij,ij->i", points, points)  # m^2 from the robot's centre
+        self.lookahead = self._lookahead(d2)
         v, w = self.window(velocity)
         v, w = self._with_pursuit(v, w, pose, path)
         traj = arcs(v, w, self.times)
         unmapped = np.zeros(len(points), bool) if unmapped is None else np.asarray(unmapped, bool).reshape(-1)
-        dist = self._distances(traj, points, unmapped, v.max())
-        near, off = self._nearest_to_carrot(traj, pose, path)
-        on_path = self._keeps_to(traj, pose, path, self.cfg.margin) & ~self._moving_near(points, unmapped, v.max())
+        within = d2 < self._reach(v.max()) ** 2  # points that can matter to an arc
+        dist = self._distances(traj, points[within], unmapped[within], d2[within])
+        # a point that may move near the arcs: no squeezing along the path
+        on_path = self._keeps_to(traj, pose, path, self.cfg.margin) & ~(unmapped & within).any()
         ok, clearance = self._admissible(v, dist, on_path)
-        score = self._scores(v, traj, clearance, pose, path, near, off)
+        score = self._scores(v, traj, clearance, pose, path)
         score[~ok] = -np.inf
         forward = ok & (v > 1e-3)
         if not ok.any():
@@ -125,10 +127,11 @@ class DynamicWindow:
         best = int(np.argmax(score))
         return Command(float(v[best]), float(w[best]), not forward.any(), "dwa")
 
-    def _lookahead(self, points) -> float:
-        """Carrot distance (m): ``lookahead``, or in a tight spot (clearance below ``TIGHT[0]``) nearer,
-        linearly down to ``TIGHT[1]``, so that the arcs follow the path rather than cut its bends."""
-        gap = float(np.sqrt(np.einsum("ij,ij->i", points, points).min())) - self.robot.radius if len(points) else np.inf
+    def _lookahead(self, d2: np.ndarray) -> float:
+        """Carrot distance (m): ``lookahead``, or in a tight spot (clearance below ``TIGHT[0]``, from the
+        points' squared distances ``d2`` (M,) m^2) nearer, linearly down to ``TIGHT[1]``, so that the arcs
+        follow the path rather than cut its bends."""
+        gap = float(np.sqrt(d2.min())) - self.robot.radius if len(d2) else np.inf
         near, least = TIGHT
         return float(np.clip(least + (self.cfg.lookahead - least) * gap / near, least, self.cfg.lookahead))
 
@@ -154,16 +157,14 @@ class DynamicWindow:
         turn = self.robot.max_speed * max(float(np.cos(bend)), 0.0)
         return min(turn, approach_speed(left, self.cfg.decel * self.robot.max_accel))
 
-    def _distances(self, traj: np.ndarray, points: np.ndarray, unmapped: np.ndarray, v_max: float) -> np.ndarray:
+    def _distances(self, traj: np.ndarray, near: np.ndarray, moving: np.ndarray, d2: np.ndarray) -> np.ndarray:
         """Distance (S, K + 1) m from the robot's centre on each arc sample (now first) to the nearest
-        point, less the grown margin of unmapped points."""
-        c = self.cfg
-        keep = np.einsum("ij,ij->i", points, points) < self._reach(v_max) ** 2
-        near, moving = points[keep], unmapped[keep]
+        of the points ``near`` (M, 2) (``d2`` (M,) m^2 from the centre), less the grown margin of
+        ``moving`` (unmapped) ones."""
         s, k = traj.shape[:2]
         if len(near) == 0:
             return np.full((s, k + 1), np.inf)
-        nearest = np.argsort(np.einsum("ij,ij->i", near, near), kind="stable")
+        nearest = np.argsort(d2, kind="stable")
         near, moving = near[nearest], moving[nearest]
         thin = thin_points(near, VOXEL)  # the point nearest the robot in each square: a corner is not thinned away
         near, moving = near[thin], moving[thin]
@@ -209,10 +210,6 @@ class DynamicWindow:
         c = self.cfg
         return v_max * c.horizon + self.robot.radius + c.margin + c.obstacle_reach + 0.1
 
-    def _moving_near(self, points, unmapped, v_max: float) -> bool:
-        """Whether a point the map does not explain (it may move) is within reach of the arcs."""
-        return bool((unmapped & (np.einsum("ij,ij->i", points, points) < self._reach(v_max) ** 2)).any())
-
     def _keeps_to(self, traj, pose, path, band: float) -> np.ndarray:
         """Whether every sample of each arc lies within ``band`` m of the path ahead (S,)."""
         local = in_robot_frame(pose, path)
@@ -222,24 +219,17 @@ class DynamicWindow:
         d2 = ((traj[:, :, None, :2] - local[None, None]) ** 2).sum(-1).min(axis=2)  # (S, K) to its points
         return d2.max(axis=1) <= band**2
 
-    def _nearest_to_carrot(self, traj, pose, path) -> tuple[np.ndarray, np.ndarray]:
-        """Where each arc comes closest to the carrot (or its end), (S, 3) in the robot frame, and
-        how far (S,) m that pose lies from the path ahead."""
+    def _scores(self, v, traj, clearance, pose, path) -> np.ndarray:
+        """Weighted score (S,) of every arc (higher is better)."""
         c, vmax = self.cfg, self.robot.max_speed
         local = in_robot_frame(pose, path)
         carrot = in_robot_frame(pose, point_along(path, self.lookahead))
         gap = np.hypot(traj[..., 0] - carrot[0], traj[..., 1] - carrot[1])  # (S, K)
         closest = np.where(gap[:, -1] <= gap.min(axis=1) + 1e-3, gap.shape[1] - 1, gap.argmin(axis=1))
-        near = traj[np.arange(len(traj)), closest]
+        near = traj[np.arange(len(traj)), closest]  # where each arc comes closest to the carrot (or its end)
         window = local[np.einsum("ij,ij->i", local, local) < (self.lookahead + vmax * c.horizon) ** 2]
         window = window if len(window) else local[-1:]
-        return near, np.sqrt(((near[:, None, :2] - window[None]) ** 2).sum(-1).min(axis=1))
-
-    def _scores(self, v, traj, clearance, pose, path, near, off) -> np.ndarray:
-        """Weighted score (S,) of every arc (higher is better); ``near``, ``off`` from :meth:`_nearest_to_carrot`."""
-        c, vmax = self.cfg, self.robot.max_speed
-        carrot = in_robot_frame(pose, point_along(path, self.lookahead))
-        gap = np.hypot(traj[..., 0] - carrot[0], traj[..., 1] - carrot[1])  # (S, K)
+        off = np.sqrt(((near[:, None, :2] - window[None]) ** 2).sum(-1).min(axis=1))
         to_carrot = carrot - near[:, :2]
         bearing = np.arctan2(to_carrot[:, 1], to_carrot[:, 0]) - near[:, 2]
         heading = 1.0 - np.abs(np.angle(np.exp(1j * bearing))) / np.pi

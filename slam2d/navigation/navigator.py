@@ -182,7 +182,7 @@ class Navigator:
         disc comes within ``inflation_margin`` of a blocked cell, rising by up to ``tight_weight`` as it
         comes closer (through a tight gap, its middle), falling linearly to 0 over ``wall_distance`` beyond."""
         c = self.cfg
-        gap = ndimage.distance_transform_edt(np.pad(raw.free, 1))[1:-1, 1:-1] * raw.resolution - self.robot.radius
+        gap = raw.clearance() - self.robot.radius
         beyond = gap - c.inflation_margin  # m between the disc + margin and the nearest blocked cell centre
         tight = np.clip(-beyond / c.inflation_margin, 0.0, 1.0) if c.inflation_margin > 0 else 0.0
         cost = c.wall_weight * np.clip(1.0 - beyond / c.wall_distance, 0.0, 1.0) + c.tight_weight * tight
