@@ -45,7 +45,7 @@ def run(log: str, overrides: list[str]) -> dict:
     wall = time.perf_counter() - t0
     folder = Path(re.search(r"results: (.+)", out).group(1).strip())
     metrics = json.loads((folder / "metrics.json").read_text())
-    return {"wall_s": wall, **metrics}
+    return {"wall_s": wall, "folder": str(folder), **metrics}
 
 
 def main(argv: list[str]) -> None:

@@ -1,0 +1,135 @@
+"""Which ground-truth relations the laser scans themselves contradict, and how much of the score they carry.
+
+Usage: .venv/bin/python benchmarks/relations_audit.py [intel aces fr079 fr-clinic csail] [--results LOG=FOLDER ...]
+
+For each log, slam2d's estimate (a results folder given with ``--results``,
+else a fresh `slam2d run experiments/<log>.yaml`) and the relations file are
+compared against the scans at both ends of every relation: scan 2's points
+are placed in scan 1's frame by the relation's pose, and their median
+distance to scan 1's nearest point is the *scan fit* (m) of that pose. A
+relation whose ground-truth pose fits worse than ``CONTRADICTED_M`` and more
+than ``RATIO`` times worse than the estimate's is one the scans contradict;
+the reverse (the estimate contradicted where the ground truth fits) is
+counted too. Pairs whose scans barely overlap (both fits above
+``NO_OVERLAP_M``: a return facing the other way) are reported apart: the
+scans say nothing about them. Prints a table and, with ``--worst N``, the
+worst contradicted relations of each log.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from slam_radish import PUBLISHED, run  # noqa: E402
+
+from slam2d import geometry  # noqa: E402
+from slam2d.config import load as load_config  # noqa: E402
+from slam2d.datasets.registry import open_dataset, resolve_data_path  # noqa: E402
+from slam2d.evaluation.relations import _endpoints, read_relations  # noqa: E402
+
+CONTRADICTED_M = 0.15  # m: a pose fitting the scans worse than this ...
+RATIO = 2.0  # ... and this many times worse than the other pose is contradicted by them
+NO_OVERLAP_M = 0.5  # m: both poses fit worse than this: the two scans see different things
+MAX_RANGE = 30.0  # m: hits farther than this are left out of the fit
+
+
+def scan_points(log: str) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """Stamps (N,) s, hit points in the robot frame (list of (M, 2) m) and laser mounts (N, 3) of a log's scans."""
+    cfg = load_config(f"experiments/{log}.yaml")
+    stamps, points, mounts = [], [], []
+    for scan in open_dataset(cfg.dataset):
+        hit = scan.hit_mask() & (scan.ranges < MAX_RANGE)
+        r, a = scan.ranges[hit], scan.angles[hit]
+        stamps.append(scan.stamp)
+        points.append(geometry.transform_points(scan.sensor_pose, np.column_stack([r * np.cos(a), r * np.sin(a)])))
+        mounts.append(scan.sensor_pose)
+    return np.array(stamps), points, np.array(mounts)
+
+
+def read_tum(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Stamps (N,) s and planar poses (N, 3) of a TUM trajectory file."""
+    t = np.loadtxt(path, ndmin=2)
+    return t[:, 0], np.column_stack([t[:, 1], t[:, 2], 2 * np.arctan2(t[:, 6], t[:, 7])])
+
+
+def audit(log: str, folder: Path) -> dict:
+    """Scan fits of the ground truth and the estimate in ``folder`` on every relation of ``log``."""
+    cfg = load_config(f"experiments/{log}.yaml")
+    relations = read_relations(resolve_data_path(cfg.evaluation.relations, "evaluation.relations"))
+    stamps, poses = read_tum(folder / "trajectory.tum")
+    frame = json.loads((folder / "metrics.json").read_text())["relations"]["frame"]
+    scan_stamps, points, mounts = scan_points(log)
+    if frame == "laser":  # relations between laser poses: points and poses in the laser frame
+        mount_at = mounts[np.clip(np.searchsorted(scan_stamps, stamps), 0, len(mounts) - 1)]
+        poses = geometry.compose(poses, mount_at)
+        points = [geometry.transform_points(geometry.inverse(m), p) for m, p in zip(mounts, points)]
+    i1, i2, ok = _endpoints(stamps, relations, cfg.evaluation.relation_tolerance)
+    s1 = np.searchsorted(scan_stamps, stamps[i1])
+    s2 = np.searchsorted(scan_stamps, stamps[i2])
+    estimate = geometry.between(poses[i1], poses[i2])
+    err = geometry.compose(estimate, geometry.inverse(relations.delta))
+    trees: dict[int, cKDTree] = {}
+
+    def fit(a: int, b: int, delta: np.ndarray) -> float:
+        if a not in trees:
+            trees[a] = cKDTree(points[a])
+        return float(np.median(trees[a].query(geometry.transform_points(delta, points[b]))[0]))
+
+    truth_fit = np.array([fit(a, b, d) for a, b, d in zip(s1, s2, relations.delta)])
+    ours_fit = np.array([fit(a, b, d) for a, b, d in zip(s1, s2, estimate)])
+    return {"error": np.hypot(err[:, 0], err[:, 1])[ok], "truth_fit": truth_fit[ok], "ours_fit": ours_fit[ok],
+            "t1": relations.t1[ok] - scan_stamps[0], "t2": relations.t2[ok] - scan_stamps[0]}  # fmt: skip
+
+
+def summary(log: str, a: dict) -> str:
+    """One table row: relations, the contradicted ones (count, mean error, share of the metric), the rest."""
+    e, ft, fo = a["error"], a["truth_fit"], a["ours_fit"]
+    n = len(e)
+    blind = (ft > NO_OVERLAP_M) & (fo > NO_OVERLAP_M)
+    truth_bad = ~blind & (ft > CONTRADICTED_M) & (ft > RATIO * fo)
+    ours_bad = ~blind & (fo > CONTRADICTED_M) & (fo > RATIO * ft)
+    rest = ~blind & ~truth_bad
+    return (f"| {log} | {n} | {e.mean():.4f} | {truth_bad.sum()} ({100 * truth_bad.mean():.1f} %) | "
+            f"{e[truth_bad].mean() if truth_bad.any() else 0:.3f} | {e[truth_bad].sum() / n:.4f} | "
+            f"{ours_bad.sum()} | {blind.sum()} | {e[blind].sum() / n:.4f} | "
+            f"{e[rest].mean():.4f} |")  # fmt: skip
+
+
+def main(argv: list[str]) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("logs", nargs="*", help=f"some of {', '.join(PUBLISHED)} (default: all)")
+    ap.add_argument("--results", action="append", default=[], help="LOG=FOLDER: score this results folder")
+    ap.add_argument("--worst", type=int, default=0, help="list this many contradicted relations per log")
+    args = ap.parse_args(argv)
+    given = dict(item.split("=", 1) for item in args.results)
+    logs = args.logs or list(PUBLISHED)
+    unknown = set(logs) - set(PUBLISHED)
+    if unknown:
+        ap.error(f"unknown log(s) {sorted(unknown)}; choose from {list(PUBLISHED)}")
+    print("| log | relations | slam2d error (m) | ground truth contradicted by the scans | their mean error (m) | "
+          "their share of the error (m) | estimate contradicted | no overlap | their share (m) | "
+          "error on the rest (m) |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    details = []
+    for log in logs:
+        folder = Path(given[log]) if log in given else Path(run(log, [])["folder"])
+        a = audit(log, folder)
+        print(summary(log, a), flush=True)
+        bad = np.flatnonzero((a["truth_fit"] > CONTRADICTED_M) & (a["truth_fit"] > RATIO * a["ours_fit"])
+                             & ~((a["truth_fit"] > NO_OVERLAP_M) & (a["ours_fit"] > NO_OVERLAP_M)))  # fmt: skip
+        for j in bad[np.argsort(-a["error"][bad])][: args.worst]:
+            details.append(f"{log}: t = {a['t1'][j]:.1f} -> {a['t2'][j]:.1f} s, error {a['error'][j]:.3f} m, scan fit "
+                           f"ground truth {a['truth_fit'][j]:.3f} m, slam2d {a['ours_fit'][j]:.3f} m")  # fmt: skip
+    if details:
+        print("\n" + "\n".join(details))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
