@@ -68,6 +68,18 @@ def test_dwa_stops_before_a_disc_that_appears_across_a_corridor():
     assert blocked[-1]
 
 
+def test_dwa_with_no_admissible_arc_brakes_on_the_arc_the_robot_is_on():
+    """Points the robot cannot stop short of: full braking, turn rate falling with the speed (the
+    stop every arc was checked with), not a plain stop that would straighten the robot's path."""
+    dwa = DynamicWindow()
+    wall = np.column_stack([np.full(41, 0.3), np.linspace(-1.0, 1.0, 41)])  # 0.1 m ahead of the disc
+    path = np.column_stack([np.linspace(0.0, 3.0, 31), np.zeros(31)])
+    cmd = dwa.command(np.zeros(3), np.array([0.8, -0.6]), wall, path)
+    assert cmd.blocked and cmd.state == "no admissible arc"
+    assert cmd.v == pytest.approx(0.8 - dwa.robot.max_accel * dwa.cfg.period)
+    assert cmd.w / cmd.v == pytest.approx(-0.6 / 0.8)
+
+
 def test_dwa_swerves_round_a_disc_that_appears_in_a_hall(hall):
     world, grid = hall
     disc = PopUpDisc([5.0, 2.0], 0.3, 1.8)

@@ -123,9 +123,17 @@ class DynamicWindow:
         score[~ok] = -np.inf
         forward = ok & (v > 1e-3)
         if not ok.any():
-            return Command(0.0, 0.0, True, "no admissible arc")
+            return self._brake(velocity)
         best = int(np.argmax(score))
         return Command(float(v[best]), float(w[best]), not forward.any(), "dwa")
+
+    def _brake(self, velocity) -> Command:
+        """No admissible arc: full braking on the arc the robot is on (its turn rate falls with its
+        speed), the stop every arc was checked with; a plain stop would let the turn rate fall faster
+        than the speed and run the robot straight on."""
+        v0, w0 = float(velocity[0]), float(velocity[1])
+        v = max(0.0, v0 - self.robot.max_accel * self.cfg.period)
+        return Command(v, w0 * v / v0 if v0 > 1e-9 else 0.0, True, "no admissible arc")
 
     def _lookahead(self, d2: np.ndarray) -> float:
         """Carrot distance (m): ``lookahead``, or in a tight spot (clearance below ``TIGHT[0]``, from the
