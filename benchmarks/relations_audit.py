@@ -27,12 +27,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from slam_radish import PUBLISHED, run  # noqa: E402
+from slam_radish import PUBLISHED, run
 
-from slam2d import geometry  # noqa: E402
-from slam2d.config import load as load_config  # noqa: E402
-from slam2d.datasets.registry import open_dataset, resolve_data_path  # noqa: E402
-from slam2d.evaluation.relations import _endpoints, read_relations  # noqa: E402
+from slam2d import geometry
+from slam2d.config import load as load_config
+from slam2d.datasets.registry import open_dataset, resolve_data_path
+from slam2d.evaluation.relations import _endpoints, read_relations
 
 CONTRADICTED_M = 0.15  # m: a pose fitting the scans worse than this ...
 RATIO = 2.0  # ... and this many times worse than the other pose is contradicted by them

@@ -11,6 +11,7 @@ import pytest
 from slam2d.errors import InputError
 from slam2d.exploration import config as explore_config
 from slam2d.exploration.candidates import (
+    Candidate,
     CandidateParams,
     adjust,
     scan_candidates,
@@ -223,6 +224,24 @@ def test_utility_trades_gain_against_distance_and_turning():
     assert more[0] > f[0]  # ten times the gain is worth 2 m more
     euclid = Explorer(explore_config.ExplorationConfig(distance="euclidean"), 0.2, 0.05, R_MAX)
     assert euclid.utility(pose, pts[:1], np.array([1.0]), np.array([50.0]))[0] == pytest.approx(np.exp(-1.0 * 2.0))
+
+
+def test_utility_takes_a_side_opening_nearby_before_a_far_candidate():
+    """A corridor with a side opening 2 m from the robot and a candidate at its far end (9 m): the
+    opening has no candidate, and the utility scores its frontier beside the candidates."""
+    state = np.full((100, 200), UNKNOWN, dtype=np.int8)
+    state[20:80, 10:190] = FREE  # 9 m x 3 m, closed at x = 0.5 m, open at x = 9.5 m
+    state[19, 10:190] = state[80, 10:190] = OCCUPIED
+    state[19:81, 9] = OCCUPIED
+    state[80, 25:40] = FREE  # a 0.75 m side opening at x = 1.25-2 m
+    view = view_of(state)
+    ex = Explorer(explore_config.ExplorationConfig(strategy="utility"), 0.2, 0.05, R_MAX)
+    far = Candidate(np.array([9.2, 2.5]), 7.7, 0, "A")
+    ex.hybrid.add([1.5, 2.5, 0.0], [far], state == OCCUPIED, view.resolution, view.origin)
+    goal = ex.decide([1.5, 2.5, 0.0], view)
+    assert goal.kind == "frontier" and goal.position[1] > 3.8 and 1.2 < goal.position[0] < 2.1
+    state[80, 25:40] = OCCUPIED  # no opening: the far end is the best goal
+    assert ex.decide([1.5, 2.5, 0.0], view_of(state)).position[0] > 8.5
 
 
 def test_path_repetition():

@@ -52,8 +52,8 @@ class ExplorationConfig(Section):
     min_gain: float = Field(0.5, ge=0, description="m² of unknown area a candidate must still see to stay open")
     backtrack: Literal["graph", "grid"] = Field("graph", description="to an old candidate: over the topological graph "
                                                                      "(the paper) or the grid path alone")  # fmt: skip
-    fallback_frontiers: bool = Field(True, description="candidate strategies: when no candidate is left, take the "
-                                                       "nearest frontier (else stop)")  # fmt: skip
+    fallback_frontiers: bool = Field(True, description="nearest / farthest candidate: with no candidate left, "
+                                                       "take the nearest frontier (else stop)")  # fmt: skip
     # explore_lite
     potential_scale: float = Field(3.0, ge=0, description="explore_lite: weight of the distance")
     gain_scale: float = Field(1.0, ge=0, description="explore_lite: weight of the frontier size")

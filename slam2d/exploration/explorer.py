@@ -4,7 +4,8 @@
 The utility of a candidate p (eq. 6): F(p) = A(p) · exp(−(k1·L + k2·γ)), with A the
 unknown cells visible from p (information gain, rays cast on the grid), L the grid path
 length (or the Euclidean distance, as the paper) and γ the absolute angle between the
-robot's heading and the direction to p. explore_lite's cost of a frontier:
+robot's heading and the direction to p; the frontier regions' goals are scored by the
+same F beside the candidates. explore_lite's cost of a frontier:
 potential_scale · min_distance · resolution − gain_scale · size · resolution (the
 lowest wins), goal at the reachable cell nearest the frontier's centroid.
 """
@@ -165,6 +166,8 @@ class Explorer:
             goal = self._frontier_goal(pose, view, distance, self.cfg.strategy)
         else:
             goal = self._candidate_goal(pose, view, distance)
+            if self.cfg.strategy == "utility":
+                goal = self._best_of(goal, self._frontier_goal(pose, view, distance, "utility"))
             if goal is None and self.cfg.fallback_frontiers:
                 goal = self._frontier_goal(pose, view, distance, "nearest_frontier")
                 self.fallbacks += goal is not None
@@ -183,10 +186,21 @@ class Explorer:
         if strategy == "explore_lite":
             res = view.resolution
             cost = [self.cfg.potential_scale * f.min_distance * res - self.cfg.gain_scale * f.size * res for f in found]
+        elif strategy == "utility":  # scored as candidates are: F = A exp(-(k1 L + k2 gamma))
+            goals = np.array([f.goal for f in found])
+            gain = information_gain(view, goals, self.cfg.gain_range, self.cfg.gain_rays)
+            cost = -self.utility(pose, goals, gain, np.array([f.path for f in found]))
         else:
             cost = [f.path for f in found]
-        best = found[int(np.argmin(cost))]
-        return Goal(best.goal, "frontier", score=float(min(cost)))
+        k = int(np.argmin(cost))
+        return Goal(found[k].goal, "frontier", score=float(-cost[k] if strategy == "utility" else cost[k]))
+
+    @staticmethod
+    def _best_of(candidate: Goal | None, frontier: Goal | None) -> Goal | None:
+        """The goal of higher utility of a candidate's and a frontier region's (either may be None)."""
+        if candidate is None or frontier is None:
+            return candidate or frontier
+        return frontier if frontier.score > candidate.score else candidate
 
     def _pocket_state(self, view: GridView) -> np.ndarray:
         retired = None
