@@ -40,9 +40,9 @@ NO_OVERLAP_M = 0.5  # m: both poses fit worse than this: the two scans see diffe
 MAX_RANGE = 30.0  # m: hits farther than this are left out of the fit
 
 
-def scan_points(log: str) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
-    """Stamps (N,) s, hit points in the robot frame (list of (M, 2) m) and laser mounts (N, 3) of a log's scans."""
-    cfg = load_config(f"experiments/{log}.yaml")
+def scan_points(cfg) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """Stamps (N,) s, hit points in the robot frame (list of (M, 2) m) and laser mounts (N, 3) of the
+    scans of ``cfg``'s dataset."""
     stamps, points, mounts = [], [], []
     for scan in open_dataset(cfg.dataset):
         hit = scan.hit_mask() & (scan.ranges < MAX_RANGE)
@@ -60,21 +60,23 @@ def read_tum(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def audit(log: str, folder: Path) -> dict:
-    """Scan fits of the ground truth and the estimate in ``folder`` on every relation of ``log``."""
+    """Scan fits of the ground truth and the estimate in ``folder`` on every relation of ``log``
+    whose two ends match both a scan and a trajectory stamp."""
     cfg = load_config(f"experiments/{log}.yaml")
+    tolerance = cfg.evaluation.relation_tolerance
     relations = read_relations(resolve_data_path(cfg.evaluation.relations, "evaluation.relations"))
     stamps, poses = read_tum(folder / "trajectory.tum")
-    frame = json.loads((folder / "metrics.json").read_text())["relations"]["frame"]
-    scan_stamps, points, mounts = scan_points(log)
-    if frame == "laser":  # relations between laser poses: points and poses in the laser frame
-        mount_at = mounts[np.clip(np.searchsorted(scan_stamps, stamps), 0, len(mounts) - 1)]
-        poses = geometry.compose(poses, mount_at)
+    scan_stamps, points, mounts = scan_points(cfg)
+    i1, i2, ok = _endpoints(stamps, relations, tolerance)
+    s1, s2, scanned = _endpoints(scan_stamps, relations, tolerance)
+    ok &= scanned
+    i1, i2, s1, s2, truth = i1[ok], i2[ok], s1[ok], s2[ok], relations.delta[ok]
+    p1, p2 = poses[i1], poses[i2]
+    if json.loads((folder / "metrics.json").read_text())["relations"]["frame"] == "laser":
+        p1, p2 = geometry.compose(p1, mounts[s1]), geometry.compose(p2, mounts[s2])  # relations between lasers
         points = [geometry.transform_points(geometry.inverse(m), p) for m, p in zip(mounts, points)]
-    i1, i2, ok = _endpoints(stamps, relations, cfg.evaluation.relation_tolerance)
-    s1 = np.searchsorted(scan_stamps, stamps[i1])
-    s2 = np.searchsorted(scan_stamps, stamps[i2])
-    estimate = geometry.between(poses[i1], poses[i2])
-    err = geometry.compose(estimate, geometry.inverse(relations.delta))
+    estimate = geometry.between(p1, p2)
+    err = geometry.compose(estimate, geometry.inverse(truth))
     trees: dict[int, cKDTree] = {}
 
     def fit(a: int, b: int, delta: np.ndarray) -> float:
@@ -82,19 +84,24 @@ def audit(log: str, folder: Path) -> dict:
             trees[a] = cKDTree(points[a])
         return float(np.median(trees[a].query(geometry.transform_points(delta, points[b]))[0]))
 
-    truth_fit = np.array([fit(a, b, d) for a, b, d in zip(s1, s2, relations.delta)])
-    ours_fit = np.array([fit(a, b, d) for a, b, d in zip(s1, s2, estimate)])
-    return {"error": np.hypot(err[:, 0], err[:, 1])[ok], "truth_fit": truth_fit[ok], "ours_fit": ours_fit[ok],
+    return {"error": np.hypot(err[:, 0], err[:, 1]),
+            "truth_fit": np.array([fit(a, b, d) for a, b, d in zip(s1, s2, truth)]),
+            "ours_fit": np.array([fit(a, b, d) for a, b, d in zip(s1, s2, estimate)]),
             "t1": relations.t1[ok] - scan_stamps[0], "t2": relations.t2[ok] - scan_stamps[0]}  # fmt: skip
+
+
+def classes(a: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Masks of the relations whose scans do not overlap, whose ground truth the scans contradict,
+    and whose estimate they contradict."""
+    ft, fo = a["truth_fit"], a["ours_fit"]
+    blind = (ft > NO_OVERLAP_M) & (fo > NO_OVERLAP_M)
+    return blind, ~blind & (ft > CONTRADICTED_M) & (ft > RATIO * fo), ~blind & (fo > CONTRADICTED_M) & (fo > RATIO * ft)
 
 
 def summary(log: str, a: dict) -> str:
     """One table row: relations, the contradicted ones (count, mean error, share of the metric), the rest."""
-    e, ft, fo = a["error"], a["truth_fit"], a["ours_fit"]
-    n = len(e)
-    blind = (ft > NO_OVERLAP_M) & (fo > NO_OVERLAP_M)
-    truth_bad = ~blind & (ft > CONTRADICTED_M) & (ft > RATIO * fo)
-    ours_bad = ~blind & (fo > CONTRADICTED_M) & (fo > RATIO * ft)
+    e, n = a["error"], len(a["error"])
+    blind, truth_bad, ours_bad = classes(a)
     rest = ~blind & ~truth_bad
     return (f"| {log} | {n} | {e.mean():.4f} | {truth_bad.sum()} ({100 * truth_bad.mean():.1f} %) | "
             f"{e[truth_bad].mean() if truth_bad.any() else 0:.3f} | {e[truth_bad].sum() / n:.4f} | "
@@ -122,8 +129,7 @@ def main(argv: list[str]) -> None:
         folder = Path(given[log]) if log in given else Path(run(log, [])["folder"])
         a = audit(log, folder)
         print(summary(log, a), flush=True)
-        bad = np.flatnonzero((a["truth_fit"] > CONTRADICTED_M) & (a["truth_fit"] > RATIO * a["ours_fit"])
-                             & ~((a["truth_fit"] > NO_OVERLAP_M) & (a["ours_fit"] > NO_OVERLAP_M)))  # fmt: skip
+        bad = np.flatnonzero(classes(a)[1])
         for j in bad[np.argsort(-a["error"][bad])][: args.worst]:
             details.append(f"{log}: t = {a['t1'][j]:.1f} -> {a['t2'][j]:.1f} s, error {a['error'][j]:.3f} m, scan fit "
                            f"ground truth {a['truth_fit'][j]:.3f} m, slam2d {a['ours_fit'][j]:.3f} m")  # fmt: skip

@@ -168,7 +168,7 @@ class Explorer:
             goal = self._candidate_goal(pose, view, distance)
             if self.cfg.strategy == "utility":
                 goal = self._best_of(goal, self._frontier_goal(pose, view, distance, "utility"))
-            if goal is None and self.cfg.fallback_frontiers:
+            elif goal is None and self.cfg.fallback_frontiers:
                 goal = self._frontier_goal(pose, view, distance, "nearest_frontier")
                 self.fallbacks += goal is not None
         if goal is None and self.cfg.pockets:
@@ -183,17 +183,19 @@ class Explorer:
                                self.cfg.avoid_radius)  # fmt: skip
         if not found:
             return None
+        if strategy == "utility":  # scored as candidates are: F = A exp(-(k1 L + k2 gamma)), highest wins
+            goals = np.array([f.goal for f in found])
+            gain = information_gain(view, goals, self.cfg.gain_range, self.cfg.gain_rays)
+            score = self.utility(pose, goals, gain, np.array([f.path for f in found]))
+            k = int(np.argmax(score))
+            return Goal(found[k].goal, "frontier", score=float(score[k]))
         if strategy == "explore_lite":
             res = view.resolution
             cost = [self.cfg.potential_scale * f.min_distance * res - self.cfg.gain_scale * f.size * res for f in found]
-        elif strategy == "utility":  # scored as candidates are: F = A exp(-(k1 L + k2 gamma))
-            goals = np.array([f.goal for f in found])
-            gain = information_gain(view, goals, self.cfg.gain_range, self.cfg.gain_rays)
-            cost = -self.utility(pose, goals, gain, np.array([f.path for f in found]))
         else:
             cost = [f.path for f in found]
         k = int(np.argmin(cost))
-        return Goal(found[k].goal, "frontier", score=float(-cost[k] if strategy == "utility" else cost[k]))
+        return Goal(found[k].goal, "frontier", score=float(cost[k]))
 
     @staticmethod
     def _best_of(candidate: Goal | None, frontier: Goal | None) -> Goal | None:
