@@ -348,6 +348,23 @@ def test_pocket_cells_are_hidden_unknown_cells_walls_close_small_gaps_and_escape
     assert abs(abs(heading) - np.pi) < 0.5  # away from it
 
 
+@pytest.mark.parametrize("wall_cells", [1, 2, 4, 5])
+def test_pocket_state_is_a_closing_of_the_walls_by_a_square_and_hidden_cells_have_no_known_neighbour(wall_cells):
+    from scipy import ndimage
+
+    from slam2d.exploration.explorer import pocket_state
+
+    rng = np.random.default_rng(wall_cells)
+    state = rng.choice(np.array([FREE, OCCUPIED, UNKNOWN], dtype=np.int8), size=(50, 70), p=[0.5, 0.1, 0.4])
+    size = wall_cells + 1
+    closed = ndimage.binary_closing(np.pad(state == OCCUPIED, size), np.ones((size, size), bool))[size:-size, size:-size]
+    unknown = state == UNKNOWN
+    hidden = unknown & ~ndimage.binary_dilation(~unknown, np.ones((3, 3), bool))
+    scored = pocket_state(state, wall_cells)
+    assert np.array_equal(scored == OCCUPIED, closed)
+    assert np.array_equal(scored == UNKNOWN, hidden & ~closed)
+
+
 def desk_room_png(tmp_path):
     """A 4 x 3 m room (x 0.5-4.5, y 0.5-3.5, 5 cm pixels) with a 2 x 0.55 m desk 0.55 m from its south
     wall: the space behind the desk is seen only along the gap, whose mouths are narrower than a

@@ -37,7 +37,7 @@ from slam2d.segmentation.observations import raycast_grid
 FRONTIER_STRATEGIES = ("nearest_frontier", "explore_lite")
 POCKET_SPACING = 0.2  # m between the places tried as views of pockets
 POCKET_RAYS = 360  # rays cast from each of them (one a degree, as the laser's beams)
-POCKET_BATCH = 128  # places scored at a time, nearest first
+POCKET_BATCH = 8, 256  # places scored at a time, nearest first: the first batch, doubling up to the last
 
 
 def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None = None) -> np.ndarray:
@@ -51,14 +51,13 @@ def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None 
     """
     from scipy import ndimage
 
-    unknown = state == UNKNOWN
-    hidden = unknown & ~ndimage.binary_dilation(~unknown, np.ones((3, 3), bool))
+    hidden = ndimage.minimum_filter(state == UNKNOWN, size=3, mode="constant", cval=True)
     if retired is not None:
         hidden &= ~retired
-    occupied = state == OCCUPIED
-    size = max(1, wall_cells) + 1
-    padded = np.pad(occupied, size)
-    closed = ndimage.binary_closing(padded, np.ones((size, size), bool))[size:-size, size:-size]
+    size = max(1, wall_cells) + 1  # a closing by a size x size square (separable max / min filters)
+    padded = ndimage.maximum_filter(np.pad(state == OCCUPIED, size), size=size, mode="constant", cval=False)
+    closed = ndimage.minimum_filter(padded, size=size, mode="constant", cval=True,
+                                    origin=0 if size % 2 else -1)[size:-size, size:-size]  # fmt: skip
     out = np.full(state.shape, FREE, dtype=np.int8)
     out[hidden] = UNKNOWN
     out[closed] = OCCUPIED
@@ -223,11 +222,11 @@ class Explorer:
         state = self._pocket_state(view)
         if not (state == UNKNOWN).any():
             return None
-        from scipy import ndimage
-
         k = max(1, round(POCKET_SPACING / view.resolution))
         room = np.isfinite(distance)
-        tried = ~ndimage.binary_erosion(room) & room  # the edge of the room: views along walls and furniture
+        inner = np.pad(room, 1)
+        inner = inner[:-2, 1:-1] & inner[2:, 1:-1] & inner[1:-1, :-2] & inner[1:-1, 2:]
+        tried = room & ~inner  # the edge of the room: views along walls and furniture
         tried[::k, ::k] = True
         rows, cols = np.nonzero(tried & room)
         if len(rows) == 0:
@@ -237,18 +236,21 @@ class Explorer:
         xy = view.to_world(cells)
         avoid = self.visited + self.inaccessible
         if avoid:
-            far = np.hypot(*(xy[:, None, :] - np.array(avoid)[None]).transpose(2, 0, 1)).min(axis=1)
-            xy = xy[far >= self.cfg.avoid_radius]
+            from scipy.spatial import cKDTree
+
+            xy = xy[cKDTree(np.array(avoid)).query(xy)[0] >= self.cfg.avoid_radius]
         scored = GridView(state, view.resolution, view.origin)
         floor = self.cfg.pocket_gain / view.resolution**2
-        for lo in range(0, len(xy), POCKET_BATCH):  # nearest first: most decisions score a few places
-            gain = information_gain(scored, xy[lo : lo + POCKET_BATCH], self.cfg.gain_range, POCKET_RAYS)
+        lo, batch = 0, POCKET_BATCH[0]
+        while lo < len(xy):  # nearest first: most decisions score a few places
+            gain = information_gain(scored, xy[lo : lo + batch], self.cfg.gain_range, POCKET_RAYS)
             ok = np.nonzero(gain >= floor)[0]
             if len(ok):
                 goal = xy[lo + ok[0]]
                 seen = unknown_in_sight(scored, goal, self.cfg.gain_range, POCKET_RAYS)
                 targets = view.to_world(np.column_stack(np.nonzero(seen)))
                 return Goal(goal, "pocket", score=float(gain[ok[0]]), targets=targets)
+            lo, batch = lo + batch, min(2 * batch, POCKET_BATCH[1])
         return None
 
     def _candidate_goal(self, pose, view, distance) -> Goal | None:
