@@ -34,14 +34,17 @@ PUBLISHED = {  # Hess et al. 2016, Tables II-III: absolute translational / rotat
 }
 
 
-def run(log: str, overrides: list[str]) -> dict:
-    """metrics.json of one `slam2d run` plus its wall clock (s) seen from outside."""
+def run(log: str, overrides: list[str], plugins: list[str] = (), env: dict | None = None) -> dict:
+    """metrics.json of one `slam2d run` (with ``--plugin`` files, in ``env``) plus its wall clock (s) seen
+    from outside."""
     root = Path("results/bench")
     cmd = [sys.executable, "-m", "slam2d.cli", "run", f"experiments/{log}.yaml", "-q", "--set", f"output.root={root}"]
     for o in overrides:
         cmd += ["--set", o]
+    for p in plugins:
+        cmd += ["--plugin", p]
     t0 = time.perf_counter()
-    out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(cmd, capture_output=True, text=True, check=True, env=env).stdout
     wall = time.perf_counter() - t0
     folder = Path(re.search(r"results: (.+)", out).group(1).strip())
     metrics = json.loads((folder / "metrics.json").read_text())

@@ -262,6 +262,7 @@ def test_gnc_rejects_false_loop(kernel):
     assert pg.num_loops == 2
     result = pg.optimize_batch()
     assert pg.num_loops == 1  # the false one is gone, the true one kept
+    assert pg.rejected_inconsistent == 1  # and counted in the run's metrics
     assert pose_diff(result, reference) < 1e-3
     g = pg.to_g2o()
     assert (len(g.i), int(g.i[-1]), int(g.j[-1])) == (17, 16, 0)

@@ -426,10 +426,12 @@ class PoseGraph:
         return rejected
 
     def _reject_outliers(self, index, weights) -> None:
+        """Deactivate the loops GNC weighs as outliers (counted in ``rejected_inconsistent``)."""
         for g, n in enumerate(index):
             f = self._factors[n]
             if f.kind == "loop" and weights[g] < GNC_OUTLIER_WEIGHT:
                 self._active[n] = False
+                self.rejected_inconsistent += 1
                 log.info("GNC rejected loop %d -> %d (weight %.3g)", f.i, f.j, weights[g])
 
     def _check_key(self, key) -> int:
