@@ -8,18 +8,13 @@ DCS's Phi is read from ``SLAM2D_PC_DCS_PHI`` (default 1). Landmark factors are n
 
 from __future__ import annotations
 
-import logging
 import os
 
 from slam2d.backend import pose_graph as pg
 
-log = logging.getLogger(__name__)
-
 
 def optimize_batch(self):
     """``pc_dcs`` over the pose graph; returns the poses (K, 3) as ``PoseGraph.optimize_batch``."""
-    import gtsam
-
     edges = [n for n, (f, a) in enumerate(zip(self._factors, self._active)) if a and f.kind in ("odometry", "loop")]
     if len(edges) != sum(self._active) - 1:  # all but the first keyframe's prior
         raise NotImplementedError("the pc_dcs final batch handles odometry and loop factors only")
@@ -30,12 +25,7 @@ def optimize_batch(self):
         if self._factors[n].kind == "loop" and not inlier:
             self._active[n] = False
             self.rejected_inconsistent += 1
-    values = pg._g2o_values(graph.ids, result.poses)
-    self._reset_isam()
-    self._new_graph, self._new_values = self._batch_graph()[0], values
-    self._flush()
-    self._isam_poses = gtsam.utilities.extractPose2(values).reshape(-1, 3)
-    return self.estimate()
+    return self._restart_at(pg._g2o_values(graph.ids, result.poses))
 
 
 pg.PoseGraph.optimize_batch = optimize_batch

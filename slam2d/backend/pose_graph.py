@@ -319,10 +319,17 @@ class PoseGraph:
             graph.error(result),
             time.perf_counter() - t0,
         )
-        self._reset_isam()  # restart iSAM2 at the batch solution, without rejected loops
-        self._new_graph, self._new_values = self._batch_graph()[0], result
+        return self._restart_at(result)
+
+    def _restart_at(self, values) -> np.ndarray:
+        """Restart iSAM2 at gtsam.Values ``values`` (a batch solution) over the active factors
+        (rejected loops left out); returns the poses (K, 3)."""
+        import gtsam
+
+        self._reset_isam()
+        self._new_graph, self._new_values = self._batch_graph()[0], values
         self._flush()
-        self._isam_poses = gtsam.utilities.extractPose2(result).reshape(-1, 3)
+        self._isam_poses = gtsam.utilities.extractPose2(values).reshape(-1, 3)
         return self.estimate()
 
     # ---------------------------------------------------------------- exporting
