@@ -11,8 +11,9 @@ relation whose ground-truth pose fits worse than ``CONTRADICTED_M`` and more
 than ``RATIO`` times worse than the estimate's is one the scans contradict;
 the reverse (the estimate contradicted where the ground truth fits) is
 counted too. Pairs whose scans barely overlap (both fits above
-``NO_OVERLAP_M``: a return facing the other way) are reported apart: the
-scans say nothing about them. Prints a table and, with ``--worst N``, the
+``NO_OVERLAP_M``: a return facing the other way) are fitted again against
+the scans around scan 1 (``LOCAL_MAP_S``) laid out by the estimate; those
+still without overlap are reported apart: the scans say nothing about them. Prints a table and, with ``--worst N``, the
 worst contradicted relations of each log.
 """
 
@@ -32,12 +33,13 @@ from slam_radish import PUBLISHED, run
 from slam2d import geometry
 from slam2d.config import load as load_config
 from slam2d.datasets.registry import open_dataset, resolve_data_path
-from slam2d.evaluation.relations import _endpoints, read_relations
+from slam2d.evaluation.relations import _endpoints, _match, read_relations
 
 CONTRADICTED_M = 0.15  # m: a pose fitting the scans worse than this ...
 RATIO = 2.0  # ... and this many times worse than the other pose is contradicted by them
 NO_OVERLAP_M = 0.5  # m: both poses fit worse than this: the two scans see different things
 MAX_RANGE = 30.0  # m: hits farther than this are left out of the fit
+LOCAL_MAP_S = 30.0  # s: a pair whose scans do not overlap is fitted again against the scans this close to scan 1
 
 
 def scan_points(cfg) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
@@ -84,10 +86,37 @@ def audit(log: str, folder: Path) -> dict:
             trees[a] = cKDTree(points[a])
         return float(np.median(trees[a].query(geometry.transform_points(delta, points[b]))[0]))
 
-    return {"error": np.hypot(err[:, 0], err[:, 1]),
-            "truth_fit": np.array([fit(a, b, d) for a, b, d in zip(s1, s2, truth)]),
-            "ours_fit": np.array([fit(a, b, d) for a, b, d in zip(s1, s2, estimate)]),
-            "t1": relations.t1[ok] - scan_stamps[0], "t2": relations.t2[ok] - scan_stamps[0]}  # fmt: skip
+    out = {"error": np.hypot(err[:, 0], err[:, 1]),
+           "truth_fit": np.array([fit(a, b, d) for a, b, d in zip(s1, s2, truth)]),
+           "ours_fit": np.array([fit(a, b, d) for a, b, d in zip(s1, s2, estimate)]),
+           "t1": relations.t1[ok] - scan_stamps[0], "t2": relations.t2[ok] - scan_stamps[0]}  # fmt: skip
+    blind = (out["truth_fit"] > NO_OVERLAP_M) & (out["ours_fit"] > NO_OVERLAP_M)
+    refit = _local_map_fits(scan_stamps, points, stamps, poses, s1[blind], s2[blind], truth[blind], estimate[blind])
+    out["truth_fit"][blind], out["ours_fit"][blind] = refit
+    out["map_fitted"] = blind
+    return out
+
+
+def _local_map_fits(scan_stamps, points, stamps, poses, s1, s2, truth, estimate) -> tuple[np.ndarray, np.ndarray]:
+    """Scan fits (m) of scan ``s2`` placed by ``truth`` and by ``estimate`` in scan ``s1``'s frame against the
+    scans within ``LOCAL_MAP_S`` of scan 1 (and not of scan 2), laid out by the estimated trajectory
+    ``(stamps, poses)`` around it: a return driving the other way sees what scan 1's neighbours saw, not
+    scan 1 itself. Pairs closer than that in time keep infinite fits (still no overlap)."""
+    order = np.argsort(stamps, kind="stable")
+    pose_of = order[_match(stamps[order], scan_stamps, np.inf)[0]]  # the trajectory pose nearest each scan
+    fits = np.zeros((2, len(s1)))
+    for j, (a, b) in enumerate(zip(s1, s2)):
+        near = np.flatnonzero((np.abs(scan_stamps - scan_stamps[a]) <= LOCAL_MAP_S)
+                              & (np.abs(scan_stamps - scan_stamps[b]) > LOCAL_MAP_S))  # fmt: skip
+        if len(near) == 0:  # scan 2 lies among scan 1's neighbours: no independent map
+            fits[:, j] = np.inf
+            continue
+        frame = geometry.inverse(poses[pose_of[a]])
+        tree = cKDTree(np.vstack([geometry.transform_points(geometry.compose(frame, poses[pose_of[k]]), points[k])
+                                  for k in near]))  # fmt: skip
+        for row, delta in enumerate((truth[j], estimate[j])):
+            fits[row, j] = np.median(tree.query(geometry.transform_points(delta, points[b]))[0])
+    return fits[0], fits[1]
 
 
 def classes(a: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
