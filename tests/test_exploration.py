@@ -17,7 +17,7 @@ from slam2d.exploration.candidates import (
     scan_candidates,
     stands,
 )
-from slam2d.exploration.explorer import Explorer
+from slam2d.exploration.explorer import Explorer, tour_regret
 from slam2d.exploration.frontiers import find_frontiers, frontier_mask
 from slam2d.exploration.gridops import (
     FREE,
@@ -212,7 +212,7 @@ def test_information_gain_counts_unknown_cells_in_sight():
 
 
 def test_utility_trades_gain_against_distance_and_turning():
-    cfg = explore_config.ExplorationConfig(k1=0.5, k2=1.0)
+    cfg = explore_config.ExplorationConfig(k1=0.5, k2=1.0, distance="path")
     ex = Explorer(cfg, 0.2, 0.05, R_MAX)
     pose = np.array([0.0, 0.0, 0.0])
     pts = np.array([[2.0, 0.0], [4.0, 0.0], [-2.0, 0.0]])
@@ -224,6 +224,21 @@ def test_utility_trades_gain_against_distance_and_turning():
     assert more[0] > f[0]  # ten times the gain is worth 2 m more
     euclid = Explorer(explore_config.ExplorationConfig(distance="euclidean"), 0.2, 0.05, R_MAX)
     assert euclid.utility(pose, pts[:1], np.array([1.0]), np.array([50.0]))[0] == pytest.approx(np.exp(-1.0 * 2.0))
+
+
+def test_tour_regret_counts_the_way_back_to_a_goal_left_behind():
+    """Goals 1 m behind and 3 m / 4 m ahead: starting behind costs 1 + 4 + 1 m, starting ahead
+    3 + 1 + 5 m (coming back), so only the goal behind has no regret; behind a wall (9 m of path)
+    the difference of path lengths bounds the way between goals and the order turns round."""
+    goals = np.array([[-1.0, 0.0], [3.0, 0.0], [4.0, 0.0]])
+    assert tour_regret(goals, np.array([1.0, 3.0, 4.0])) == pytest.approx([0.0, 3.0, 3.0])
+    assert tour_regret(goals, np.array([9.0, 3.0, 4.0])) == pytest.approx([6.0, 0.0, 2.0])
+    cfg = explore_config.ExplorationConfig(distance="tour", k1=1.0, k2=0.0)
+    ex = Explorer(cfg, 0.2, 0.05, R_MAX)
+    f = ex.utility(np.zeros(3), goals, np.array([10.0, 100.0, 100.0]), np.array([1.0, 3.0, 4.0]))
+    path = Explorer(explore_config.ExplorationConfig(k1=1.0, k2=0.0, distance="path"), 0.2, 0.05, R_MAX)
+    g = path.utility(np.zeros(3), goals, np.array([10.0, 100.0, 100.0]), np.array([1.0, 3.0, 4.0]))
+    assert np.argmax(f) == 0 and np.argmax(g) == 1  # the small gain behind first, not on the way back
 
 
 def test_utility_takes_a_side_opening_nearby_before_a_far_candidate():
@@ -298,6 +313,33 @@ def test_exploring_two_rooms_terminates_with_full_coverage(tmp_path, strategy):
     grid = load_map_server(folder / "map.yaml")
     cell = grid.world_to_cell(np.array([6.5, 2.0]))
     assert grid.free_mask()[cell[0], cell[1]]
+
+
+def test_the_area_to_explore_leaves_out_what_a_plan_leaves_unknown(tmp_path):
+    """A room whose wall has a one-pixel hole onto a band of the plan's unknown grey (205, a wall's
+    interior in a scanned plan): the laser sees into the band through the hole, but the band is no
+    area the explorer must map."""
+    from PIL import Image
+
+    from slam2d.exploration.run import reachable_free, truth_map
+    from slam2d.sim.world import load_world
+
+    img = np.zeros((80, 120), dtype=np.uint8)
+    img[10:70, 10:80] = 254  # the room, 3.5 m x 3 m
+    img[10:70, 82:100] = 205  # the unknown band beyond its 2 px east wall
+    img[40, 80:82] = 254  # a pinhole in the wall
+    path = tmp_path / "pinhole.png"
+    Image.fromarray(img).save(path)
+    world = load_world(str(path), 0.05)
+    free, frame = truth_map(world)
+    band = np.zeros_like(free)
+    band[10:70, 82:100] = True
+    band = band[::-1]  # row 0 of the grid is the bottom of the image
+    assert world.unmapped is not None and (world.unmapped == band).all()
+    seen = reachable_free(free, frame, (2.0, 2.0), 0.25, 10.0)
+    asked = reachable_free(free, frame, (2.0, 2.0), 0.25, 10.0, world.unmapped)
+    assert (seen & band).sum() > 10  # the laser sees through the hole
+    assert not (asked & band).any() and (asked == (seen & ~band)).all()
 
 
 def test_bad_explore_input_leaves_no_folder(tmp_path):

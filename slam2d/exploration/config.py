@@ -46,7 +46,9 @@ class ExplorationConfig(Section):
     d_tho: float = Field(0.5, gt=0, description="m, nearest A-type goal from the sensor")
     k1: float = Field(1.0, ge=0, description="1/m, distance weight of the utility")
     k2: float = Field(0.5, ge=0, description="1/rad, heading weight of the utility")
-    distance: Literal["path", "euclidean"] = Field("path", description="L of the utility: grid path or straight line")
+    distance: Literal["path", "euclidean", "tour"] = Field(
+        "tour", description="L of the utility: grid path, straight line, or how much longer the route through all "
+                            "goals gets when this one is first (tour)")  # fmt: skip
     gain_range: float = Field(6.0, gt=0, description="m, reach of the rays counting unknown cells (information gain)")
     gain_rays: int = Field(120, gt=3, description="rays cast for the information gain")
     min_gain: float = Field(0.5, ge=0, description="m² of unknown area a candidate must still see to stay open")

@@ -27,6 +27,7 @@ from slam2d.exploration.gridops import (
     UNKNOWN,
     GridView,
     geodesic,
+    greedy_tours,
     information_gain,
     inside_polygon,
     unknown_in_sight,
@@ -163,11 +164,11 @@ class Explorer:
         distance = np.where(roomy, distance, np.inf)  # goals only where the robot has room
         if self.cfg.strategy in FRONTIER_STRATEGIES:
             goal = self._frontier_goal(pose, view, distance, self.cfg.strategy)
+        elif self.cfg.strategy == "utility":
+            goal = self._utility_goal(pose, view, distance)
         else:
             goal = self._candidate_goal(pose, view, distance)
-            if self.cfg.strategy == "utility":
-                goal = self._best_of(goal, self._frontier_goal(pose, view, distance, "utility"))
-            elif goal is None and self.cfg.fallback_frontiers:
+            if goal is None and self.cfg.fallback_frontiers:
                 goal = self._frontier_goal(pose, view, distance, "nearest_frontier")
                 self.fallbacks += goal is not None
         if goal is None and self.cfg.pockets:
@@ -176,18 +177,15 @@ class Explorer:
         self.decision_seconds.append(time.perf_counter() - t0)
         return goal
 
-    def _frontier_goal(self, pose, view, distance, strategy) -> Goal | None:
+    def _frontiers(self, pose, view, distance) -> list:
         avoid = self.visited + self.inaccessible
-        found = find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
-                               self.cfg.avoid_radius)  # fmt: skip
+        return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
+                              self.cfg.avoid_radius)  # fmt: skip
+
+    def _frontier_goal(self, pose, view, distance, strategy) -> Goal | None:
+        found = self._frontiers(pose, view, distance)
         if not found:
             return None
-        if strategy == "utility":  # scored as candidates are: F = A exp(-(k1 L + k2 gamma)), highest wins
-            goals = np.array([f.goal for f in found])
-            gain = information_gain(view, goals, self.cfg.gain_range, self.cfg.gain_rays)
-            score = self.utility(pose, goals, gain, np.array([f.path for f in found]))
-            k = int(np.argmax(score))
-            return Goal(found[k].goal, "frontier", score=float(score[k]))
         if strategy == "explore_lite":
             res = view.resolution
             cost = [self.cfg.potential_scale * f.min_distance * res - self.cfg.gain_scale * f.size * res for f in found]
@@ -196,12 +194,26 @@ class Explorer:
         k = int(np.argmin(cost))
         return Goal(found[k].goal, "frontier", score=float(cost[k]))
 
-    @staticmethod
-    def _best_of(candidate: Goal | None, frontier: Goal | None) -> Goal | None:
-        """The goal of higher utility of a candidate's and a frontier region's (either may be None)."""
-        if candidate is None or frontier is None:
-            return candidate or frontier
-        return frontier if frontier.score > candidate.score else candidate
+    def _utility_goal(self, pose, view, distance) -> Goal | None:
+        """The candidate or frontier region's goal of highest utility, scored together: candidates are made
+        only at nodes from one scan each, so a side opening the scans missed has a frontier but no candidate."""
+        live, pts, path, target = self._candidate_options(view, distance)
+        found = self._frontiers(pose, view, distance)
+        if not live and not found:
+            return None
+        fronts = np.array([f.goal for f in found]).reshape(-1, 2)
+        points = np.concatenate([pts, fronts])
+        goals = np.concatenate([target, fronts])
+        gain = np.concatenate([[c.gain for c in live], information_gain(view, fronts, self.cfg.gain_range,
+                                                                         self.cfg.gain_rays)])  # fmt: skip
+        path = np.concatenate([path, [f.path for f in found]])
+        score = self.utility(pose, points, gain, path, goals)
+        for c, sc in zip(live, score):
+            c.utility = float(sc)
+        k = int(np.argmax(score))
+        if k >= len(live):
+            return Goal(fronts[k - len(live)].copy(), "frontier", score=float(score[k]))
+        return Goal(target[k].copy(), "candidate", live[k], self._route(pose, view, live[k]), float(score[k]))
 
     def _pocket_state(self, view: GridView) -> np.ndarray:
         retired = None
@@ -253,40 +265,43 @@ class Explorer:
             lo, batch = lo + batch, min(2 * batch, POCKET_BATCH[1])
         return None
 
-    def _candidate_goal(self, pose, view, distance) -> Goal | None:
+    def _candidate_options(self, view, distance) -> tuple[list[Candidate], np.ndarray, np.ndarray, np.ndarray]:
+        """The open candidates the robot can reach: candidates, positions (P, 2) m, grid path lengths (P,) m
+        and where to drive (P, 2) m."""
+        none = [], np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2))
         live = self.maintain(view)
         if not live:
-            return None
+            return none
         pts = np.array([c.position for c in live])
         path, target = _path_lengths(view, distance, pts, self.radius + 0.3)
         ok = np.isfinite(path)
-        if not ok.any():
-            return None
-        if self.visited:  # a candidate whose goal is where the robot has been is explored
+        if self.visited and ok.any():  # a candidate whose goal is where the robot has been is explored
             near = np.hypot(*(target[:, None, :] - np.array(self.visited)[None]).transpose(2, 0, 1)).min(axis=1)
             for c in np.array(live, dtype=object)[near < self.cfg.avoid_radius]:
                 c.alive = False
             ok &= near >= self.cfg.avoid_radius
         if not ok.any():
+            return none
+        return [c for c, k in zip(live, ok) if k], pts[ok], path[ok], target[ok]
+
+    def _candidate_goal(self, pose, view, distance) -> Goal | None:
+        """The nearest or farthest open candidate by grid path."""
+        live, _, path, target = self._candidate_options(view, distance)
+        if not live:
             return None
-        live, pts, path, target = [c for c, k in zip(live, ok) if k], pts[ok], path[ok], target[ok]
-        strategy = self.cfg.strategy
-        if strategy == "nearest_candidate":
-            score = -path
-        elif strategy == "farthest_candidate":
-            score = path
-        else:
-            score = self.utility(pose, pts, np.array([c.gain for c in live]), path)
+        score = -path if self.cfg.strategy == "nearest_candidate" else path
         for c, s in zip(live, score):
             c.utility = float(s)
         k = int(np.argmax(score))
-        chosen = live[k]
-        return Goal(target[k].copy(), "candidate", chosen, self._route(pose, view, chosen), float(score[k]))
+        return Goal(target[k].copy(), "candidate", live[k], self._route(pose, view, live[k]), float(score[k]))
 
-    def utility(self, pose, points, gain, path) -> np.ndarray:
-        """F(p) = A(p)·exp(−(k1·L + k2·γ)) for points (P, 2) m with gains (P,) cells and grid path lengths (P,) m."""
+    def utility(self, pose, points, gain, path, goals=None) -> np.ndarray:
+        """F(p) = A(p)·exp(−(k1·L + k2·γ)) for points (P, 2) m with gains (P,) cells and grid path lengths
+        (P,) m; ``goals`` (P, 2) m, where the robot drives for each (default ``points``), for ``distance: tour``."""
         if self.cfg.distance == "euclidean":
             length = np.hypot(*(points - pose[:2]).T)
+        elif self.cfg.distance == "tour":
+            length = tour_regret(points if goals is None else goals, path)
         else:
             length = path
         gamma = np.abs(geometry.wrap_angle(np.arctan2(points[:, 1] - pose[1], points[:, 0] - pose[0]) - pose[2]))
@@ -355,6 +370,17 @@ class Explorer:
         self.inaccessible.append(goal.position.copy())
         if goal.candidate is not None:
             goal.candidate.alive = False
+
+
+def tour_regret(goals, path) -> np.ndarray:
+    """How much longer (P,) m the route through all ``goals`` (P, 2) m gets when each is visited first:
+    path (P,) m from the robot to it, then a greedy tour through the rest (nearest next), minus the
+    shortest such route. Between two goals the distance is its lower bound max(straight line, difference
+    of their path lengths from the robot): no grid search per goal."""
+    goals, path = np.asarray(goals, dtype=np.float64).reshape(-1, 2), np.asarray(path, dtype=np.float64)
+    between = np.maximum(np.hypot(*(goals[:, None] - goals[None]).transpose(2, 0, 1)), np.abs(path[:, None] - path))
+    route = greedy_tours(path, between)
+    return route - route.min()
 
 
 def _path_lengths(view: GridView, distance: np.ndarray, points, reach: float) -> tuple[np.ndarray, np.ndarray]:

@@ -112,9 +112,9 @@ class _Loop:
         # the robot's centre goes where the navigator plans: radius + inflation margin from walls
         self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2],
                                         self.robot.cfg.radius + self.options.inflation_margin,
-                                        sim.laser.range_max)  # fmt: skip
+                                        sim.laser.range_max, self.world.unmapped)  # fmt: skip
         self.reachable_disc = reachable_free(self.truth_free, self.truth_frame, start[:2], self.robot.cfg.radius,
-                                             sim.laser.range_max)  # fmt: skip
+                                             sim.laser.range_max, self.world.unmapped)  # fmt: skip
         self.slam = OnlineSlam(cfg)
         self.explorer = Explorer(self.ecfg, self.robot.cfg.radius, self.options.inflation_margin,
                                  sim.laser.range_max)  # fmt: skip
@@ -365,11 +365,13 @@ def truth_map(world, resolution: float = 0.05):
     return grid.free, grid
 
 
-def reachable_free(free: np.ndarray, frame, start_xy, radius: float = 0.25, max_range: float = 12.0) -> np.ndarray:
+def reachable_free(free: np.ndarray, frame, start_xy, radius: float = 0.25, max_range: float = 12.0,
+                   unmapped: np.ndarray | None = None) -> np.ndarray:
     """The area an explorer can be asked to map: free cells that the laser (``max_range`` m) sees from
     some place the robot's centre can reach from the start (the free cells farther than ``radius`` m
     from walls, connected to the start's cell — the robot's radius plus the navigator's inflation
-    margin in a run), sampled every VIEW_SPACING m."""
+    margin in a run), sampled every VIEW_SPACING m; none of the ``unmapped`` cells (a PNG plan's
+    unknown grey: wall interiors and the outside, seen through pinholes in its walls)."""
     from slam2d.exploration.gridops import visible_from
 
     res = frame.resolution
@@ -388,7 +390,8 @@ def reachable_free(free: np.ndarray, frame, start_xy, radius: float = 0.25, max_
     k = max(1, round(VIEW_SPACING / res))
     rows, cols = np.nonzero(robot[::k, ::k])
     origins = np.column_stack([cols * k + 0.5, rows * k + 0.5])
-    return visible_from(free, res, origins, max_range) | robot
+    area = visible_from(free, res, origins, max_range) | robot
+    return area if unmapped is None else area & ~unmapped
 
 
 def seeded_start(world, name: str, free: np.ndarray, frame, seed: int) -> np.ndarray:

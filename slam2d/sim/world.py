@@ -22,6 +22,7 @@ __all__ = ["World", "Contact", "load_world"]
 
 _PAIRS_PER_BATCH = 200_000  # beam x segment pairs per ray-casting batch
 _EPS = 1e-9
+UNMAPPED_MAX = 205  # grey: a PNG world's pixels from 128 up to this are unknown in the plan (map_server's 0.196)
 
 # --------------------------------------------------------------------------- geometry helpers
 
@@ -117,7 +118,7 @@ class World:
     transient obstacles, ``(centres (C, 2), radii (C,))`` in metres.
     """
 
-    def __init__(self, segments, bounds=None, *, solids=(), grid=None, name: str = "world"):
+    def __init__(self, segments, bounds=None, *, solids=(), grid=None, unmapped=None, name: str = "world"):
         self.segments = np.asarray(segments, dtype=np.float64).reshape(-1, 2, 2)
         if bounds is None:
             pts = self.segments.reshape(-1, 2)
@@ -125,6 +126,7 @@ class World:
         self.bounds = np.asarray(bounds, dtype=np.float64).reshape(2, 2)
         self.solids = [np.asarray(r, dtype=np.float64) for r in solids]
         self.grid = grid
+        self.unmapped = unmapped  # (H, W) bool on ``grid``'s cells: free to the laser, unknown in the plan
         self.name = name
 
     def __repr__(self) -> str:
@@ -148,7 +150,10 @@ class World:
         """World from an occupancy PNG: pixels darker than 128 are obstacles.
 
         ``resolution`` is metres per pixel; the origin is the image's lower-left
-        corner (image row 0 is the top, at the largest y).
+        corner (image row 0 is the top, at the largest y). The other pixels not
+        lighter than ``UNMAPPED_MAX`` (map_server's unknown grey, 205) are free
+        to the laser but marked ``unmapped``: wall interiors and the outside of
+        a scanned plan, which its pinholes let the laser see.
         """
         path = Path(path)
         if not path.is_file():
@@ -157,12 +162,14 @@ class World:
             raise InputError(path, f"resolution must be > 0 m per pixel, got {resolution}")
         from slam2d.mapping.image import read_grey
 
-        occ = read_grey(path)[::-1] < 128
+        grey = read_grey(path)[::-1]
+        occ = grey < 128
         h, w = occ.shape
         return cls(
             _grid_boundaries(occ, resolution),
             bounds=[[0.0, 0.0], [w * resolution, h * resolution]],
             grid=(occ, float(resolution)),
+            unmapped=~occ & (grey <= UNMAPPED_MAX),
             name=path.stem,
         )
 
