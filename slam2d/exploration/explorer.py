@@ -2,8 +2,9 @@
 (nearest, farthest, utility), with visited and inaccessible lists and the hybrid map.
 
 The utility of a candidate p (eq. 6): F(p) = A(p) · exp(−(k1·L + k2·γ)), with A the
-unknown cells visible from p (information gain, rays cast on the grid), L the grid path
-length (or the Euclidean distance, as the paper) and γ the absolute angle between the
+unknown cells visible from p (information gain, rays cast on the grid), L how much longer
+the route through all open goals gets when p is first (``tour_regret``; or the grid path
+length, or the Euclidean distance as the paper) and γ the absolute angle between the
 robot's heading and the direction to p; the frontier regions' goals are scored by the
 same F beside the candidates. explore_lite's cost of a frontier:
 potential_scale · min_distance · resolution − gain_scale · size · resolution (the
