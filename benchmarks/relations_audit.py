@@ -13,8 +13,9 @@ the reverse (the estimate contradicted where the ground truth fits) is
 counted too. Pairs whose scans barely overlap (both fits above
 ``NO_OVERLAP_M``: a return facing the other way) are fitted again against
 the scans around scan 1 (``LOCAL_MAP_S``) laid out by the estimate; those
-still without overlap are reported apart: the scans say nothing about them. Prints a table and, with ``--worst N``, the
-worst contradicted relations of each log.
+still without overlap are reported apart: the scans say nothing about them.
+Prints a table and, with ``--worst N``, the worst contradicted relations of
+each log.
 """
 
 from __future__ import annotations

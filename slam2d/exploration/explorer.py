@@ -17,6 +17,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from slam2d import geometry
 from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candidates
@@ -28,7 +29,6 @@ from slam2d.exploration.gridops import (
     UNKNOWN,
     GridView,
     geodesic,
-    greedy_tours,
     information_gain,
     inside_polygon,
     unknown_in_sight,
@@ -371,6 +371,30 @@ class Explorer:
         self.inaccessible.append(goal.position.copy())
         if goal.candidate is not None:
             goal.candidate.alive = False
+
+
+@njit(cache=True)
+def greedy_tours(first, between):
+    """Length (P,) of a greedy open tour through all P goals starting at each: ``first`` (P,) the cost to
+    reach each goal, then always the nearest goal not yet visited by ``between`` (P, P)."""
+    n = len(first)
+    out = np.empty(n)
+    for s in range(n):
+        seen = np.zeros(n, dtype=np.bool_)
+        seen[s] = True
+        cur, total = s, first[s]
+        for _ in range(n - 1):
+            best, nxt = np.inf, -1
+            for j in range(n):
+                if not seen[j] and between[cur, j] < best:
+                    best, nxt = between[cur, j], j
+            if nxt < 0:
+                break
+            seen[nxt] = True
+            total += best
+            cur = nxt
+        out[s] = total
+    return out
 
 
 def tour_regret(goals, path) -> np.ndarray:

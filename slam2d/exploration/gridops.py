@@ -104,30 +104,6 @@ def geodesic(passable: np.ndarray, start_cell, resolution: float, snap_cells: in
     return (out + extra) * resolution
 
 
-@njit(cache=True)
-def greedy_tours(first, between):
-    """Length (P,) of a greedy open tour through all P goals starting at each: ``first`` (P,) the cost to
-    reach each goal, then always the nearest goal not yet visited by ``between`` (P, P)."""
-    n = len(first)
-    out = np.empty(n)
-    for s in range(n):
-        seen = np.zeros(n, dtype=np.bool_)
-        seen[s] = True
-        cur, total = s, first[s]
-        for _ in range(n - 1):
-            best, nxt = np.inf, -1
-            for j in range(n):
-                if not seen[j] and between[cur, j] < best:
-                    best, nxt = between[cur, j], j
-            if nxt < 0:
-                break
-            seen[nxt] = True
-            total += best
-            cur = nxt
-        out[s] = total
-    return out
-
-
 def _snap(passable, cell, within: int):
     h, w = passable.shape
     r0, r1 = max(cell[0] - within, 0), min(cell[0] + within + 1, h)
