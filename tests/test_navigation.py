@@ -328,3 +328,37 @@ def test_a_goal_blocked_in_a_map_being_built_is_approached_until_the_map_clears(
         assert ("replan", "the goal is blocked in the map") in [e[1:] for e in result.events]
     else:
         assert result.status == "unreachable" and "blocked" in result.reason and result.steps == 0
+
+
+def test_clearance_refreshed_near_changed_cells_equals_the_whole_grids():
+    from slam2d.planning.grid import refresh_clearance
+
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        h, w = rng.integers(5, 90, 2)
+        free = rng.random((h, w)) > 0.05
+        cap = rng.uniform(0.05, 1.0)
+        clear = np.minimum(PlanningGrid(free, 0.05, (0.0, 0.0)).clearance(), cap)
+        new = free.copy()
+        r, c = rng.integers(0, h), rng.integers(0, w)
+        new[r : r + rng.integers(1, 10), c : c + rng.integers(1, 10)] = rng.random() > 0.5  # a wall, or a gap
+        new[rng.integers(0, h), rng.integers(0, w)] ^= True  # and a cell elsewhere
+        refresh_clearance(clear, new, new != free, 0.05, cap)
+        assert np.allclose(clear, np.minimum(PlanningGrid(new, 0.05, (0.0, 0.0)).clearance(), cap))
+
+
+def test_a_map_changed_step_by_step_is_inflated_as_the_same_map_given_at_once(hall):
+    world, grid = hall
+    live = PlanningGrid(grid.free.copy(), grid.resolution, grid.origin)
+    nav = Navigator([9.0, 2.0], RobotConfig(), NavigatorConfig())
+    pose = np.array([1.0, 2.0, 0.0])
+    for k, (x0, x1) in enumerate([(4.9, 5.1), (2.0, 2.1), (7.0, 7.4)]):
+        (r0, c0), (r1, c1) = grid.world_to_cell([[x0, 0.0], [x1, 1.0 + k]])
+        live.free[r0:r1, c0:c1] = False
+        nav.step(pose, np.zeros(2), np.zeros((0, 2)), live, 0.1 * k)
+    live.free[r0:r1, c0:c1] = True  # the last one gone again
+    nav.step(pose, np.zeros(2), np.zeros((0, 2)), live, 0.4)
+    fresh = Navigator([9.0, 2.0], RobotConfig(), NavigatorConfig())
+    fresh.step(pose, np.zeros(2), np.zeros((0, 2)), live, 0.0)
+    assert np.array_equal(nav._grid.free, fresh._grid.free) and np.allclose(nav._cost, fresh._cost)
+    assert nav._cost.max() > 0 and not nav._grid.free.all()

@@ -36,7 +36,7 @@ from slam2d.navigation.dwa import DwaConfig, DynamicWindow
 from slam2d.navigation.fsm import AvoidanceStateMachine, FsmConfig
 from slam2d.navigation.maps import free_mask, mark_points
 from slam2d.planning.astar import AStar
-from slam2d.planning.grid import PlanningGrid
+from slam2d.planning.grid import PlanningGrid, refresh_clearance
 from slam2d.sim.robot import RobotConfig
 
 __all__ = [
@@ -116,7 +116,7 @@ class Navigator:
         self.events: list[tuple[float, str, str]] = []  # (time s, "replan" / "recovery", why)
         self._raw = self._grid = self._cost = None
         self._cell_blocked_at = None  # (H, W) time (s) each cell of ``_raw`` became blocked; inf: free
-        self._now, self._mapped_at = 0.0, None
+        self._now, self._clear = 0.0, None  # _clear: the map's clearance (H, W) m, capped
         self._index, self._level, self._arrived, self._last_distance = 0, 0, False, np.inf
         self._best = (np.inf, 0.0)  # (remaining path m, time)
         self._level_mark = np.inf  # remaining path m at the first recovery of a run of them
@@ -142,9 +142,13 @@ class Navigator:
         if same_frame and self._raw.free.shape == free.shape and np.array_equal(self._raw.free, free):
             return False
         new = PlanningGrid(np.array(free, dtype=bool), res, origin)  # a copy: the source may change
+        if same_frame and self._raw.free.shape == free.shape:  # only near the changed cells
+            refresh_clearance(self._clear, new.free, new.free != self._raw.free, res, self._clear_cap)
+        else:
+            self._clear = np.minimum(new.clearance(), self._clear_cap)
         self._cell_blocked_at = self._block_times(new)
-        self._raw, self._mapped_at = new, None
-        self._grid, self._cost = self._inflate(new)
+        self._raw = new
+        self._grid, self._cost = self._inflate(new, self._clear)
         return True
 
     def _block_times(self, new: PlanningGrid) -> np.ndarray:
@@ -160,29 +164,38 @@ class Navigator:
                                                                 lo[1] - shift[1]:hi[1] - shift[1]]
         return np.where(new.free, np.inf, np.minimum(since, old))
 
-    def _mapped_mask(self) -> np.ndarray:
-        """Cells within ``_EXPLAINED_CELLS`` of a cell blocked for at least ``_SETTLED_S`` (recomputed as time passes)."""
-        settled_count = int(np.count_nonzero(self._cell_blocked_at <= self._now - _SETTLED_S))
-        if self._mapped_at is None or self._mapped_at[0] != settled_count:
-            settled = self._cell_blocked_at <= self._now - _SETTLED_S
-            self._mapped_at = (settled_count, ndimage.binary_dilation(settled, iterations=_EXPLAINED_CELLS))
-        return self._mapped_at[1]
-
     def unmapped(self, pose, points) -> np.ndarray:
-        """Which laser ``points`` (M, 2) (robot frame) lie in no blocked cell of the map (within
-        ``_EXPLAINED_CELLS``); points outside the map count as mapped."""
+        """Which laser ``points`` (M, 2) (robot frame) lie in no blocked cell of the map: none within
+        ``_EXPLAINED_CELLS`` (4-connected steps) has been blocked for ``_SETTLED_S``; points outside the
+        map count as mapped."""
         cells = self._raw.world_to_cell(geometry.transform_points(pose, points))
         inside = self._raw.in_bounds(cells)
+        rows, cols = cells[inside, 0], cells[inside, 1]
+        h, w = self._raw.shape
+        settled_before = self._now - _SETTLED_S
+        explained = np.zeros(len(rows), dtype=bool)
+        k = _EXPLAINED_CELLS
+        for dr in range(-k, k + 1):
+            for dc in range(abs(dr) - k, k - abs(dr) + 1):
+                r, c = rows + dr, cols + dc
+                ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+                explained[ok] |= self._cell_blocked_at[r[ok], c[ok]] <= settled_before
         out = np.zeros(len(points), dtype=bool)
-        out[inside] = ~self._mapped_mask()[cells[inside, 0], cells[inside, 1]]
+        out[inside] = ~explained
         return out
 
-    def _inflate(self, raw: PlanningGrid) -> tuple[PlanningGrid, np.ndarray]:
+    @property
+    def _clear_cap(self) -> float:
+        """m: the clearance beyond which a cell is free and costs nothing."""
+        return self.robot.radius + self.cfg.inflation_margin + self.cfg.wall_distance
+
+    def _inflate(self, raw: PlanningGrid, clear: np.ndarray | None = None) -> tuple[PlanningGrid, np.ndarray]:
         """(The cells where the robot's disc fits, the A* cost layer (H, W)): ``wall_weight`` where the
         disc comes within ``inflation_margin`` of a blocked cell, rising by up to ``tight_weight`` as it
-        comes closer (through a tight gap, its middle), falling linearly to 0 over ``wall_distance`` beyond."""
+        comes closer (through a tight gap, its middle), falling linearly to 0 over ``wall_distance`` beyond.
+        ``clear``: ``raw``'s clearance (m, may be capped at ``_clear_cap``) if known."""
         c = self.cfg
-        gap = raw.clearance() - self.robot.radius
+        gap = (raw.clearance() if clear is None else clear) - self.robot.radius
         beyond = gap - c.inflation_margin  # m between the disc + margin and the nearest blocked cell centre
         tight = np.clip(-beyond / c.inflation_margin, 0.0, 1.0) if c.inflation_margin > 0 else 0.0
         cost = c.wall_weight * np.clip(1.0 - beyond / c.wall_distance, 0.0, 1.0) + c.tight_weight * tight
@@ -247,7 +260,7 @@ class Navigator:
             return cell
         raw = self._raw
         rc = raw.world_to_cell(self.goal[:2])
-        if not raw.in_bounds(rc) or raw.clearance()[rc[0], rc[1]] < self.robot.radius:
+        if not raw.in_bounds(rc) or self._clear[rc[0], rc[1]] < self.robot.radius:
             if not self.cfg.unknown_free:
                 return None
             # a map being built: what blocks the goal may be a person mapped in passing; drive to the
