@@ -139,16 +139,20 @@ class Navigator:
         if self.cfg.unknown_free:  # a map being built may not reach the goal yet: beyond it is unknown, so free
             free, origin = _reaching(free, res, origin, self.goal[:2], GOAL_PADDING)
         same_frame = self._raw is not None and (res, tuple(origin)) == (self._raw.resolution, self._raw.origin)
-        if same_frame and self._raw.free.shape == free.shape and np.array_equal(self._raw.free, free):
+        same_frame = same_frame and self._raw.free.shape == free.shape
+        changed = free != self._raw.free if same_frame else None
+        if same_frame and not changed.any():
             return False
         new = PlanningGrid(np.array(free, dtype=bool), res, origin)  # a copy: the source may change
-        if same_frame and self._raw.free.shape == free.shape:  # only near the changed cells
-            refresh_clearance(self._clear, new.free, new.free != self._raw.free, res, self._clear_cap)
+        if same_frame:  # the layers only near the changed cells
+            near = refresh_clearance(self._clear, new.free, changed, res, self._clear_cap)
+            self._grid.free[near], self._cost[near] = self._layers(self._clear[near])
+            self._cell_blocked_at[changed] = np.where(new.free[changed], np.inf, self._now)
         else:
             self._clear = np.minimum(new.clearance(), self._clear_cap)
-        self._cell_blocked_at = self._block_times(new)
+            self._cell_blocked_at = self._block_times(new)
+            self._grid, self._cost = self._inflate(new, self._clear)
         self._raw = new
-        self._grid, self._cost = self._inflate(new, self._clear)
         return True
 
     def _block_times(self, new: PlanningGrid) -> np.ndarray:
@@ -190,16 +194,21 @@ class Navigator:
         return self.robot.radius + self.cfg.inflation_margin + self.cfg.wall_distance
 
     def _inflate(self, raw: PlanningGrid, clear: np.ndarray | None = None) -> tuple[PlanningGrid, np.ndarray]:
-        """(The cells where the robot's disc fits, the A* cost layer (H, W)): ``wall_weight`` where the
-        disc comes within ``inflation_margin`` of a blocked cell, rising by up to ``tight_weight`` as it
-        comes closer (through a tight gap, its middle), falling linearly to 0 over ``wall_distance`` beyond.
-        ``clear``: ``raw``'s clearance (m, may be capped at ``_clear_cap``) if known."""
+        """(The cells where the robot's disc fits, the A* cost layer (H, W)) of ``raw`` (see ``_layers``);
+        ``clear``: its clearance (m, may be capped at ``_clear_cap``) if known."""
+        fits, cost = self._layers(raw.clearance() if clear is None else clear)
+        return PlanningGrid(fits, raw.resolution, raw.origin), cost
+
+    def _layers(self, clear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(Where the robot's disc fits, the A* cost) of cells with clearance ``clear`` (m): ``wall_weight``
+        where the disc comes within ``inflation_margin`` of a blocked cell, rising by up to ``tight_weight``
+        as it comes closer (through a tight gap, its middle), falling linearly to 0 over ``wall_distance`` beyond."""
         c = self.cfg
-        gap = (raw.clearance() if clear is None else clear) - self.robot.radius
+        gap = clear - self.robot.radius
         beyond = gap - c.inflation_margin  # m between the disc + margin and the nearest blocked cell centre
         tight = np.clip(-beyond / c.inflation_margin, 0.0, 1.0) if c.inflation_margin > 0 else 0.0
         cost = c.wall_weight * np.clip(1.0 - beyond / c.wall_distance, 0.0, 1.0) + c.tight_weight * tight
-        return PlanningGrid(gap > 0, raw.resolution, raw.origin), cost
+        return gap > 0, cost
 
     def plan(self, pose, points_world=None, unmapped=None) -> str:
         """Plans from ``pose`` (3,) to the goal, with ``points_world`` (P, 2) blocked if given;

@@ -95,13 +95,15 @@ class PlanningGrid(GridFrame):
         return PlanningGrid(inflate(self.free, radius / self.resolution), self.resolution, self.origin, self.name)
 
 
-def refresh_clearance(clear: np.ndarray, free: np.ndarray, changed: np.ndarray, resolution: float, cap: float) -> None:
+def refresh_clearance(clear: np.ndarray, free: np.ndarray, changed: np.ndarray, resolution: float,
+                      cap: float) -> tuple[slice, slice]:  # fmt: skip
     """Brings ``clear`` (H, W) m, the :meth:`PlanningGrid.clearance` of a grid capped at ``cap`` m, up to date
     in place after the cells ``changed`` (H, W) bool of ``free`` (H, W), the grid now, changed: only cells
-    within ``cap`` of the changed ones can differ, and only blocked cells within ``2 cap`` of them count."""
+    within ``cap`` of the changed ones can differ, and only blocked cells within ``2 cap`` of them count.
+    Returns the window (rows, cols) rewritten."""
     rows, cols = np.nonzero(changed)
     if len(rows) == 0:
-        return
+        return slice(0, 0), slice(0, 0)
     k = int(np.ceil(cap / resolution)) + 1
     h, w = free.shape
     # windows in the coordinates of the grid padded by one blocked cell, as ``clearance`` has it
@@ -114,7 +116,9 @@ def refresh_clearance(clear: np.ndarray, free: np.ndarray, changed: np.ndarray, 
     window[r0 - in_lo[0] : r1 - in_lo[0], c0 - in_lo[1] : c1 - in_lo[1]] = free[r0 - 1 : r1 - 1, c0 - 1 : c1 - 1]
     dist = ndimage.distance_transform_edt(window) * resolution
     a, b = out_lo - in_lo, out_hi - in_lo
-    clear[out_lo[0] - 1 : out_hi[0] - 1, out_lo[1] - 1 : out_hi[1] - 1] = np.minimum(dist[a[0] : b[0], a[1] : b[1]], cap)
+    near = slice(out_lo[0] - 1, out_hi[0] - 1), slice(out_lo[1] - 1, out_hi[1] - 1)
+    clear[near] = np.minimum(dist[a[0] : b[0], a[1] : b[1]], cap)
+    return near
 
 
 def inflate(free: np.ndarray, radius_cells: float) -> np.ndarray:
