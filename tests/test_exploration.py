@@ -433,3 +433,31 @@ def test_exploring_a_room_with_a_desk_near_a_wall_sees_behind_the_desk(tmp_path)
     assert m["coverage"] >= 0.99 and m["pocket_goals"] > 0
     off = explore(cfg.model_copy(update={"exploration": cfg.exploration.model_copy(update={"pockets": False})}))
     assert off.metrics["premature_stop"] and off.metrics["coverage"] < 0.97  # frontiers alone stop early
+
+
+def test_geodesic_distances_are_dijkstras_on_the_8_connected_grid():
+    """Against scipy's Dijkstra on the same graph: 8 neighbours, diagonals √2 and never across a corner."""
+    from scipy import ndimage
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        passable = ndimage.binary_opening(rng.random((40, 50)) > 0.15)
+        rows, cols = np.nonzero(passable)
+        start = rows[len(rows) // 2], cols[len(rows) // 2]
+        h, w = passable.shape
+        edges = []
+        for dr, dc in [(0, 1), (1, 0), (1, 1), (1, -1)]:
+            r, c = rows + dr, cols + dc
+            ok = (r < h) & (c >= 0) & (c < w)
+            ok[ok] &= passable[r[ok], c[ok]]
+            if dr and dc:  # no corner cutting
+                ok[ok] &= passable[rows[ok] + dr, cols[ok]] & passable[rows[ok], cols[ok] + dc]
+            edges.append((rows[ok] * w + cols[ok], r[ok] * w + c[ok], np.full(ok.sum(), np.hypot(dr, dc))))
+        a, b, cost = (np.concatenate(x) for x in zip(*edges))
+        graph = coo_matrix((cost, (a, b)), shape=(h * w, h * w))
+        expected = dijkstra(graph, directed=False, indices=start[0] * w + start[1]).reshape(h, w)
+        got = geodesic(passable, start, 0.05) / 0.05
+        assert np.array_equal(np.isfinite(got), np.isfinite(expected)) and np.isfinite(got).sum() > 100
+        assert np.allclose(got[np.isfinite(got)], expected[np.isfinite(expected)])

@@ -6,7 +6,6 @@ Cells are (row, col) with rows along y, as :class:`~slam2d.types.GridFrame`.
 
 from __future__ import annotations
 
-import heapq
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,26 +67,45 @@ class GridView:
 
 @njit(cache=True)
 def _dijkstra(passable, r0, c0, out):
+    """Dijkstra with a bucket queue one cell wide (Dial): every step is at least one cell long, so the cells
+    of a bucket are final when it is reached, in any order; three buckets in turn hold all pending ones."""
     h, w = passable.shape
+    done = np.zeros(h * w, dtype=np.bool_)
+    queue = np.empty((3, 4096), dtype=np.int64)
+    sizes = np.zeros(3, dtype=np.int64)
     out[r0, c0] = 0.0
-    heap = [(0.0, r0, c0)]
-    while len(heap) > 0:
-        d, r, c = heapq.heappop(heap)
-        if d > out[r, c]:
-            continue
-        for dr in range(-1, 2):
-            for dc in range(-1, 2):
-                if dr == 0 and dc == 0:
-                    continue
-                rr, cc = r + dr, c + dc
-                if rr < 0 or cc < 0 or rr >= h or cc >= w or not passable[rr, cc]:
-                    continue
-                if dr != 0 and dc != 0 and not (passable[r + dr, c] and passable[r, c + dc]):
-                    continue
-                nd = d + (1.4142135623730951 if dr != 0 and dc != 0 else 1.0)
-                if nd < out[rr, cc]:
-                    out[rr, cc] = nd
-                    heapq.heappush(heap, (nd, rr, cc))
+    queue[0, 0] = r0 * w + c0
+    sizes[0] = 1
+    k = 0
+    while sizes.sum() > 0:
+        b = k % 3
+        for i in range(sizes[b]):
+            v = queue[b, i]
+            if done[v]:
+                continue
+            done[v] = True
+            r, c = v // w, v % w
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    if dr == 0 and dc == 0:
+                        continue
+                    rr, cc = r + dr, c + dc
+                    if rr < 0 or cc < 0 or rr >= h or cc >= w or not passable[rr, cc]:
+                        continue
+                    if dr != 0 and dc != 0 and not (passable[r + dr, c] and passable[r, c + dc]):
+                        continue
+                    nd = out[r, c] + (1.4142135623730951 if dr != 0 and dc != 0 else 1.0)
+                    if nd < out[rr, cc]:
+                        out[rr, cc] = nd
+                        nb = int(nd) % 3
+                        if sizes[nb] == queue.shape[1]:
+                            grown = np.empty((3, 2 * queue.shape[1]), dtype=np.int64)
+                            grown[:, : queue.shape[1]] = queue
+                            queue = grown
+                        queue[nb, sizes[nb]] = rr * w + cc
+                        sizes[nb] += 1
+        sizes[b] = 0
+        k += 1
 
 
 def geodesic(passable: np.ndarray, start_cell, resolution: float, snap_cells: int = 10) -> np.ndarray:
