@@ -24,6 +24,7 @@ from slam2d.exploration.gridops import (
     OCCUPIED,
     UNKNOWN,
     GridView,
+    LiveClearance,
     geodesic,
     information_gain,
     straight_reachable,
@@ -461,3 +462,21 @@ def test_geodesic_distances_are_dijkstras_on_the_8_connected_grid():
         got = geodesic(passable, start, 0.05) / 0.05
         assert np.array_equal(np.isfinite(got), np.isfinite(expected)) and np.isfinite(got).sum() > 100
         assert np.allclose(got[np.isfinite(got)], expected[np.isfinite(expected)])
+
+
+def test_the_live_clearance_of_a_growing_map_is_the_clearance_of_each_view():
+    rng = np.random.default_rng(4)
+    live = LiveClearance(0.5)
+    state = np.full((60, 80), UNKNOWN, dtype=np.int8)
+    for k in range(8):
+        r, c = rng.integers(0, 50), rng.integers(0, 70)
+        state[r : r + 10, c : c + 10] = FREE  # more of the map seen
+        state[rng.integers(0, 60, 5), rng.integers(0, 80, 5)] = OCCUPIED  # and walls
+        state[rng.integers(0, 60, 2), rng.integers(0, 80, 2)] = FREE  # a cell taken for a wall, now free
+        origin = (0.0, 0.0) if k < 5 else (-1.0, 0.0)  # the frame moves once
+        view = live.attach(GridView(state.copy(), 0.05, origin))
+        fresh = GridView(state.copy(), 0.05, origin)
+        for radius in (0.1, 0.25, 0.45):
+            assert np.array_equal(view.traversable(radius), fresh.traversable(radius))
+        assert view.clearance_cap == 10.0 and view.clearance.max() <= 10.0
+    assert view.traversable(0.45).any() and not view.traversable(0.1).all()

@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 from scipy import ndimage
 
+from slam2d.planning.grid import refresh_clearance
 from slam2d.segmentation.observations import dda_start, dda_step, raycast_grid
 
 FREE, OCCUPIED, UNKNOWN = 0, 1, 2
@@ -20,11 +21,15 @@ FREE, OCCUPIED, UNKNOWN = 0, 1, 2
 @dataclass(eq=False)
 class GridView:
     """One snapshot of a map for a decision: ``state`` (H, W) int8 (FREE / OCCUPIED / UNKNOWN),
-    ``resolution`` m/cell, ``origin`` (x, y) m of cell (0, 0)'s corner."""
+    ``resolution`` m/cell, ``origin`` (x, y) m of cell (0, 0)'s corner; ``clearance`` (H, W) cells from
+    each cell centre to the nearest occupied one (outside the grid counts as occupied), capped at
+    ``clearance_cap`` cells, if known (else computed when first needed)."""
 
     state: np.ndarray
     resolution: float
     origin: tuple[float, float]
+    clearance: np.ndarray | None = None
+    clearance_cap: float = np.inf
 
     @classmethod
     def of(cls, grid, free_thresh: float = 0.196, occupied_thresh: float = 0.65) -> GridView:
@@ -56,10 +61,36 @@ class GridView:
 
     def traversable(self, radius: float) -> np.ndarray:
         """Known-free cells farther than ``radius`` m from every occupied cell (H, W) bool."""
-        if getattr(self, "_clearance", None) is None:
-            self._clearance = ndimage.distance_transform_edt(np.pad(self.state != OCCUPIED, 1,
-                                                                    constant_values=False))[1:-1, 1:-1]  # fmt: skip
-        return (self._clearance > radius / self.resolution) & (self.state == FREE)
+        cells = radius / self.resolution
+        if self.clearance is None or cells >= self.clearance_cap:
+            self.clearance, self.clearance_cap = _clearance_cells(self.state != OCCUPIED), np.inf
+        return (self.clearance > cells) & (self.state == FREE)
+
+
+def _clearance_cells(free: np.ndarray) -> np.ndarray:
+    return ndimage.distance_transform_edt(np.pad(free, 1, constant_values=False))[1:-1, 1:-1]
+
+
+class LiveClearance:
+    """The clearance of successive views of one map being built, capped at ``cap`` m: refreshed only
+    near the cells whose occupancy changed since the last view (all of it when the grid's frame changed)."""
+
+    def __init__(self, cap: float):
+        self.cap = cap
+        self._frame = self._occupied = self._clear = None
+
+    def attach(self, view: GridView) -> GridView:
+        """``view`` with its ``clearance`` set (a copy of its own)."""
+        occupied = view.state == OCCUPIED
+        cap = self.cap / view.resolution
+        frame = view.shape, view.resolution, tuple(view.origin)
+        if frame == self._frame:
+            refresh_clearance(self._clear, ~occupied, occupied != self._occupied, 1.0, cap)
+        else:
+            self._clear = np.minimum(_clearance_cells(~occupied), cap)
+        self._frame, self._occupied = frame, occupied
+        view.clearance, view.clearance_cap = self._clear.copy(), cap
+        return view
 
 
 # --------------------------------------------------------------------------- geodesic distance

@@ -26,7 +26,7 @@ from slam2d import config as config_mod
 from slam2d.errors import InputError
 from slam2d.exploration.config import ExploreConfig
 from slam2d.exploration.explorer import Explorer, Goal
-from slam2d.exploration.gridops import GridView
+from slam2d.exploration.gridops import GridView, LiveClearance
 
 log = logging.getLogger(__name__)
 
@@ -118,6 +118,9 @@ class _Loop:
         self.slam = OnlineSlam(cfg)
         self.explorer = Explorer(self.ecfg, self.robot.cfg.radius, self.options.inflation_margin,
                                  sim.laser.range_max)  # fmt: skip
+        # the explorer asks for room of its radius + the larger of the inflation and the goal clearance
+        self.clearance = LiveClearance(self.robot.cfg.radius + max(self.options.inflation_margin,
+                                                                   self.ecfg.goal_clearance) + 2 * cfg.mapping.resolution)  # fmt: skip
         self.nav = None
         self.goal: Goal | None = None
         self.dwell: float | None = None  # s: until when the robot stands at a view of a pocket
@@ -129,7 +132,7 @@ class _Loop:
 
     def view(self) -> GridView:
         m = self.cfg.mapping
-        return GridView.of(self.slam.grid, m.free_thresh, m.occupied_thresh)
+        return self.clearance.attach(GridView.of(self.slam.grid, m.free_thresh, m.occupied_thresh))
 
     def set_goal(self, goal: Goal | None, now: float) -> None:
         from slam2d.navigation import Navigator
