@@ -41,9 +41,14 @@ def frontier_mask(state: np.ndarray, wall_gap: int = WALL_GAP) -> np.ndarray:
     unknown = np.pad(state == UNKNOWN, 1, constant_values=True)
     near = unknown[:-2, 1:-1] | unknown[2:, 1:-1] | unknown[1:-1, :-2] | unknown[1:-1, 2:]
     mask = (state == FREE) & near
-    if wall_gap > 0:
-        size = 2 * wall_gap + 1
-        mask &= ~ndimage.maximum_filter(state == OCCUPIED, size=size, mode="constant", cval=False)
+    rows, cols = np.nonzero(mask)
+    h, w = state.shape
+    for dr in range(-wall_gap, wall_gap + 1):  # looked up around the frontier cells only: few of the map's
+        for dc in range(-wall_gap, wall_gap + 1):
+            r, c = rows + dr, cols + dc
+            ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+            ok[ok] = state[r[ok], c[ok]] == OCCUPIED
+            mask[rows[ok], cols[ok]] = False
     return mask
 
 
@@ -52,14 +57,16 @@ def frontier_regions(mask: np.ndarray, min_cells: int) -> list[np.ndarray]:
     labels, n = ndimage.label(mask, structure=_EIGHT)
     if n == 0:
         return []
-    order = np.argsort(labels.ravel(), kind="stable")
-    sizes = np.bincount(labels.ravel(), minlength=n + 1)
+    rows, cols = np.nonzero(labels)
+    label = labels[rows, cols]
+    order = np.argsort(label, kind="stable")  # each region's cells in raster order
+    sizes = np.bincount(label, minlength=n + 1)
     ends = np.cumsum(sizes)
     out = []
     for k in range(1, n + 1):
         if sizes[k] >= min_cells:
             idx = order[ends[k - 1] : ends[k]]
-            out.append(np.column_stack(np.unravel_index(idx, mask.shape)))
+            out.append(np.column_stack([rows[idx], cols[idx]]))
     return out
 
 
