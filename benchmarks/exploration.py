@@ -107,12 +107,29 @@ def tables(runs: list[dict]) -> str:
                 a, k = med(r["nodes_all"] for r in rs), med(r["nodes_final"] for r in rs)
                 out.append(f"| {world} | {s} | {len(rs)} | {a:.0f} | {k:.0f} | {100 * k / a:.0f} % |")
     out.append("")
+    out.extend(paired_ratios(runs))
     out.append("| strategy | runs | median path repetition | median goals | median inaccessible goals |")
     out.append("|---|---|---|---|---|")
     for s, rs in by.items():
         out.append(f"| {s} | {len(rs)} | {100 * med(r['path_repetition'] for r in rs):.0f} % | "
                    f"{med(r['goals'] for r in rs):.0f} | {med(r['goals_inaccessible'] for r in rs):.0f} |")  # fmt: skip
     return "\n".join(out)
+
+
+def paired_ratios(runs: list[dict], strategy: str = "utility") -> list[str]:
+    """The table of ``strategy``'s distance to 99 % over each reference's on the same world and seed: median,
+    quartiles and range over the pairs where both reached 99 %, and how many pairs it was shorter in."""
+    d99 = {(r["world"], r["seed"], r["strategy"]): r["distance_to_99"] for r in runs}
+    out = [f"| {strategy} ÷ | pairs (world, seed) | median | quartiles | range | shorter in |", "|---|---|---|---|---|---|"]
+    for ref in ("nearest_frontier", "explore_lite"):
+        ratios = [d / d99[(w, seed, ref)] for (w, seed, s), d in d99.items()
+                  if s == strategy and not math.isnan(d) and not math.isnan(d99.get((w, seed, ref), math.nan))]
+        if len(ratios) < 2:
+            continue
+        q = statistics.quantiles(ratios, n=4)
+        out.append(f"| {ref} | {len(ratios)} | {statistics.median(ratios):.2f} | {q[0]:.2f}–{q[2]:.2f} | "
+                   f"{min(ratios):.2f}–{max(ratios):.2f} | {sum(x < 1 for x in ratios)} |")  # fmt: skip
+    return out + [""]
 
 
 def main() -> None:

@@ -13,7 +13,7 @@ from numba import njit
 from scipy import ndimage
 
 from slam2d.planning.grid import refresh_clearance
-from slam2d.segmentation.observations import dda_start, dda_step, raycast_grid
+from slam2d.segmentation.observations import _dda_many, dda_start, dda_step
 
 FREE, OCCUPIED, UNKNOWN = 0, 1, 2
 
@@ -230,7 +230,9 @@ def straight_reachable(blocked: np.ndarray, resolution: float, origin, a, b, wid
     normal = np.array([-d[1], d[0]]) / length
     starts = a + np.outer([-0.5, 0.0, 0.5], normal * width) + 1e-6 * resolution  # off cell edges: 0·inf in the traversal
     angle = np.full((3, 1), np.arctan2(d[1], d[0]))
-    _, hit = raycast_grid(~np.asarray(blocked, dtype=bool), resolution, starts, angle, length, origin)
+    gxy = np.ascontiguousarray((starts - np.asarray(origin, dtype=np.float64)) / resolution)
+    t, hit = np.empty((3, 1)), np.zeros((3, 1), dtype=bool)
+    _dda_many(np.asarray(blocked, dtype=bool), gxy, angle, length / resolution, t, hit)  # as raycast_grid, no copy
     return not bool(hit.any())
 
 
