@@ -342,6 +342,14 @@ def test_the_area_to_explore_leaves_out_what_a_plan_leaves_unknown(tmp_path):
     assert (seen & band).sum() > 10  # the laser sees through the hole
     assert not (asked & band).any() and (asked == (seen & ~band)).all()
 
+    from slam2d.config import MappingConfig
+    from slam2d.exploration.run import Coverage
+    from slam2d.mapping.occupancy import OccupancyGrid
+
+    mapped = OccupancyGrid(np.where(seen, -3.0, 0.0), frame.resolution, frame.origin)  # free where the laser saw
+    assert Coverage(asked, frame, MappingConfig(), world.unmapped).iou(mapped) == 1.0  # the band says nothing
+    assert Coverage(asked, frame, MappingConfig()).iou(mapped) < 1.0
+
 
 def test_bad_explore_input_leaves_no_folder(tmp_path):
     from slam2d.exploration.run import run_explore

@@ -192,7 +192,7 @@ def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
     cfg = resolved(cfg)
     loop, ecfg = _Loop(cfg), cfg.exploration
     period = loop.options.period
-    cover = Coverage(loop.reachable, loop.truth_frame, cfg.mapping)
+    cover = Coverage(loop.reachable, loop.truth_frame, cfg.mapping, loop.world.unmapped)
     step = loop.robot.step(0.0, 0.0, 0.0)
     t0 = step.scan.stamp
     loop.slam.add(step.scan)
@@ -424,12 +424,13 @@ def seeded_start(world, name: str, free: np.ndarray, frame, seed: int) -> np.nda
 
 class Coverage:
     """Explored fraction of the reachable free area: a reachable true-free cell counts as explored
-    when the SLAM grid knows (free or occupied) a cell within one cell of it."""
+    when the SLAM grid knows (free or occupied) a cell within one cell of it. ``unmapped`` (H, W): the
+    cells the plan leaves unknown (None: none), about which the map's IoU says nothing."""
 
-    def __init__(self, reachable: np.ndarray, frame, mapping):
+    def __init__(self, reachable: np.ndarray, frame, mapping, unmapped: np.ndarray | None = None):
         rows, cols = np.nonzero(reachable)
         self.points = frame.cell_to_world(np.column_stack([rows, cols]))
-        self.reachable, self.frame, self.mapping = reachable, frame, mapping
+        self.reachable, self.frame, self.mapping, self.unmapped = reachable, frame, mapping, unmapped
 
     def __call__(self, grid) -> float:
         known = grid.free_mask(self.mapping.free_thresh) | grid.occupied_mask(self.mapping.occupied_thresh)
@@ -437,11 +438,14 @@ class Coverage:
         return float(_lookup(grid, known, self.points).mean()) if len(self.points) else 1.0
 
     def iou(self, grid) -> float:
-        """IoU of SLAM's free cells and the reachable true free space, on the world's cells."""
+        """IoU of SLAM's free cells and the reachable true free space, on the world's cells the plan knows
+        (SLAM's free cells where the plan is unknown grey, e.g. the outside seen through a door, are neither)."""
         h, w = self.reachable.shape
         rows, cols = np.indices((h, w))
         centres = self.frame.cell_to_world(np.column_stack([rows.ravel(), cols.ravel()]))
         free = _lookup(grid, grid.free_mask(self.mapping.free_thresh), centres).reshape(h, w)
+        if self.unmapped is not None:
+            free &= ~self.unmapped
         union = (free | self.reachable).sum()
         return float((free & self.reachable).sum() / union) if union else 1.0
 
