@@ -488,3 +488,26 @@ def test_the_live_clearance_of_a_growing_map_is_the_clearance_of_each_view():
             assert np.array_equal(view.traversable(radius), fresh.traversable(radius))
         assert view.clearance_cap == 10.0 and view.clearance.max() <= 10.0
     assert view.traversable(0.45).any() and not view.traversable(0.1).all()
+
+
+def test_a_robot_boxed_in_by_the_margin_leaves_through_the_gap_it_came_in_by():
+    """A room whose only door is 0.45 m wide: the robot's disc (0.4 m) fits, its disc + margin (0.5 m) does
+    not. Beyond the door, unknown space: the explorer must not call the exploration done from inside."""
+    state = np.full((80, 240), UNKNOWN, dtype=np.int8)
+    state[10:70, 10:50] = FREE  # the room, 2 x 3 m
+    state[10:70, 50:52] = OCCUPIED  # its east wall
+    state[36:45, 50:52] = FREE  # the door: 9 cells
+    state[10:70, 52:210] = FREE  # the hall beyond, open to the unknown at its east end, out of the room's sight
+    state[8:10, 8:212] = OCCUPIED
+    state[70:72, 8:212] = OCCUPIED
+    state[10:70, 8:10] = OCCUPIED
+    view = GridView(state, 0.05, (0.0, 0.0))
+    cfg = explore_config.load(None, {"exploration.strategy": "nearest_frontier"}).exploration
+    explorer = Explorer(cfg, 0.2, 0.05, 12.0)
+    goal = explorer.decide(np.array([1.5, 2.0, 0.0]), view)
+    assert goal is not None and goal.kind == "frontier" and goal.position[0] > 10 and explorer.tight_goals == 1
+    wide = state.copy()
+    wide[30:50, 50:52] = FREE  # a 1 m door: the margin is kept, no tight goal
+    explorer = Explorer(cfg, 0.2, 0.05, 12.0)
+    assert explorer.decide(np.array([1.5, 2.0, 0.0]), GridView(wide, 0.05, (0.0, 0.0))) is not None
+    assert explorer.tight_goals == 0

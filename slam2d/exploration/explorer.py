@@ -94,7 +94,7 @@ class Explorer:
         self.inaccessible: list[np.ndarray] = []
         self.retired = np.zeros((0, 2))  # (K, 2) m: hidden cells a pocket view reached did not reveal
         self.decision_seconds: list[float] = []
-        self.fallbacks = self.pocket_goals = 0
+        self.fallbacks = self.pocket_goals = self.tight_goals = 0
 
     # -- nodes and candidates --------------------------------------------------------------
 
@@ -157,10 +157,21 @@ class Explorer:
     # -- decisions -------------------------------------------------------------------------------
 
     def decide(self, pose, view: GridView) -> Goal | None:
-        """The next goal from ``pose`` on ``view``, or None when nothing is left to explore."""
+        """The next goal from ``pose`` on ``view``, or None when nothing is left to explore. Paths keep the
+        robot's radius + the navigator's inflation margin from obstacles; when no goal is left so, the radius
+        alone (the navigator takes a gap that tight as a last resort: the robot may have come in through one)."""
         t0 = time.perf_counter()
         pose = np.asarray(pose, dtype=np.float64)
-        distance = geodesic(view.traversable(self.radius + self.inflation), view.to_cell(pose[:2]), view.resolution)
+        goal = self._decide(pose, view, self.radius + self.inflation)
+        if goal is None and self.inflation > 0:
+            goal = self._decide(pose, view, self.radius)
+            self.tight_goals += goal is not None
+        self.decision_seconds.append(time.perf_counter() - t0)
+        return goal
+
+    def _decide(self, pose, view: GridView, clearance: float) -> Goal | None:
+        """The next goal over paths keeping ``clearance`` m from obstacles."""
+        distance = geodesic(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution)
         roomy = view.traversable(self.radius + self.cfg.goal_clearance)
         distance = np.where(roomy, distance, np.inf)  # goals only where the robot has room
         if self.cfg.strategy in FRONTIER_STRATEGIES:
@@ -175,7 +186,6 @@ class Explorer:
         if goal is None and self.cfg.pockets:
             goal = self._pocket_goal(pose, view, distance)
             self.pocket_goals += goal is not None
-        self.decision_seconds.append(time.perf_counter() - t0)
         return goal
 
     def _frontiers(self, pose, view, distance) -> list:

@@ -499,7 +499,7 @@ def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, colli
         "collisions": collisions, "min_clearance": float(min_clear),
         "goals": len(run.goals), "goals_reached": outcomes.count("reached"), "goals_spent": outcomes.count("spent"),
         "goals_inaccessible": outcomes.count("inaccessible"), "frontier_fallbacks": ex.fallbacks,
-        "pocket_goals": ex.pocket_goals,
+        "pocket_goals": ex.pocket_goals, "tight_goals": ex.tight_goals,
         "replans": loop.replans, "recoveries": loop.recoveries, "escapes": loop.escapes,
         "path_repetition": path_repetition(run.truth[:, :2]),
         "coverage_disc": Coverage(loop.reachable_disc, loop.truth_frame, loop.cfg.mapping)(run.grid),
