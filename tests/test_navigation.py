@@ -362,3 +362,22 @@ def test_a_map_changed_step_by_step_is_inflated_as_the_same_map_given_at_once(ha
     fresh.step(pose, np.zeros(2), np.zeros((0, 2)), live, 0.0)
     assert np.array_equal(nav._grid.free, fresh._grid.free) and np.allclose(nav._cost, fresh._cost)
     assert nav._cost.max() > 0 and not nav._grid.free.all()
+
+
+def test_laser_points_near_a_settled_blocked_cell_are_the_maps():
+    """A point is the map's when a cell within 2 4-connected steps has been blocked for 3 s: as a dilation."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(2)
+    free = rng.random((40, 60)) > 0.03
+    nav = Navigator([1.0, 1.0], RobotConfig(), NavigatorConfig())
+    nav.update_map(PlanningGrid(free, 0.05, (0.0, 0.0)), 0.0)  # the first map's cells count as settled
+    later = free.copy()
+    later[rng.integers(0, 40, 30), rng.integers(0, 60, 30)] = False
+    nav.update_map(PlanningGrid(later, 0.05, (0.0, 0.0)), 10.0)
+    nav.update_map(PlanningGrid(later, 0.05, (0.0, 0.0)), 11.0)  # the new cells blocked for 1 s only
+    rows, cols = np.indices(free.shape)
+    points = np.column_stack([cols.ravel(), rows.ravel()]) * 0.05 + 0.025
+    expected = ~ndimage.binary_dilation(~free, iterations=2)
+    assert np.array_equal(nav.unmapped(np.zeros(3), points).reshape(free.shape), expected)
+    assert expected.any() and not expected.all()

@@ -15,6 +15,7 @@ import numpy as np
 from scipy import ndimage
 
 from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, inside_polygon
+from slam2d.planning.grid import around
 
 _EIGHT = np.ones((3, 3), dtype=int)
 WALL_GAP = 2  # cells: frontier cells this close to an occupied cell are left out
@@ -41,14 +42,10 @@ def frontier_mask(state: np.ndarray, wall_gap: int = WALL_GAP) -> np.ndarray:
     unknown = np.pad(state == UNKNOWN, 1, constant_values=True)
     near = unknown[:-2, 1:-1] | unknown[2:, 1:-1] | unknown[1:-1, :-2] | unknown[1:-1, 2:]
     mask = (state == FREE) & near
-    rows, cols = np.nonzero(mask)
-    h, w = state.shape
-    for dr in range(-wall_gap, wall_gap + 1):  # looked up around the frontier cells only: few of the map's
-        for dc in range(-wall_gap, wall_gap + 1):
-            r, c = rows + dr, cols + dc
-            ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-            ok[ok] = state[r[ok], c[ok]] == OCCUPIED
-            mask[rows[ok], cols[ok]] = False
+    rows, cols = np.nonzero(mask)  # looked up around the frontier cells only: few of the map's
+    square = np.stack(np.meshgrid(np.arange(-wall_gap, wall_gap + 1), np.arange(-wall_gap, wall_gap + 1)), -1)
+    walled = (around(state, rows, cols, square.reshape(-1, 2), FREE) == OCCUPIED).any(axis=1)
+    mask[rows[walled], cols[walled]] = False
     return mask
 
 

@@ -10,10 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy import ndimage
 
-from slam2d.planning.grid import refresh_clearance
-from slam2d.segmentation.observations import _dda_many, dda_start, dda_step
+from slam2d.planning.grid import PlanningGrid, refresh_clearance
+from slam2d.segmentation.observations import dda_start, dda_step, raycast_grid
 
 FREE, OCCUPIED, UNKNOWN = 0, 1, 2
 
@@ -68,7 +67,7 @@ class GridView:
 
 
 def _clearance_cells(free: np.ndarray) -> np.ndarray:
-    return ndimage.distance_transform_edt(np.pad(free, 1, constant_values=False))[1:-1, 1:-1]
+    return PlanningGrid(free, 1.0, (0.0, 0.0)).clearance()  # in cells: a grid of 1-unit cells
 
 
 class LiveClearance:
@@ -230,9 +229,7 @@ def straight_reachable(blocked: np.ndarray, resolution: float, origin, a, b, wid
     normal = np.array([-d[1], d[0]]) / length
     starts = a + np.outer([-0.5, 0.0, 0.5], normal * width) + 1e-6 * resolution  # off cell edges: 0·inf in the traversal
     angle = np.full((3, 1), np.arctan2(d[1], d[0]))
-    gxy = np.ascontiguousarray((starts - np.asarray(origin, dtype=np.float64)) / resolution)
-    t, hit = np.empty((3, 1)), np.zeros((3, 1), dtype=bool)
-    _dda_many(np.asarray(blocked, dtype=bool), gxy, angle, length / resolution, t, hit)  # as raycast_grid, no copy
+    _, hit = raycast_grid(~np.asarray(blocked, dtype=bool), resolution, starts, angle, length, origin)
     return not bool(hit.any())
 
 

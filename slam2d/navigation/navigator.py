@@ -36,7 +36,7 @@ from slam2d.navigation.dwa import DwaConfig, DynamicWindow
 from slam2d.navigation.fsm import AvoidanceStateMachine, FsmConfig
 from slam2d.navigation.maps import free_mask, mark_points
 from slam2d.planning.astar import AStar
-from slam2d.planning.grid import PlanningGrid, refresh_clearance
+from slam2d.planning.grid import PlanningGrid, around, refresh_clearance
 from slam2d.sim.robot import RobotConfig
 
 __all__ = [
@@ -56,6 +56,9 @@ _SNAP = 0.5  # m, farthest a start cell inside the inflation is moved to a free 
 _AHEAD = 40  # path points searched ahead of the last nearest one
 _EXPLAINED_CELLS = 2  # a laser point this many cells from a blocked map cell is the map's
 _SETTLED_S = 3.0  # s; ... if that cell has been blocked this long (a live map also holds people walking)
+_EXPLAINING = np.array([(dr, dc) for dr in range(-_EXPLAINED_CELLS, _EXPLAINED_CELLS + 1)
+                        for dc in range(-_EXPLAINED_CELLS, _EXPLAINED_CELLS + 1)
+                        if abs(dr) + abs(dc) <= _EXPLAINED_CELLS])  # the offsets (rows, cols) of those cells
 _FINAL_GAP = 0.01  # m kept between the robot's disc and any point on the final approach
 GOAL_PADDING = 1.0  # m of free cells kept around a goal beyond a map whose unknown cells are free
 
@@ -151,7 +154,8 @@ class Navigator:
         else:
             self._clear = np.minimum(new.clearance(), self._clear_cap)
             self._cell_blocked_at = self._block_times(new)
-            self._grid, self._cost = self._inflate(new, self._clear)
+            fits, self._cost = self._layers(self._clear)
+            self._grid = PlanningGrid(fits, res, origin)
         self._raw = new
         return True
 
@@ -174,18 +178,9 @@ class Navigator:
         map count as mapped."""
         cells = self._raw.world_to_cell(geometry.transform_points(pose, points))
         inside = self._raw.in_bounds(cells)
-        rows, cols = cells[inside, 0], cells[inside, 1]
-        h, w = self._raw.shape
-        settled_before = self._now - _SETTLED_S
-        explained = np.zeros(len(rows), dtype=bool)
-        k = _EXPLAINED_CELLS
-        for dr in range(-k, k + 1):
-            for dc in range(abs(dr) - k, k - abs(dr) + 1):
-                r, c = rows + dr, cols + dc
-                ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-                explained[ok] |= self._cell_blocked_at[r[ok], c[ok]] <= settled_before
+        blocked_at = around(self._cell_blocked_at, cells[inside, 0], cells[inside, 1], _EXPLAINING, np.inf)
         out = np.zeros(len(points), dtype=bool)
-        out[inside] = ~explained
+        out[inside] = ~(blocked_at <= self._now - _SETTLED_S).any(axis=1)
         return out
 
     @property
@@ -193,10 +188,9 @@ class Navigator:
         """m: the clearance beyond which a cell is free and costs nothing."""
         return self.robot.radius + self.cfg.inflation_margin + self.cfg.wall_distance
 
-    def _inflate(self, raw: PlanningGrid, clear: np.ndarray | None = None) -> tuple[PlanningGrid, np.ndarray]:
-        """(The cells where the robot's disc fits, the A* cost layer (H, W)) of ``raw`` (see ``_layers``);
-        ``clear``: its clearance (m, may be capped at ``_clear_cap``) if known."""
-        fits, cost = self._layers(raw.clearance() if clear is None else clear)
+    def _inflate(self, raw: PlanningGrid) -> tuple[PlanningGrid, np.ndarray]:
+        """(The cells where the robot's disc fits, the A* cost layer (H, W)) of ``raw`` (see ``_layers``)."""
+        fits, cost = self._layers(raw.clearance())
         return PlanningGrid(fits, raw.resolution, raw.origin), cost
 
     def _layers(self, clear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

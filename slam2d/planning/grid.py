@@ -121,6 +121,18 @@ def refresh_clearance(clear: np.ndarray, free: np.ndarray, changed: np.ndarray, 
     return near
 
 
+def around(values: np.ndarray, rows, cols, offsets, outside) -> np.ndarray:
+    """``values`` (H, W) at each cell (``rows``, ``cols``) (N,) moved by each of ``offsets`` (K, 2) (rows, cols):
+    (N, K), ``outside`` where that falls off the grid."""
+    r = np.asarray(rows)[:, None] + np.asarray(offsets)[None, :, 0]
+    c = np.asarray(cols)[:, None] + np.asarray(offsets)[None, :, 1]
+    h, w = values.shape
+    ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+    out = np.full(r.shape, outside, dtype=values.dtype)
+    out[ok] = values[r[ok], c[ok]]
+    return out
+
+
 def inflate(free: np.ndarray, radius_cells: float) -> np.ndarray:
     """Free cells whose centre is farther than ``radius_cells`` from every blocked cell centre.
 
