@@ -51,7 +51,8 @@ class ExplorationConfig(Section):
                             "goals gets when this one is first (tour)")  # fmt: skip
     gain_range: float = Field(6.0, gt=0, description="m, reach of the rays counting unknown cells (information gain)")
     gain_rays: int = Field(120, gt=3, description="rays cast for the information gain")
-    min_gain: float = Field(0.5, ge=0, description="m² of unknown area a candidate must still see to stay open")
+    min_gain: float = Field(0.5, ge=0, description="m² of hidden area (unknown, no known cell beside it) a "
+                                                   "candidate must still see to stay open")  # fmt: skip
     backtrack: Literal["graph", "grid"] = Field("graph", description="to an old candidate: over the topological graph "
                                                                      "(the paper) or the grid path alone")  # fmt: skip
     fallback_frontiers: bool = Field(True, description="nearest / farthest candidate: with no candidate left, "

@@ -1,7 +1,7 @@
 """Goal choice for exploration: frontiers (nearest, explore_lite's cost) or Li et al.'s candidates
 (nearest, farthest, utility), with visited and inaccessible lists and the hybrid map.
 
-The utility of a candidate p (eq. 6): F(p) = A(p) · exp(−(k1·L + k2·γ)), with A the
+The utility of a candidate p (eq. 6): F(p) = A(p) · exp(−(k1·L + k2·γ)), with A the hidden
 unknown cells visible from p (information gain, rays cast on the grid), L how much longer
 the route through all open goals gets when p is first (``tour_regret``; or the grid path
 length, or the Euclidean distance as the paper) and γ the absolute angle between the
@@ -28,6 +28,7 @@ from slam2d.exploration.gridops import (
     OCCUPIED,
     UNKNOWN,
     GridView,
+    distances_between,
     geodesic,
     information_gain,
     inside_polygon,
@@ -95,6 +96,7 @@ class Explorer:
         self.retired = np.zeros((0, 2))  # (K, 2) m: hidden cells a pocket view reached did not reveal
         self.decision_seconds: list[float] = []
         self.fallbacks = self.pocket_goals = self.tight_goals = 0
+        self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest decision
 
     # -- nodes and candidates --------------------------------------------------------------
 
@@ -141,7 +143,8 @@ class Explorer:
         live = self.hybrid.candidates()
         if not live:
             return []
-        gain = information_gain(view, np.array([c.position for c in live]), self.cfg.gain_range, self.cfg.gain_rays)
+        pts = np.array([c.position for c in live])
+        gain = information_gain(self._hidden(view), pts, self.cfg.gain_range, self.cfg.gain_rays)
         floor = self.cfg.min_gain / view.resolution**2
         out = []
         for c, g in zip(live, gain):
@@ -171,13 +174,15 @@ class Explorer:
 
     def _decide(self, pose, view: GridView, clearance: float) -> Goal | None:
         """The next goal over paths keeping ``clearance`` m from obstacles."""
-        distance = geodesic(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution)
+        passable = view.traversable(clearance)
+        reach = geodesic(passable, view.to_cell(pose[:2]), view.resolution)
         roomy = view.traversable(self.radius + self.cfg.goal_clearance)
-        distance = np.where(roomy, distance, np.inf)  # goals only where the robot has room
+        distance = np.where(roomy, reach, np.inf)  # goals only where the robot has room
         if self.cfg.strategy in FRONTIER_STRATEGIES:
             goal = self._frontier_goal(pose, view, distance, self.cfg.strategy)
         elif self.cfg.strategy == "utility":
-            goal = self._utility_goal(pose, view, distance)
+            goal = self._utility_goal(pose, view, distance, lambda cells: distances_between(reach, passable, cells,
+                                                                                             view.resolution))
         else:
             goal = self._candidate_goal(pose, view, distance)
             if goal is None and self.cfg.fallback_frontiers:
@@ -205,9 +210,10 @@ class Explorer:
         k = int(np.argmin(cost))
         return Goal(found[k].goal, "frontier", score=float(cost[k]))
 
-    def _utility_goal(self, pose, view, distance) -> Goal | None:
+    def _utility_goal(self, pose, view, distance, between) -> Goal | None:
         """The candidate or frontier region's goal of highest utility, scored together: candidates are made
-        only at nodes from one scan each, so a side opening the scans missed has a frontier but no candidate."""
+        only at nodes from one scan each, so a side opening the scans missed has a frontier but no candidate.
+        ``between(cells)`` gives the path lengths (P, P) m between cells (P, 2) for the tour regret."""
         live, pts, path, target = self._candidate_options(view, distance)
         found = self._frontiers(pose, view, distance)
         if not live and not found:
@@ -215,16 +221,26 @@ class Explorer:
         fronts = np.array([f.goal for f in found]).reshape(-1, 2)
         points = np.concatenate([pts, fronts])
         goals = np.concatenate([target, fronts])
-        gain = np.concatenate([[c.gain for c in live], information_gain(view, fronts, self.cfg.gain_range,
+        gain = np.concatenate([[c.gain for c in live], information_gain(self._hidden(view), fronts, self.cfg.gain_range,
                                                                          self.cfg.gain_rays)])  # fmt: skip
         path = np.concatenate([path, [f.path for f in found]])
-        score = self.utility(pose, points, gain, path, goals)
+        apart = between(view.to_cell(goals)) if self.cfg.distance == "tour" else None
+        score = self.utility(pose, points, gain, path, apart)
         for c, sc in zip(live, score):
             c.utility = float(sc)
         k = int(np.argmax(score))
         if k >= len(live):
             return Goal(fronts[k - len(live)].copy(), "frontier", score=float(score[k]))
         return Goal(target[k].copy(), "candidate", live[k], self._route(pose, view, live[k]), float(score[k]))
+
+    def _hidden(self, view: GridView) -> GridView:
+        """The grid the information gain is counted on: ``pocket_state`` (the hidden cells, what the coverage
+        counts as unexplored; rays stopped by gaps between occupied cells narrower than the robot's radius,
+        so that the unknown inside furniture or behind a wall seen at a grazing angle keeps no goal open)."""
+        if self._hidden_of[0] is not view:
+            state = pocket_state(view.state, int(self.radius / view.resolution))
+            self._hidden_of = view, GridView(state, view.resolution, view.origin)
+        return self._hidden_of[1]
 
     def _pocket_state(self, view: GridView) -> np.ndarray:
         retired = None
@@ -306,13 +322,16 @@ class Explorer:
         k = int(np.argmax(score))
         return Goal(target[k].copy(), "candidate", live[k], self._route(pose, view, live[k]), float(score[k]))
 
-    def utility(self, pose, points, gain, path, goals=None) -> np.ndarray:
+    def utility(self, pose, points, gain, path, between=None) -> np.ndarray:
         """F(p) = A(p)·exp(−(k1·L + k2·γ)) for points (P, 2) m with gains (P,) cells and grid path lengths
-        (P,) m; ``goals`` (P, 2) m, where the robot drives for each (default ``points``), for ``distance: tour``."""
+        (P,) m; ``between`` (P, P) m the path lengths between them for ``distance: tour`` (default: straight
+        lines)."""
         if self.cfg.distance == "euclidean":
             length = np.hypot(*(points - pose[:2]).T)
         elif self.cfg.distance == "tour":
-            length = tour_regret(points if goals is None else goals, path)
+            if between is None:
+                between = np.hypot(*(points[:, None] - points[None]).transpose(2, 0, 1))
+            length = tour_regret(path, between)
         else:
             length = path
         gamma = np.abs(geometry.wrap_angle(np.arctan2(points[:, 1] - pose[1], points[:, 0] - pose[0]) - pose[2]))
@@ -351,7 +370,8 @@ class Explorer:
                 return True
             return False
         if goal.kind == "candidate":
-            g = information_gain(view, goal.candidate.position[None], self.cfg.gain_range, self.cfg.gain_rays)[0]
+            g = information_gain(self._hidden(view), goal.candidate.position[None], self.cfg.gain_range,
+                                 self.cfg.gain_rays)[0]  # fmt: skip
             if g < self.cfg.min_gain / view.resolution**2:
                 goal.candidate.alive = False
                 return True
@@ -407,13 +427,12 @@ def greedy_tours(first, between):
     return out
 
 
-def tour_regret(goals, path) -> np.ndarray:
-    """How much longer (P,) m the route through all ``goals`` (P, 2) m gets when each is visited first:
-    path (P,) m from the robot to it, then a greedy tour through the rest (nearest next), minus the
-    shortest such route. Between two goals the distance is its lower bound max(straight line, difference
-    of their path lengths from the robot): no grid search per goal."""
-    goals, path = np.asarray(goals, dtype=np.float64).reshape(-1, 2), np.asarray(path, dtype=np.float64)
-    between = np.maximum(np.hypot(*(goals[:, None] - goals[None]).transpose(2, 0, 1)), np.abs(path[:, None] - path))
+def tour_regret(path, between) -> np.ndarray:
+    """How much longer (P,) m the route through all P goals gets when each is visited first: ``path`` (P,) m
+    from the robot to it, then a greedy tour through the rest (nearest next) by ``between`` (P, P) m,
+    minus the shortest such route."""
+    path = np.asarray(path, dtype=np.float64)
+    between = np.where(np.isfinite(between), between, 1e6)  # apart on the grid: never next on the tour
     route = greedy_tours(path, between)
     return route - route.min()
 

@@ -152,6 +152,96 @@ def geodesic(passable: np.ndarray, start_cell, resolution: float, snap_cells: in
     return (out + extra) * resolution
 
 
+@njit(cache=True)
+def _walk_down(dist, passable, r, c, out):
+    """Cells (flat indices) from (r, c) down ``dist`` to its root along shortest-path parents, into ``out``;
+    their count."""
+    h, w = dist.shape
+    n = 0
+    while True:
+        out[n] = r * w + c
+        n += 1
+        best, br, bc = dist[r, c] - 1e-9, -1, -1
+        for dr in range(-1, 2):
+            for dc in range(-1, 2):
+                rr, cc = r + dr, c + dc
+                if (dr == 0 and dc == 0) or rr < 0 or cc < 0 or rr >= h or cc >= w or not passable[rr, cc]:
+                    continue
+                if dr != 0 and dc != 0 and not (passable[r + dr, c] and passable[r, c + dc]):
+                    continue
+                d = dist[rr, cc] + (1.4142135623730951 if dr != 0 and dc != 0 else 1.0)
+                if d <= best + 1e-6 and dist[rr, cc] < dist[r, c]:
+                    best, br, bc = d, rr, cc
+        if br < 0 or n == len(out):
+            return n
+        r, c = br, bc
+
+
+@njit(cache=True)
+def _in_sight(passable, r0, c0, r1, c1):
+    """Whether every cell on the line between two cells' centres is passable (Bresenham)."""
+    dr, dc = abs(r1 - r0), abs(c1 - c0)
+    sr, sc = (1 if r1 > r0 else -1), (1 if c1 > c0 else -1)
+    err, r, c = dr - dc, r0, c0
+    while True:
+        if not passable[r, c]:
+            return False
+        if r == r1 and c == c1:
+            return True
+        e2 = 2 * err
+        if e2 > -dc:
+            err -= dc
+            r += sr
+        if e2 < dr:
+            err += dr
+            c += sc
+
+
+@njit(cache=True)
+def _between(dist, passable, cells):
+    h, w = dist.shape
+    n = len(cells)
+    out = np.zeros((n, n))
+    buf = np.empty(h * w, dtype=np.int64)
+    stamp = np.full(h * w, -1, dtype=np.int64)
+    starts = np.zeros(n + 1, dtype=np.int64)
+    paths = np.empty(0, dtype=np.int64)
+    for a in range(n):
+        k = _walk_down(dist, passable, cells[a, 0], cells[a, 1], buf)
+        paths = np.concatenate((paths, buf[:k]))
+        starts[a + 1] = starts[a] + k
+    for a in range(n):
+        ra, ca = cells[a, 0], cells[a, 1]
+        for i in range(starts[a], starts[a + 1]):
+            stamp[paths[i]] = a
+        for b in range(a + 1, n):
+            rb, cb = cells[b, 0], cells[b, 1]
+            if _in_sight(passable, ra, ca, rb, cb):
+                d = np.hypot(ra - rb, ca - cb)
+            else:
+                meet = 0.0
+                for i in range(starts[b], starts[b + 1]):  # the paths meet at the root at the latest
+                    v = paths[i]
+                    if stamp[v] == a:
+                        meet = dist[v // w, v % w]
+                        break
+                d = dist[ra, ca] + dist[rb, cb] - 2.0 * meet
+            out[a, b] = out[b, a] = d
+    return out
+
+
+def distances_between(distance: np.ndarray, passable: np.ndarray, cells, resolution: float) -> np.ndarray:
+    """Path lengths (P, P) m between the P reachable ``cells`` (P, 2) over ``passable`` (H, W), no grid
+    search per cell: the straight line where every cell on it is passable, else the way along the tree of
+    shortest paths of ``distance`` (H, W) m from the robot (``geodesic``), down from one cell to where its
+    path to the robot meets the other's and up again. That way is never shorter than the grid path,
+    and close to it where the two paths part near where the grid path turns (rooms either side of a wall,
+    off one corridor); it overestimates where they part early, at the robot in an open room."""
+    cells = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+    dist = np.ascontiguousarray(distance / resolution)
+    return _between(dist, np.ascontiguousarray(passable, dtype=np.bool_), cells) * resolution
+
+
 def _snap(passable, cell, within: int):
     h, w = passable.shape
     r0, r1 = max(cell[0] - within, 0), min(cell[0] + within + 1, h)
