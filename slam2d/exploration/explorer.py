@@ -28,7 +28,6 @@ from slam2d.exploration.gridops import (
     OCCUPIED,
     UNKNOWN,
     GridView,
-    distances_between,
     geodesic,
     information_gain,
     inside_polygon,
@@ -174,15 +173,13 @@ class Explorer:
 
     def _decide(self, pose, view: GridView, clearance: float) -> Goal | None:
         """The next goal over paths keeping ``clearance`` m from obstacles."""
-        passable = view.traversable(clearance)
-        reach = geodesic(passable, view.to_cell(pose[:2]), view.resolution)
+        distance = geodesic(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution)
         roomy = view.traversable(self.radius + self.cfg.goal_clearance)
-        distance = np.where(roomy, reach, np.inf)  # goals only where the robot has room
+        distance = np.where(roomy, distance, np.inf)  # goals only where the robot has room
         if self.cfg.strategy in FRONTIER_STRATEGIES:
             goal = self._frontier_goal(pose, view, distance, self.cfg.strategy)
         elif self.cfg.strategy == "utility":
-            goal = self._utility_goal(pose, view, distance, lambda cells: distances_between(reach, passable, cells,
-                                                                                             view.resolution))
+            goal = self._utility_goal(pose, view, distance)
         else:
             goal = self._candidate_goal(pose, view, distance)
             if goal is None and self.cfg.fallback_frontiers:
@@ -210,10 +207,9 @@ class Explorer:
         k = int(np.argmin(cost))
         return Goal(found[k].goal, "frontier", score=float(cost[k]))
 
-    def _utility_goal(self, pose, view, distance, between) -> Goal | None:
+    def _utility_goal(self, pose, view, distance) -> Goal | None:
         """The candidate or frontier region's goal of highest utility, scored together: candidates are made
-        only at nodes from one scan each, so a side opening the scans missed has a frontier but no candidate.
-        ``between(cells)`` gives the path lengths (P, P) m between cells (P, 2) for the tour regret."""
+        only at nodes from one scan each, so a side opening the scans missed has a frontier but no candidate."""
         live, pts, path, target = self._candidate_options(view, distance)
         found = self._frontiers(pose, view, distance)
         if not live and not found:
@@ -224,8 +220,7 @@ class Explorer:
         gain = np.concatenate([[c.gain for c in live], information_gain(self._hidden(view), fronts, self.cfg.gain_range,
                                                                          self.cfg.gain_rays)])  # fmt: skip
         path = np.concatenate([path, [f.path for f in found]])
-        apart = between(view.to_cell(goals)) if self.cfg.distance == "tour" else None
-        score = self.utility(pose, points, gain, path, apart)
+        score = self.utility(pose, points, gain, path, goals)
         for c, sc in zip(live, score):
             c.utility = float(sc)
         k = int(np.argmax(score))
@@ -322,16 +317,13 @@ class Explorer:
         k = int(np.argmax(score))
         return Goal(target[k].copy(), "candidate", live[k], self._route(pose, view, live[k]), float(score[k]))
 
-    def utility(self, pose, points, gain, path, between=None) -> np.ndarray:
+    def utility(self, pose, points, gain, path, goals=None) -> np.ndarray:
         """F(p) = A(p)·exp(−(k1·L + k2·γ)) for points (P, 2) m with gains (P,) cells and grid path lengths
-        (P,) m; ``between`` (P, P) m the path lengths between them for ``distance: tour`` (default: straight
-        lines)."""
+        (P,) m; ``goals`` (P, 2) m, where the robot drives for each (default ``points``), for ``distance: tour``."""
         if self.cfg.distance == "euclidean":
             length = np.hypot(*(points - pose[:2]).T)
         elif self.cfg.distance == "tour":
-            if between is None:
-                between = np.hypot(*(points[:, None] - points[None]).transpose(2, 0, 1))
-            length = tour_regret(path, between)
+            length = tour_regret(points if goals is None else goals, path)
         else:
             length = path
         gamma = np.abs(geometry.wrap_angle(np.arctan2(points[:, 1] - pose[1], points[:, 0] - pose[0]) - pose[2]))
@@ -427,12 +419,13 @@ def greedy_tours(first, between):
     return out
 
 
-def tour_regret(path, between) -> np.ndarray:
-    """How much longer (P,) m the route through all P goals gets when each is visited first: ``path`` (P,) m
-    from the robot to it, then a greedy tour through the rest (nearest next) by ``between`` (P, P) m,
-    minus the shortest such route."""
-    path = np.asarray(path, dtype=np.float64)
-    between = np.where(np.isfinite(between), between, 1e6)  # apart on the grid: never next on the tour
+def tour_regret(goals, path) -> np.ndarray:
+    """How much longer (P,) m the route through all ``goals`` (P, 2) m gets when each is visited first:
+    path (P,) m from the robot to it, then a greedy tour through the rest (nearest next), minus the
+    shortest such route. Between two goals the distance is its lower bound max(straight line, difference
+    of their path lengths from the robot): no grid search per goal."""
+    goals, path = np.asarray(goals, dtype=np.float64).reshape(-1, 2), np.asarray(path, dtype=np.float64)
+    between = np.maximum(np.hypot(*(goals[:, None] - goals[None]).transpose(2, 0, 1)), np.abs(path[:, None] - path))
     route = greedy_tours(path, between)
     return route - route.min()
 
