@@ -399,14 +399,15 @@ def test_pocket_cells_are_hidden_unknown_cells_walls_close_small_gaps_and_escape
     assert abs(abs(heading) - np.pi) < 0.5  # away from it
 
 
-@pytest.mark.parametrize("wall_cells", [1, 2, 4, 5])
-def test_pocket_state_is_a_closing_of_the_walls_by_a_square_and_hidden_cells_have_no_known_neighbour(wall_cells):
+@pytest.mark.parametrize("wall_cells, shape", [(1, (50, 70)), (2, (50, 70)), (4, (50, 70)), (5, (50, 70)),
+                                               (0, (1, 30)), (7, (30, 1)), (3, (4, 9))])  # fmt: skip
+def test_pocket_state_is_a_closing_of_the_walls_by_a_square_and_hidden_cells_have_no_known_neighbour(wall_cells, shape):
     from scipy import ndimage
 
     from slam2d.exploration.explorer import pocket_state
 
     rng = np.random.default_rng(wall_cells)
-    state = rng.choice(np.array([FREE, OCCUPIED, UNKNOWN], dtype=np.int8), size=(50, 70), p=[0.5, 0.1, 0.4])
+    state = rng.choice(np.array([FREE, OCCUPIED, UNKNOWN], dtype=np.int8), size=shape, p=[0.5, 0.1, 0.4])
     size = wall_cells + 1
     closed = ndimage.binary_closing(np.pad(state == OCCUPIED, size), np.ones((size, size), bool))[size:-size, size:-size]
     unknown = state == UNKNOWN

@@ -51,18 +51,56 @@ def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None 
     grazing angle or missed, the corners of a box): rays do not leak through them into the unknown
     space behind walls and inside furniture. FREE: the rest, which rays cross.
     """
-    from scipy import ndimage
-
-    hidden = ndimage.minimum_filter(state == UNKNOWN, size=3, mode="constant", cval=True)
+    known = state != UNKNOWN
+    hidden = ~_window_any(_window_any(known, 1, 1, False, 0), 1, 1, False, 1)  # outside the grid: unknown
     if retired is not None:
         hidden &= ~retired
-    size = max(1, wall_cells) + 1  # a closing by a size x size square (separable max / min filters)
-    padded = ndimage.maximum_filter(np.pad(state == OCCUPIED, size), size=size, mode="constant", cval=False)
-    closed = ndimage.minimum_filter(padded, size=size, mode="constant", cval=True,
-                                    origin=0 if size % 2 else -1)[size:-size, size:-size]  # fmt: skip
+    size = max(1, wall_cells) + 1  # a closing by a size x size square: a dilation, then the mirrored erosion
+    lo, hi = size // 2, size - 1 - size // 2
+    grown = np.pad(state == OCCUPIED, size)
+    for axis in (0, 1):
+        grown = _window_any(grown, lo, hi, False, axis)
+    for axis in (0, 1):
+        grown = ~_window_any(~grown, hi, lo, False, axis)  # an erosion; outside the padded grid: occupied
+    closed = grown[size:-size, size:-size]
     out = np.full(state.shape, FREE, dtype=np.int8)
     out[hidden] = UNKNOWN
     out[closed] = OCCUPIED
+    return out
+
+
+@njit(cache=True)
+def _window_any(mask, before, after, outside, axis):
+    """Whether any cell from ``before`` cells before to ``after`` cells after each cell along ``axis`` is
+    set in ``mask`` (H, W) bool; cells beyond the grid count as ``outside``. Running counts, row by row."""
+    h, w = mask.shape
+    out = np.empty((h, w), dtype=np.bool_)
+    if axis == 0:
+        count = np.zeros(w, dtype=np.int64)
+        for r in range(min(after, h - 1) + 1):
+            for c in range(w):
+                count[c] += mask[r, c]
+        for r in range(h):
+            edge = outside and (r - before < 0 or r + after >= h)
+            for c in range(w):
+                out[r, c] = count[c] > 0 or edge
+            if r - before >= 0:
+                for c in range(w):
+                    count[c] -= mask[r - before, c]
+            if r + after + 1 < h:
+                for c in range(w):
+                    count[c] += mask[r + after + 1, c]
+        return out
+    for r in range(h):
+        count = 0
+        for c in range(min(after, w - 1) + 1):
+            count += mask[r, c]
+        for c in range(w):
+            out[r, c] = count > 0 or (outside and (c - before < 0 or c + after >= w))
+            if c - before >= 0:
+                count -= mask[r, c - before]
+            if c + after + 1 < w:
+                count += mask[r, c + after + 1]
     return out
 
 
