@@ -401,7 +401,9 @@ def test_pocket_cells_are_hidden_unknown_cells_walls_close_small_gaps_and_escape
 
 @pytest.mark.parametrize("wall_cells, shape", [(1, (50, 70)), (2, (50, 70)), (4, (50, 70)), (5, (50, 70)),
                                                (0, (1, 30)), (7, (30, 1)), (3, (4, 9))])  # fmt: skip
-def test_pocket_state_is_a_closing_of_the_walls_by_a_square_and_hidden_cells_have_no_known_neighbour(wall_cells, shape):
+def test_pocket_state_is_a_closing_of_the_walls_by_a_square_and_hidden_cells_have_no_known_neighbour(
+    wall_cells, shape
+):
     from scipy import ndimage
 
     from slam2d.exploration.explorer import pocket_state

@@ -49,7 +49,7 @@ class ExplorationConfig(Section):
     distance: Literal["path", "euclidean", "tour"] = Field(
         "tour", description="L of the utility: grid path, straight line, or how much longer the route through all "
                             "goals gets when this one is first (tour)")  # fmt: skip
-    gain_range: float = Field(6.0, gt=0, description="m, reach of the rays counting unknown cells (information gain)")
+    gain_range: float = Field(6.0, gt=0, description="m, reach of the rays counting hidden cells (information gain)")
     gain_rays: int = Field(120, gt=3, description="rays cast for the information gain")
     min_gain: float = Field(0.5, ge=0, description="m² of hidden area (unknown, no known cell beside it) a "
                                                    "candidate must still see to stay open")  # fmt: skip

@@ -72,7 +72,8 @@ def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None 
 @njit(cache=True)
 def _window_any(mask, before, after, outside, axis):
     """Whether any cell from ``before`` cells before to ``after`` cells after each cell along ``axis`` is
-    set in ``mask`` (H, W) bool; cells beyond the grid count as ``outside``. Running counts, row by row."""
+    set in ``mask`` (H, W) bool; cells beyond the grid count as ``outside``. Running counts, row by row in
+    memory order for both axes (per column along axis 0, per row along axis 1)."""
     h, w = mask.shape
     out = np.empty((h, w), dtype=np.bool_)
     if axis == 0:
@@ -133,7 +134,7 @@ class Explorer:
         self.retired = np.zeros((0, 2))  # (K, 2) m: hidden cells a pocket view reached did not reveal
         self.decision_seconds: list[float] = []
         self.fallbacks = self.pocket_goals = self.tight_goals = 0
-        self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest decision
+        self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest view counted on
 
     # -- nodes and candidates --------------------------------------------------------------
 
