@@ -180,6 +180,30 @@ def test_a_corner_keeps_one_node_and_an_open_candidate_keeps_its_node():
     assert hybrid.nodes[3].role == FINAL and hybrid.nodes[2].role == MARKED
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_frontier_cells_and_regions_match_the_definition_and_scipy_labels(seed):
+    """Frontier cells: free, an unknown 4-neighbour (the edge counts), no occupied cell within the wall gap;
+    regions: scipy's 8-connected labels, each region's cells in raster order, regions by first cell."""
+    from scipy import ndimage
+
+    from slam2d.exploration.frontiers import frontier_regions
+
+    rng = np.random.default_rng(seed)
+    state = rng.choice(3, size=(37 + seed, 53), p=[0.55, 0.1, 0.35]).astype(np.int8)
+    for gap in (0, 2):
+        unknown = np.pad(state == UNKNOWN, 1, constant_values=True)
+        near = unknown[:-2, 1:-1] | unknown[2:, 1:-1] | unknown[1:-1, :-2] | unknown[1:-1, 2:]
+        walled = ndimage.maximum_filter(state == OCCUPIED, size=2 * gap + 1, mode="constant")
+        expected = (state == FREE) & near & ~walled
+        mask = frontier_mask(state, gap)
+        assert np.array_equal(mask, expected) and mask.sum() > 20
+    labels, n = ndimage.label(mask, structure=np.ones((3, 3)))
+    regions = frontier_regions(mask, 3)
+    expected = [np.argwhere(labels == k) for k in range(1, n + 1) if (labels == k).sum() >= 3]
+    assert len(regions) == len(expected) >= 3
+    assert all(np.array_equal(a, b) for a, b in zip(regions, expected))
+
+
 def test_frontiers_regions_goal_size_visited_and_bounds():
     state = np.full((80, 120), UNKNOWN, dtype=np.int8)
     state[10:70, 10:60] = FREE  # a known room, open to the unknown on its east side (x = 3 m)

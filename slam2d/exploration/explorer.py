@@ -214,7 +214,7 @@ class Explorer:
         """The next goal over paths keeping ``clearance`` m from obstacles."""
         distance = geodesic(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution)
         roomy = view.traversable(self.radius + self.cfg.goal_clearance)
-        distance = np.where(roomy, distance, np.inf)  # goals only where the robot has room
+        distance[~roomy] = np.inf  # goals only where the robot has room
         if self.cfg.strategy in FRONTIER_STRATEGIES:
             goal = self._frontier_goal(pose, view, distance, self.cfg.strategy)
         elif self.cfg.strategy == "utility":

@@ -12,12 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy import ndimage
 
 from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, inside_polygon
-from slam2d.planning.grid import around
 
-_EIGHT = np.ones((3, 3), dtype=int)
 WALL_GAP = 2  # cells: frontier cells this close to an occupied cell are left out
 
 
@@ -39,32 +38,76 @@ def frontier_mask(state: np.ndarray, wall_gap: int = WALL_GAP) -> np.ndarray:
     """Frontier cells (H, W) bool: free cells with an unknown 4-neighbour (the grid's edge counts as
     unknown) and no occupied cell within ``wall_gap`` cells (Chebyshev): unknown cells seen through
     gaps in a wall's cells are not open space."""
-    unknown = np.pad(state == UNKNOWN, 1, constant_values=True)
-    near = unknown[:-2, 1:-1] | unknown[2:, 1:-1] | unknown[1:-1, :-2] | unknown[1:-1, 2:]
-    mask = (state == FREE) & near
-    rows, cols = np.nonzero(mask)  # looked up around the frontier cells only: few of the map's
-    square = np.stack(np.meshgrid(np.arange(-wall_gap, wall_gap + 1), np.arange(-wall_gap, wall_gap + 1)), -1)
-    walled = (around(state, rows, cols, square.reshape(-1, 2), FREE) == OCCUPIED).any(axis=1)
-    mask[rows[walled], cols[walled]] = False
+    return _frontier_mask(np.asarray(state, dtype=np.int8), int(wall_gap))
+
+
+@njit(cache=True)
+def _frontier_mask(state, wall_gap):
+    h, w = state.shape
+    mask = np.zeros((h, w), dtype=np.bool_)
+    for r in range(h):
+        for c in range(w):
+            if state[r, c] != FREE:
+                continue
+            if not (r == 0 or c == 0 or r == h - 1 or c == w - 1 or state[r - 1, c] == UNKNOWN
+                    or state[r + 1, c] == UNKNOWN or state[r, c - 1] == UNKNOWN or state[r, c + 1] == UNKNOWN):  # fmt: skip
+                continue
+            mask[r, c] = not _occupied_within(state, r, c, wall_gap)
     return mask
 
 
+@njit(cache=True)
+def _occupied_within(state, r, c, k):
+    h, w = state.shape
+    for rr in range(max(r - k, 0), min(r + k + 1, h)):
+        for cc in range(max(c - k, 0), min(c + k + 1, w)):
+            if state[rr, cc] == OCCUPIED:
+                return True
+    return False
+
+
 def frontier_regions(mask: np.ndarray, min_cells: int) -> list[np.ndarray]:
-    """8-connected regions of ``mask`` with at least ``min_cells`` cells, each (K, 2) (row, col)."""
-    labels, n = ndimage.label(mask, structure=_EIGHT)
-    if n == 0:
-        return []
-    rows, cols = np.nonzero(labels)
-    label = labels[rows, cols]
-    order = np.argsort(label, kind="stable")  # each region's cells in raster order
+    """8-connected regions of ``mask`` with at least ``min_cells`` cells, each (K, 2) (row, col) in raster
+    order; regions in the raster order of their first cell."""
+    cells, label, n = _label8(np.asarray(mask, dtype=np.bool_))
+    order = np.argsort(label, kind="stable")
     sizes = np.bincount(label, minlength=n + 1)
     ends = np.cumsum(sizes)
-    out = []
-    for k in range(1, n + 1):
-        if sizes[k] >= min_cells:
-            idx = order[ends[k - 1] : ends[k]]
-            out.append(np.column_stack([rows[idx], cols[idx]]))
-    return out
+    return [cells[order[ends[k - 1] : ends[k]]] for k in range(1, n + 1) if sizes[k] >= min_cells]
+
+
+@njit(cache=True)
+def _label8(mask):
+    """The cells (N, 2) of ``mask`` in raster order, each one's region label (N,) (1..n, numbered in the
+    raster order of the regions' first cells; 8-connected, by depth-first search) and n."""
+    h, w = mask.shape
+    labels = np.zeros((h, w), dtype=np.int32)
+    n_cells = 0
+    for r in range(h):
+        for c in range(w):
+            n_cells += mask[r, c]
+    stack = np.empty(n_cells, dtype=np.int64)
+    cells = np.empty((n_cells, 2), dtype=np.int64)
+    label = np.empty(n_cells, dtype=np.int64)
+    n = k = 0
+    for r in range(h):
+        for c in range(w):
+            if not mask[r, c]:
+                continue
+            if labels[r, c] == 0:
+                n += 1
+                labels[r, c], stack[0], top = n, r * w + c, 1
+                while top > 0:
+                    top -= 1
+                    vr, vc = stack[top] // w, stack[top] % w
+                    for rr in range(max(vr - 1, 0), min(vr + 2, h)):
+                        for cc in range(max(vc - 1, 0), min(vc + 2, w)):
+                            if mask[rr, cc] and labels[rr, cc] == 0:
+                                labels[rr, cc], stack[top] = n, rr * w + cc
+                                top += 1
+            cells[k, 0], cells[k, 1], label[k] = r, c, labels[r, c]
+            k += 1
+    return cells, label, n
 
 
 def find_frontiers(view: GridView, robot_xy, distance: np.ndarray, min_size: float, reach: float,

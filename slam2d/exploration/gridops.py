@@ -149,7 +149,9 @@ def geodesic(passable: np.ndarray, start_cell, resolution: float, snap_cells: in
         return out
     cell, extra = start
     _dijkstra(passable, int(cell[0]), int(cell[1]), out)
-    return (out + extra) * resolution
+    out += extra
+    out *= resolution
+    return out
 
 
 def _snap(passable, cell, within: int):
