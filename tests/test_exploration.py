@@ -251,19 +251,21 @@ def test_utility_trades_gain_against_distance_and_turning():
     assert euclid.utility(pose, pts[:1], np.array([1.0]), np.array([50.0]))[0] == pytest.approx(np.exp(-1.0 * 2.0))
 
 
-def test_tour_regret_counts_the_way_back_to_a_goal_left_behind():
-    """Goals 1 m behind and 3 m / 4 m ahead: starting behind costs 1 + 4 + 1 m, starting ahead
-    3 + 1 + 5 m (coming back), so only the goal behind has no regret; behind a wall (9 m of path)
-    the difference of path lengths bounds the way between goals and the order turns round."""
+def test_tour_regret_weighs_each_goal_by_its_gain():
+    """Goals 1 m behind and 3 m / 4 m ahead (path = straight line): with equal gains the goal behind
+    first reaches the cells at 1, 5, 6 m (mean 4), the one 3 m ahead first at 3, 4, 9 m (mean 5.33);
+    with a tenth of the gain behind, going ahead first is best: the small goal waits for the way back.
+    Behind a wall (9 m of path) the difference of path lengths bounds the way between goals."""
     goals = np.array([[-1.0, 0.0], [3.0, 0.0], [4.0, 0.0]])
-    assert tour_regret(goals, np.array([1.0, 3.0, 4.0])) == pytest.approx([0.0, 3.0, 3.0])
-    assert tour_regret(goals, np.array([9.0, 3.0, 4.0])) == pytest.approx([6.0, 0.0, 2.0])
+    path = np.array([1.0, 3.0, 4.0])
+    assert tour_regret(goals, path, np.ones(3)) == pytest.approx([0.0, 4 / 3, 2.0])
+    assert tour_regret(goals, path, np.array([0.1, 1.0, 1.0])) == pytest.approx([3.2 / 2.1, 0.0, 2.0 / 2.1])
+    assert tour_regret(goals, np.array([9.0, 3.0, 4.0]), np.ones(3)) == pytest.approx([22 / 3, 0.0, 4 / 3])
     cfg = explore_config.ExplorationConfig(distance="tour", k1=1.0, k2=0.0)
     ex = Explorer(cfg, 0.2, 0.05, R_MAX)
-    f = ex.utility(np.zeros(3), goals, np.array([10.0, 100.0, 100.0]), np.array([1.0, 3.0, 4.0]))
-    path = Explorer(explore_config.ExplorationConfig(k1=1.0, k2=0.0, distance="path"), 0.2, 0.05, R_MAX)
-    g = path.utility(np.zeros(3), goals, np.array([10.0, 100.0, 100.0]), np.array([1.0, 3.0, 4.0]))
-    assert np.argmax(f) == 0 and np.argmax(g) == 1  # the small gain behind first, not on the way back
+    f = ex.utility(np.zeros(3), goals, np.array([10.0, 100.0, 100.0]), path)
+    g = ex.utility(np.zeros(3), goals, np.array([100.0, 100.0, 100.0]), path)
+    assert np.argmax(f) == 1 and np.argmax(g) == 0
 
 
 def test_utility_takes_a_side_opening_nearby_before_a_far_candidate():

@@ -47,8 +47,8 @@ class ExplorationConfig(Section):
     k1: float = Field(1.0, ge=0, description="1/m, distance weight of the utility")
     k2: float = Field(0.5, ge=0, description="1/rad, heading weight of the utility")
     distance: Literal["path", "euclidean", "tour"] = Field(
-        "tour", description="L of the utility: grid path, straight line, or how much longer the route through all "
-                            "goals gets when this one is first (tour)")  # fmt: skip
+        "tour", description="L of the utility: grid path, straight line, or how much later (m driven, mean over the "
+                            "goals' hidden cells) a tour through all goals reaches them when this one is first (tour)")  # fmt: skip
     gain_range: float = Field(6.0, gt=0, description="m, reach of the rays counting hidden cells (information gain)")
     gain_rays: int = Field(120, gt=3, description="rays cast for the information gain")
     min_gain: float = Field(0.5, ge=0, description="m² of hidden area (unknown, no known cell beside it) a "

@@ -2,8 +2,9 @@
 (nearest, farthest, utility), with visited and inaccessible lists and the hybrid map.
 
 The utility of a candidate p (eq. 6): F(p) = A(p) · exp(−(k1·L + k2·γ)), with A the hidden
-unknown cells visible from p (information gain, rays cast on the grid), L how much longer
-the route through all open goals gets when p is first (``tour_regret``; or the grid path
+unknown cells visible from p (information gain, rays cast on the grid), L how much later, on
+average over the goals' hidden cells, a tour through all open goals reaches them when p is first
+(``tour_regret``; or the grid path
 length, or the Euclidean distance as the paper) and γ the absolute angle between the
 robot's heading and the direction to p; the frontier regions' goals are scored by the
 same F beside the candidates. explore_lite's cost of a frontier:
@@ -362,7 +363,7 @@ class Explorer:
         if self.cfg.distance == "euclidean":
             length = np.hypot(*(points - pose[:2]).T)
         elif self.cfg.distance == "tour":
-            length = tour_regret(points if goals is None else goals, path)
+            length = tour_regret(points if goals is None else goals, path, gain)
         else:
             length = path
         gamma = np.abs(geometry.wrap_angle(np.arctan2(points[:, 1] - pose[1], points[:, 0] - pose[0]) - pose[2]))
@@ -435,15 +436,17 @@ class Explorer:
 
 
 @njit(cache=True)
-def greedy_tours(first, between):
-    """Length (P,) of a greedy open tour through all P goals starting at each: ``first`` (P,) the cost to
-    reach each goal, then always the nearest goal not yet visited by ``between`` (P, P)."""
+def greedy_tours(first, between, weight):
+    """Mean distance (P,) driven before each goal is reached, weighted by ``weight`` (P,), on a greedy open
+    tour through all P goals starting at each: ``first`` (P,) the cost to reach each goal, then always the
+    nearest goal not yet visited by ``between`` (P, P)."""
     n = len(first)
     out = np.empty(n)
     for s in range(n):
         seen = np.zeros(n, dtype=np.bool_)
         seen[s] = True
         cur, total = s, first[s]
+        late = weight[s] * total
         for _ in range(n - 1):
             best, nxt = np.inf, -1
             for j in range(n):
@@ -453,19 +456,20 @@ def greedy_tours(first, between):
                 break
             seen[nxt] = True
             total += best
+            late += weight[nxt] * total
             cur = nxt
-        out[s] = total
+        out[s] = late / max(weight.sum(), 1e-9)
     return out
 
 
-def tour_regret(goals, path) -> np.ndarray:
-    """How much longer (P,) m the route through all ``goals`` (P, 2) m gets when each is visited first:
-    path (P,) m from the robot to it, then a greedy tour through the rest (nearest next), minus the
-    shortest such route. Between two goals the distance is its lower bound max(straight line, difference
-    of their path lengths from the robot): no grid search per goal."""
+def tour_regret(goals, path, gain) -> np.ndarray:
+    """How much later (P,) m, on average over the hidden cells (``gain`` (P,) each goal's), the robot reaches
+    them when each goal is visited first: path (P,) m from the robot to it, then a greedy tour through the
+    rest (nearest next), minus the best such first goal. Between two goals the distance is its lower bound
+    max(straight line, difference of their path lengths from the robot): no grid search per goal."""
     goals, path = np.asarray(goals, dtype=np.float64).reshape(-1, 2), np.asarray(path, dtype=np.float64)
     between = np.maximum(np.hypot(*(goals[:, None] - goals[None]).transpose(2, 0, 1)), np.abs(path[:, None] - path))
-    route = greedy_tours(path, between)
+    route = greedy_tours(path, between, np.asarray(gain, dtype=np.float64))
     return route - route.min()
 
 
