@@ -4,10 +4,9 @@
 The utility of a candidate p (eq. 6): F(p) = A(p) · exp(−(k1·L + k2·γ)), with A the hidden
 unknown cells visible from p (information gain, rays cast on the grid), L how much later, on
 average over the goals' hidden cells, a tour through all open goals reaches them when p is first
-(``tour_regret``; or the grid path
-length, or the Euclidean distance as the paper) and γ the absolute angle between the
-robot's heading and the direction to p; the frontier regions' goals are scored by the
-same F beside the candidates. explore_lite's cost of a frontier:
+(``tour_regret``; or the grid path length, or the Euclidean distance as the paper) and γ the
+absolute angle between the robot's heading and the direction to p; the frontier regions' goals
+are scored by the same F beside the candidates. explore_lite's cost of a frontier:
 potential_scale · min_distance · resolution − gain_scale · size · resolution (the
 lowest wins), goal at the reachable cell nearest the frontier's centroid.
 """
@@ -436,17 +435,18 @@ class Explorer:
 
 
 @njit(cache=True)
-def greedy_tours(first, between, weight):
+def mean_arrivals(first, between, weight):
     """Mean distance (P,) driven before each goal is reached, weighted by ``weight`` (P,), on a greedy open
     tour through all P goals starting at each: ``first`` (P,) the cost to reach each goal, then always the
     nearest goal not yet visited by ``between`` (P, P)."""
     n = len(first)
     out = np.empty(n)
+    total_weight = max(weight.sum(), 1e-9)
     for s in range(n):
         seen = np.zeros(n, dtype=np.bool_)
         seen[s] = True
-        cur, total = s, first[s]
-        late = weight[s] * total
+        cur, driven = s, first[s]
+        late = weight[s] * driven
         for _ in range(n - 1):
             best, nxt = np.inf, -1
             for j in range(n):
@@ -455,10 +455,10 @@ def greedy_tours(first, between, weight):
             if nxt < 0:
                 break
             seen[nxt] = True
-            total += best
-            late += weight[nxt] * total
+            driven += best
+            late += weight[nxt] * driven
             cur = nxt
-        out[s] = late / max(weight.sum(), 1e-9)
+        out[s] = late / total_weight
     return out
 
 
@@ -469,8 +469,8 @@ def tour_regret(goals, path, gain) -> np.ndarray:
     max(straight line, difference of their path lengths from the robot): no grid search per goal."""
     goals, path = np.asarray(goals, dtype=np.float64).reshape(-1, 2), np.asarray(path, dtype=np.float64)
     between = np.maximum(np.hypot(*(goals[:, None] - goals[None]).transpose(2, 0, 1)), np.abs(path[:, None] - path))
-    route = greedy_tours(path, between, np.asarray(gain, dtype=np.float64))
-    return route - route.min()
+    arrival = mean_arrivals(path, between, np.asarray(gain, dtype=np.float64))
+    return arrival - arrival.min()
 
 
 def _path_lengths(view: GridView, distance: np.ndarray, points, reach: float) -> tuple[np.ndarray, np.ndarray]:
