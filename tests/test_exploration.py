@@ -27,7 +27,9 @@ from slam2d.exploration.gridops import (
     LiveClearance,
     geodesic,
     information_gain,
+    shared_gain,
     straight_reachable,
+    unknown_in_sight,
 )
 from slam2d.exploration.hybrid import FINAL, MARKED, HybridMap
 from slam2d.exploration.run import path_repetition
@@ -268,6 +270,35 @@ def test_tour_regret_weighs_each_goal_by_its_gain():
     assert np.argmax(f) == 1 and np.argmax(g) == 0
 
 
+def test_hidden_cells_seen_from_several_goals_are_shared_among_them():
+    """Two goals at one place and a third seeing part of the same hidden block: the shares add up to the block's
+    cells in sight of any of them, a cell seen from k goals counting 1/k; the twin goals split theirs."""
+    state = np.full((100, 100), FREE, dtype=np.int8)
+    state[[0, -1], :] = state[:, [0, -1]] = OCCUPIED
+    state[40:60, 70:90] = UNKNOWN
+    view = view_of(state)
+    pts = np.array([[1.0, 2.5], [1.0, 2.5], [4.0, 0.5]])
+    own = information_gain(view, pts, 6.0, 120)
+    shares = shared_gain(view, pts, 6.0, 120)
+    union = unknown_in_sight(view, pts[0], 6.0, 120) | unknown_in_sight(view, pts[2], 6.0, 120)
+    assert shares.sum() == pytest.approx(union.sum())
+    assert shares[0] == shares[1] < own[0] / 2 and own[2] / 3 < shares[2] < own[2]
+    alone = unknown_in_sight(view, pts[2], 6.0, 120) & ~unknown_in_sight(view, pts[0], 6.0, 120)
+    both = unknown_in_sight(view, pts[2], 6.0, 120) & unknown_in_sight(view, pts[0], 6.0, 120)
+    assert shares[2] == pytest.approx(alone.sum() + both.sum() / 3)
+
+
+def test_the_tour_weighs_twin_goals_by_their_shares_of_the_cells():
+    """A goal 1 m behind (10 cells) and three twins 3 m ahead seeing the same 12 cells: weighed by each goal's
+    own gain the twins count their cells three times and the tour goes ahead first; by their shares (4 each),
+    the goal behind is first."""
+    ex = Explorer(explore_config.ExplorationConfig(distance="tour", k1=1.0, k2=0.0), 0.2, 0.05, R_MAX)
+    pts = np.array([[-1.0, 0.0], [3.0, 0.0], [3.0, 0.0], [3.0, 0.0]])
+    gain, path = np.array([10.0, 12.0, 12.0, 12.0]), np.array([1.0, 3.0, 3.0, 3.0])
+    assert np.argmax(ex.utility(np.zeros(3), pts, gain, path)) == 1
+    assert np.argmax(ex.utility(np.zeros(3), pts, gain, path, shares=np.array([10.0, 4.0, 4.0, 4.0]))) == 0
+
+
 def test_utility_takes_a_side_opening_nearby_before_a_far_candidate():
     """A corridor with a side opening 2 m from the robot and a candidate at its far end (9 m): the
     opening has no candidate, and the utility scores its frontier beside the candidates."""
@@ -284,6 +315,32 @@ def test_utility_takes_a_side_opening_nearby_before_a_far_candidate():
     assert goal.kind == "frontier" and goal.position[1] > 3.8 and 1.2 < goal.position[0] < 2.1
     state[80, 25:40] = OCCUPIED  # no opening: the far end is the best goal
     assert ex.decide([1.5, 2.5, 0.0], view_of(state)).position[0] > 8.5
+
+
+def test_backtracking_takes_the_graph_unless_the_grid_knows_a_shortcut():
+    """The robot went up the west side of a wall, across its north end and down the east side; a candidate
+    of the first node is left at the west. With the wall closed the graph's way round is the way; once a
+    door through the wall is mapped, the graph's way round is a detour and the grid path is taken."""
+    def u_world(door):
+        s = np.full((200, 200), FREE, dtype=np.int8)
+        s[[0, -1], :] = s[:, [0, -1]] = OCCUPIED
+        s[0:160, 89:92] = OCCUPIED  # a wall at x = 4.5 m from y = 0 to 8 m
+        if door:
+            s[10:30, 89:92] = FREE  # a 1 m door at y = 0.5-1.5 m
+        s[40:80, 2:20] = UNKNOWN  # a hidden block west, x 0.1-1 m, y 2-4 m
+        return view_of(s)
+
+    cfg = explore_config.load(None, {"exploration.strategy": "nearest_candidate"}).exploration
+    ex = Explorer(cfg, 0.2, 0.05, R_MAX)
+    blocked = u_world(False).state == OCCUPIED
+    way = [(2, 1), (2, 3), (2, 5), (2, 7), (2, 8.8), (4, 8.8), (5.5, 8.8), (7, 8.8), (7, 7), (7, 5), (7, 3), (7, 1)]
+    for i, (x, y) in enumerate(way):
+        found = [Candidate(np.array([1.4, 3.0]), 1.0, 0, "A")] if i == 0 else []
+        ex.hybrid.add(np.array([x, y, 0.0]), found, blocked, 0.05, (0.0, 0.0))
+    round_the_wall = ex.decide(np.array([7.0, 1.0, 0.0]), u_world(door=False))
+    assert round_the_wall.kind == "candidate" and [tuple(w) for w in round_the_wall.waypoints] == [(7, 7), (4, 8.8)]
+    through_the_door = ex.decide(np.array([7.0, 1.0, 0.0]), u_world(door=True))
+    assert through_the_door.candidate is round_the_wall.candidate and through_the_door.waypoints == []
 
 
 def test_path_repetition():

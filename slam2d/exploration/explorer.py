@@ -3,8 +3,9 @@
 
 The utility of a candidate p (eq. 6): F(p) = A(p) · exp(−(k1·L + k2·γ)), with A the hidden
 unknown cells visible from p (information gain, rays cast on the grid), L how much later, on
-average over the goals' hidden cells, a tour through all open goals reaches them when p is first
-(``tour_regret``; or the grid path length, or the Euclidean distance as the paper) and γ the
+average over the goals' hidden cells (each counted once: a cell several goals see is shared among
+them), a tour through all open goals reaches them when p is first (``tour_regret``; or the grid
+path length, or the Euclidean distance as the paper) and γ the
 absolute angle between the robot's heading and the direction to p; the frontier regions' goals
 are scored by the same F beside the candidates. explore_lite's cost of a frontier:
 potential_scale · min_distance · resolution − gain_scale · size · resolution (the
@@ -31,6 +32,7 @@ from slam2d.exploration.gridops import (
     geodesic,
     information_gain,
     inside_polygon,
+    shared_gain,
     unknown_in_sight,
 )
 from slam2d.exploration.hybrid import FINAL, HybridMap
@@ -259,13 +261,17 @@ class Explorer:
         gain = np.concatenate([[c.gain for c in live], information_gain(self._hidden(view), fronts, self.cfg.gain_range,
                                                                          self.cfg.gain_rays)])  # fmt: skip
         path = np.concatenate([path, [f.path for f in found]])
-        score = self.utility(pose, points, gain, path, goals)
+        shares = None
+        if self.cfg.distance == "tour":
+            shares = shared_gain(self._hidden(view), points, self.cfg.gain_range, self.cfg.gain_rays)
+        score = self.utility(pose, points, gain, path, goals, shares)
         for c, sc in zip(live, score):
             c.utility = float(sc)
         k = int(np.argmax(score))
         if k >= len(live):
             return Goal(fronts[k - len(live)].copy(), "frontier", score=float(score[k]))
-        return Goal(target[k].copy(), "candidate", live[k], self._route(pose, view, live[k]), float(score[k]))
+        way = self._route(pose, view, live[k], target[k], path[k])
+        return Goal(target[k].copy(), "candidate", live[k], way, float(score[k]))
 
     def _hidden(self, view: GridView) -> GridView:
         """The grid the information gain is counted on: ``pocket_state`` (the hidden cells, what the coverage
@@ -354,22 +360,26 @@ class Explorer:
         for c, s in zip(live, score):
             c.utility = float(s)
         k = int(np.argmax(score))
-        return Goal(target[k].copy(), "candidate", live[k], self._route(pose, view, live[k]), float(score[k]))
+        way = self._route(pose, view, live[k], target[k], path[k])
+        return Goal(target[k].copy(), "candidate", live[k], way, float(score[k]))
 
-    def utility(self, pose, points, gain, path, goals=None) -> np.ndarray:
+    def utility(self, pose, points, gain, path, goals=None, shares=None) -> np.ndarray:
         """F(p) = A(p)·exp(−(k1·L + k2·γ)) for points (P, 2) m with gains (P,) cells and grid path lengths
-        (P,) m; ``goals`` (P, 2) m, where the robot drives for each (default ``points``), for ``distance: tour``."""
+        (P,) m; for ``distance: tour``, ``goals`` (P, 2) m where the robot drives for each (default ``points``) and
+        ``shares`` (P,) cells each goal's share of the hidden cells (``shared_gain``; default ``gain``)."""
         if self.cfg.distance == "euclidean":
             length = np.hypot(*(points - pose[:2]).T)
         elif self.cfg.distance == "tour":
-            length = tour_regret(points if goals is None else goals, path, gain)
+            length = tour_regret(points if goals is None else goals, path, gain if shares is None else shares)
         else:
             length = path
         gamma = np.abs(geometry.wrap_angle(np.arctan2(points[:, 1] - pose[1], points[:, 0] - pose[0]) - pose[2]))
         return gain * np.exp(-(self.cfg.k1 * length + self.cfg.k2 * gamma))
 
-    def _route(self, pose, view, chosen: Candidate) -> list:
-        """Waypoints over the topological graph to a candidate of an old final node (``backtrack: graph``)."""
+    def _route(self, pose, view, chosen: Candidate, target, path: float) -> list:
+        """Waypoints over the topological graph to a candidate of an old final node (``backtrack: graph``), driving
+        to ``target`` (x, y) m; none when their straight legs are longer than the grid path (``path`` m) by more
+        than a node step: the graph is a tree of the ways the robot came, and the grid knows a shortcut."""
         node = self.hybrid.nodes.get(chosen.node)
         if self.cfg.backtrack != "graph" or node is None or node.role != FINAL:
             return []
@@ -386,7 +396,8 @@ class Explorer:
             way.pop(0)
         while way and clear(way[-1] if len(way) == 1 else way[-2], chosen.position):
             way.pop()
-        return way
+        legs = np.diff(np.array([pose[:2], *way, target]), axis=0)
+        return way if np.hypot(*legs.T).sum() <= path + self.cfg.node_step else []
 
     # -- goal bookkeeping ---------------------------------------------------------------------
 

@@ -198,6 +198,49 @@ def _gain(state, gxy, n_rays, max_t, mark):
     return out
 
 
+@njit(cache=True)
+def _shared_gain(state, gxy, n_rays, max_t):
+    """Each point's unknown cells in sight (as ``_gain``), a cell seen from k of the points counted 1/k."""
+    h, w = state.shape
+    n = gxy.shape[0]
+    mark = np.zeros((h, w), dtype=np.int64)
+    seers = np.zeros((h, w), dtype=np.int64)
+    out = np.zeros(n)
+    for rnd in range(2):  # count the points seeing each cell, then share it among them
+        for p in range(n):
+            token = rnd * n + p + 1
+            gx, gy = gxy[p, 0], gxy[p, 1]
+            for b in range(n_rays):
+                a = 2.0 * np.pi * b / n_rays
+                dx, dy = np.cos(a), np.sin(a)
+                c, r = int(np.floor(gx)), int(np.floor(gy))
+                step_c, step_r, inv_x, inv_y, tmx, tmy = dda_start(gx, gy, dx, dy)
+                t = 0.0
+                while t < max_t:
+                    if r < 0 or c < 0 or r >= h or c >= w:
+                        out[p] += rnd  # beyond the map: unknown, no other point's
+                    else:
+                        s = state[r, c]
+                        if s == 1:
+                            break
+                        if s == 2 and mark[r, c] != token:
+                            mark[r, c] = token
+                            if rnd == 0:
+                                seers[r, c] += 1
+                            else:
+                                out[p] += 1.0 / seers[r, c]
+                    t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
+    return out
+
+
+def shared_gain(view: GridView, points, max_range: float, rays: int = 180) -> np.ndarray:
+    """:func:`information_gain` (P,) with the unknown cells seen from several points shared: a cell seen from
+    k of them counts 1/k to each, so the shares add up to the unknown area all the points see together."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    gxy = np.ascontiguousarray((points - np.asarray(view.origin)) / view.resolution)
+    return _shared_gain(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution)
+
+
 def information_gain(view: GridView, points, max_range: float, rays: int = 180) -> np.ndarray:
     """Unknown cells (P,) visible from each point (P, 2) m within ``max_range`` m: ``rays`` rays cast
     (Amanatides–Woo) through free and unknown cells until an occupied one."""
