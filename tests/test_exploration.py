@@ -278,8 +278,8 @@ def test_hidden_cells_seen_from_several_goals_are_shared_among_them():
     state[40:60, 70:90] = UNKNOWN
     view = view_of(state)
     pts = np.array([[1.0, 2.5], [1.0, 2.5], [4.0, 0.5]])
-    own = information_gain(view, pts, 6.0, 120)
-    shares = shared_gain(view, pts, 6.0, 120)
+    own, shares = shared_gain(view, pts, 6.0, 120)
+    assert np.array_equal(own, information_gain(view, pts, 6.0, 120))
     union = unknown_in_sight(view, pts[0], 6.0, 120) | unknown_in_sight(view, pts[2], 6.0, 120)
     assert shares.sum() == pytest.approx(union.sum())
     assert shares[0] == shares[1] < own[0] / 2 and own[2] / 3 < shares[2] < own[2]

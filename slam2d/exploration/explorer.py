@@ -258,12 +258,9 @@ class Explorer:
         fronts = np.array([f.goal for f in found]).reshape(-1, 2)
         points = np.concatenate([pts, fronts])
         goals = np.concatenate([target, fronts])
-        gain = np.concatenate([[c.gain for c in live], information_gain(self._hidden(view), fronts, self.cfg.gain_range,
-                                                                         self.cfg.gain_rays)])  # fmt: skip
+        own, shares = shared_gain(self._hidden(view), points, self.cfg.gain_range, self.cfg.gain_rays)
+        gain = np.concatenate([[c.gain for c in live], own[len(live) :]])
         path = np.concatenate([path, [f.path for f in found]])
-        shares = None
-        if self.cfg.distance == "tour":
-            shares = shared_gain(self._hidden(view), points, self.cfg.gain_range, self.cfg.gain_rays)
         score = self.utility(pose, points, gain, path, goals, shares)
         for c, sc in zip(live, score):
             c.utility = float(sc)

@@ -200,12 +200,13 @@ def _gain(state, gxy, n_rays, max_t, mark):
 
 @njit(cache=True)
 def _shared_gain(state, gxy, n_rays, max_t):
-    """Each point's unknown cells in sight (as ``_gain``), a cell seen from k of the points counted 1/k."""
+    """Each point's unknown cells in sight, as ``_gain`` (``own``), and its ``shares``: a cell seen from k of
+    the points counted 1/k."""
     h, w = state.shape
     n = gxy.shape[0]
     mark = np.zeros((h, w), dtype=np.int64)
     seers = np.zeros((h, w), dtype=np.int64)
-    out = np.zeros(n)
+    own, shares = np.zeros(n), np.zeros(n)
     for rnd in range(2):  # count the points seeing each cell, then share it among them
         for p in range(n):
             token = rnd * n + p + 1
@@ -218,7 +219,10 @@ def _shared_gain(state, gxy, n_rays, max_t):
                 t = 0.0
                 while t < max_t:
                     if r < 0 or c < 0 or r >= h or c >= w:
-                        out[p] += rnd  # beyond the map: unknown, no other point's
+                        if rnd == 0:  # beyond the map: unknown, no other point's
+                            own[p] += 1
+                        else:
+                            shares[p] += 1
                     else:
                         s = state[r, c]
                         if s == 1:
@@ -227,15 +231,16 @@ def _shared_gain(state, gxy, n_rays, max_t):
                             mark[r, c] = token
                             if rnd == 0:
                                 seers[r, c] += 1
+                                own[p] += 1
                             else:
-                                out[p] += 1.0 / seers[r, c]
+                                shares[p] += 1.0 / seers[r, c]
                     t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
-    return out
+    return own, shares
 
 
-def shared_gain(view: GridView, points, max_range: float, rays: int = 180) -> np.ndarray:
-    """:func:`information_gain` (P,) with the unknown cells seen from several points shared: a cell seen from
-    k of them counts 1/k to each, so the shares add up to the unknown area all the points see together."""
+def shared_gain(view: GridView, points, max_range: float, rays: int = 180) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`information_gain` (P,) of each point, and its share (P,) of the unknown cells: a cell seen from k of
+    the points counts 1/k to each, so the shares add up to the unknown area all the points see together."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     gxy = np.ascontiguousarray((points - np.asarray(view.origin)) / view.resolution)
     return _shared_gain(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution)
