@@ -170,44 +170,16 @@ def _snap(passable, cell, within: int):
 
 
 @njit(cache=True)
-def _gain(state, gxy, n_rays, max_t, mark):
-    h, w = state.shape
-    out = np.zeros(gxy.shape[0], dtype=np.int64)
-    for p in range(gxy.shape[0]):
-        token = p + 1
-        gx, gy = gxy[p, 0], gxy[p, 1]
-        count = 0
-        for b in range(n_rays):
-            a = 2.0 * np.pi * b / n_rays
-            dx, dy = np.cos(a), np.sin(a)
-            c, r = int(np.floor(gx)), int(np.floor(gy))
-            step_c, step_r, inv_x, inv_y, tmx, tmy = dda_start(gx, gy, dx, dy)
-            t = 0.0
-            while t < max_t:
-                if r < 0 or c < 0 or r >= h or c >= w:
-                    count += 1  # beyond the map: unknown (counted per step, not per cell)
-                else:
-                    s = state[r, c]
-                    if s == 1:
-                        break
-                    if s == 2 and mark[r, c] != token:
-                        mark[r, c] = token
-                        count += 1
-                t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
-        out[p] = count
-    return out
-
-
-@njit(cache=True)
-def _shared_gain(state, gxy, n_rays, max_t):
-    """Each point's unknown cells in sight, as ``_gain`` (``own``), and its ``shares``: a cell seen from k of
-    the points counted 1/k."""
+def _cast(state, gxy, n_rays, max_t, rounds):
+    """Rays from each point (P, 2) grid units through free and unknown cells until an occupied one: ``own`` (P,)
+    unknown cells in sight (steps beyond the map counted as unknown), the ``mark`` (H, W) of the last point seeing
+    each cell (1-based), and with ``rounds`` = 2 the ``shares`` (P,): a cell seen from k of the points is 1/k."""
     h, w = state.shape
     n = gxy.shape[0]
     mark = np.zeros((h, w), dtype=np.int64)
     seers = np.zeros((h, w), dtype=np.int64)
     own, shares = np.zeros(n), np.zeros(n)
-    for rnd in range(2):  # count the points seeing each cell, then share it among them
+    for rnd in range(rounds):  # count the points seeing each cell, then share it among them
         for p in range(n):
             token = rnd * n + p + 1
             gx, gy = gxy[p, 0], gxy[p, 1]
@@ -235,33 +207,31 @@ def _shared_gain(state, gxy, n_rays, max_t):
                             else:
                                 shares[p] += 1.0 / seers[r, c]
                     t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
-    return own, shares
+    return own, shares, mark
 
 
-def shared_gain(view: GridView, points, max_range: float, rays: int = 180) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`information_gain` (P,) of each point, and its share (P,) of the unknown cells: a cell seen from k of
-    the points counts 1/k to each, so the shares add up to the unknown area all the points see together."""
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    gxy = np.ascontiguousarray((points - np.asarray(view.origin)) / view.resolution)
-    return _shared_gain(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution)
+def _rays(view: GridView, points, max_range: float, rays: int, rounds: int):
+    gxy = np.ascontiguousarray((np.asarray(points, dtype=np.float64).reshape(-1, 2) - np.asarray(view.origin))
+                               / view.resolution)  # fmt: skip
+    return _cast(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution, rounds)
 
 
 def information_gain(view: GridView, points, max_range: float, rays: int = 180) -> np.ndarray:
     """Unknown cells (P,) visible from each point (P, 2) m within ``max_range`` m: ``rays`` rays cast
     (Amanatides–Woo) through free and unknown cells until an occupied one."""
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    gxy = np.ascontiguousarray((points - np.asarray(view.origin)) / view.resolution)
-    mark = np.zeros(view.shape, dtype=np.int64)
-    return _gain(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution, mark)
+    return _rays(view, points, max_range, rays, 1)[0]
+
+
+def shared_gain(view: GridView, points, max_range: float, rays: int = 180) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`information_gain` (P,) of each point, and its share (P,) of the unknown cells: a cell seen from k of
+    the points counts 1/k to each, so the shares add up to the unknown area all the points see together."""
+    own, shares, _ = _rays(view, points, max_range, rays, 2)
+    return own, shares
 
 
 def unknown_in_sight(view: GridView, point, max_range: float, rays: int = 180) -> np.ndarray:
     """The unknown cells (H, W) bool that :func:`information_gain` counts for one point (x, y) m."""
-    gxy = np.ascontiguousarray((np.asarray(point, dtype=np.float64).reshape(1, 2) - np.asarray(view.origin))
-                               / view.resolution)  # fmt: skip
-    mark = np.zeros(view.shape, dtype=np.int64)
-    _gain(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution, mark)
-    return mark == 1
+    return _rays(view, point, max_range, rays, 1)[2] == 1
 
 
 # --------------------------------------------------------------------------- straight-line reachability
