@@ -170,6 +170,14 @@ def _snap(passable, cell, within: int):
 
 
 @njit(cache=True)
+def _ray_start(gx, gy, b, n_rays):
+    """Ray ``b`` of ``n_rays`` evenly spread from (gx, gy) grid units: its cell (col, row) and traversal state."""
+    a = 2.0 * np.pi * b / n_rays
+    step_c, step_r, inv_x, inv_y, tmx, tmy = dda_start(gx, gy, np.cos(a), np.sin(a))
+    return int(np.floor(gx)), int(np.floor(gy)), step_c, step_r, inv_x, inv_y, tmx, tmy
+
+
+@njit(cache=True)
 def _cast(state, gxy, n_rays, max_t, rounds):
     """Rays from each point (P, 2) grid units through free and unknown cells until an occupied one: ``own`` (P,)
     unknown cells in sight (steps beyond the map counted as unknown), the ``mark`` (H, W) of the last point seeing
@@ -184,10 +192,7 @@ def _cast(state, gxy, n_rays, max_t, rounds):
             token = rnd * n + p + 1
             gx, gy = gxy[p, 0], gxy[p, 1]
             for b in range(n_rays):
-                a = 2.0 * np.pi * b / n_rays
-                dx, dy = np.cos(a), np.sin(a)
-                c, r = int(np.floor(gx)), int(np.floor(gy))
-                step_c, step_r, inv_x, inv_y, tmx, tmy = dda_start(gx, gy, dx, dy)
+                c, r, step_c, step_r, inv_x, inv_y, tmx, tmy = _ray_start(gx, gy, b, n_rays)
                 t = 0.0
                 while t < max_t:
                     if r < 0 or c < 0 or r >= h or c >= w:
@@ -278,10 +283,7 @@ def _mark_visible(free, gxy, n_rays, max_t, seen):
     for p in range(gxy.shape[0]):
         gx, gy = gxy[p, 0], gxy[p, 1]
         for b in range(n_rays):
-            a = 2.0 * np.pi * b / n_rays
-            dx, dy = np.cos(a), np.sin(a)
-            c, r = int(np.floor(gx)), int(np.floor(gy))
-            step_c, step_r, inv_x, inv_y, tmx, tmy = dda_start(gx, gy, dx, dy)
+            c, r, step_c, step_r, inv_x, inv_y, tmx, tmy = _ray_start(gx, gy, b, n_rays)
             t = 0.0
             while t < max_t and 0 <= r < h and 0 <= c < w and free[r, c]:
                 seen[r, c] = True
