@@ -313,6 +313,14 @@ def test_utility_takes_a_side_opening_nearby_before_a_far_candidate():
     ex.hybrid.add([1.5, 2.5, 0.0], [far], state == OCCUPIED, view.resolution, view.origin)
     goal = ex.decide([1.5, 2.5, 0.0], view)
     assert goal.kind == "frontier" and goal.position[1] > 3.8 and 1.2 < goal.position[0] < 2.1
+    # the decision's options, best first, say why: the opening, then the far candidate
+    first, *rest = goal.options
+    assert first["kind"] == "frontier" and np.allclose(first["position"], goal.position, atol=1e-3)
+    assert [o["F"] for o in goal.options] == sorted((o["F"] for o in goal.options), reverse=True)
+    assert any(o["kind"] == "candidate" and o["position"][0] > 8.5 for o in rest)
+    for o in goal.options:
+        cost = ex.cfg.k1 * o["L_m"] + ex.cfg.k2 * o["gamma_rad"]
+        assert o["F"] == pytest.approx(o["gain_m2"] / 0.05**2 * np.exp(-cost), rel=2e-3)
     state[80, 25:40] = OCCUPIED  # no opening: the far end is the best goal
     assert ex.decide([1.5, 2.5, 0.0], view_of(state)).position[0] > 8.5
 
@@ -387,6 +395,10 @@ def test_exploring_two_rooms_terminates_with_full_coverage(tmp_path, strategy):
     assert m["nodes_final"] <= m["nodes_all"]
     hybrid = json.loads((folder / "hybrid.json").read_text())
     assert len(hybrid["nodes"]) == m["nodes_all"]
+    goals = json.loads((folder / "goals.json").read_text())
+    chosen = [g for g in goals if "options" in g]
+    assert len(chosen) == (sum(g["kind"] != "pocket" for g in goals) if strategy == "utility" else 0)
+    assert all(np.allclose(g["options"][0]["position"], g["position"], atol=1e-3) for g in chosen)
     names = ["config.yaml", "map.pgm", "map.yaml", "map.png", "coverage.png", "coverage.csv", "trajectory.tum"]
     names += ["explore.gif"] if strategy == "utility" else []
     for name in names:

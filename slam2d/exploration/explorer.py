@@ -42,6 +42,8 @@ FRONTIER_STRATEGIES = ("nearest_frontier", "explore_lite")
 POCKET_SPACING = 0.2  # m between the places tried as views of pockets
 POCKET_RAYS = 360  # rays cast from each of them (one a degree, as the laser's beams)
 POCKET_BATCH = 8, 256  # places scored at a time, nearest first: the first batch, doubling up to the last
+OPTIONS_KEPT = 10  # a utility decision's best options kept with its goal (goals.json)
+OPTION_TERMS = "gain_m2", "share_m2", "path_m", "L_m", "gamma_rad", "F"
 
 
 def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None = None) -> np.ndarray:
@@ -110,7 +112,8 @@ def _window_any(mask, before, after, outside, axis):
 @dataclass(eq=False)
 class Goal:
     """A chosen goal: ``position`` (x, y) m, ``kind`` ("frontier" / "candidate"), the candidate if any,
-    ``waypoints`` (x, y) m to pass first (backtracking over the graph), ``score`` of the choice."""
+    ``waypoints`` (x, y) m to pass first (backtracking over the graph), ``score`` of the choice, and for the
+    utility the decision's best ``options`` (the chosen goal first): why it went there."""
 
     position: np.ndarray
     kind: str
@@ -118,6 +121,7 @@ class Goal:
     waypoints: list = field(default_factory=list)
     score: float = float("nan")
     targets: np.ndarray | None = None  # (K, 2) m: the hidden cells a pocket view was chosen to see
+    options: list = field(default_factory=list)  # dicts: position, kind, gain_m2, share_m2, path_m, L_m, gamma_rad, F
 
 
 class Explorer:
@@ -261,14 +265,16 @@ class Explorer:
         own, shares = shared_gain(self._hidden(view), points, self.cfg.gain_range, self.cfg.gain_rays)
         gain = np.concatenate([[c.gain for c in live], own[len(live) :]])
         path = np.concatenate([path, [f.path for f in found]])
-        score = self.utility(pose, points, gain, path, goals, shares)
+        score, length, gamma = self.utility_terms(pose, points, gain, path, goals, shares)
         for c, sc in zip(live, score):
             c.utility = float(sc)
         k = int(np.argmax(score))
+        terms = np.column_stack([gain * view.resolution**2, shares * view.resolution**2, path, length, gamma, score])
+        options = [_option(goals[i], i < len(live), terms[i]) for i in np.argsort(-score, kind="stable")[:OPTIONS_KEPT]]
         if k >= len(live):
-            return Goal(fronts[k - len(live)].copy(), "frontier", score=float(score[k]))
+            return Goal(fronts[k - len(live)].copy(), "frontier", score=float(score[k]), options=options)
         way = self._route(pose, view, live[k], target[k], path[k])
-        return Goal(target[k].copy(), "candidate", live[k], way, float(score[k]))
+        return Goal(target[k].copy(), "candidate", live[k], way, float(score[k]), options=options)
 
     def _hidden(self, view: GridView) -> GridView:
         """The grid the information gain is counted on: ``pocket_state`` (the hidden cells, what the coverage
@@ -364,6 +370,10 @@ class Explorer:
         """F(p) = A(p)·exp(−(k1·L + k2·γ)) for points (P, 2) m with gains (P,) cells and grid path lengths
         (P,) m; for ``distance: tour``, ``goals`` (P, 2) m where the robot drives for each (default ``points``) and
         ``shares`` (P,) cells each goal's share of the hidden cells (``shared_gain``; default ``gain``)."""
+        return self.utility_terms(pose, points, gain, path, goals, shares)[0]
+
+    def utility_terms(self, pose, points, gain, path, goals=None, shares=None) -> tuple[np.ndarray, ...]:
+        """:meth:`utility` F (P,) with its terms: L (P,) m and γ (P,) rad."""
         if self.cfg.distance == "euclidean":
             length = np.hypot(*(points - pose[:2]).T)
         elif self.cfg.distance == "tour":
@@ -371,7 +381,7 @@ class Explorer:
         else:
             length = path
         gamma = np.abs(geometry.wrap_angle(np.arctan2(points[:, 1] - pose[1], points[:, 0] - pose[0]) - pose[2]))
-        return gain * np.exp(-(self.cfg.k1 * length + self.cfg.k2 * gamma))
+        return gain * np.exp(-(self.cfg.k1 * length + self.cfg.k2 * gamma)), length, gamma
 
     def _route(self, pose, view, chosen: Candidate, target, path: float) -> list:
         """Waypoints over the topological graph to a candidate of an old final node (``backtrack: graph``), driving
@@ -440,6 +450,12 @@ class Explorer:
         self.inaccessible.append(goal.position.copy())
         if goal.candidate is not None:
             goal.candidate.alive = False
+
+
+def _option(goal, candidate: bool, terms) -> dict:
+    """One option of a utility decision as goals.json keeps it: where (x, y) m, the kind, and ``OPTION_TERMS``."""
+    return {"position": np.round(goal, 3).tolist(), "kind": "candidate" if candidate else "frontier",
+            **{key: float(f"{v:.4g}") for key, v in zip(OPTION_TERMS, terms)}}
 
 
 @njit(cache=True)

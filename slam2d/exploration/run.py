@@ -147,6 +147,8 @@ class _Loop:
         self.goal_from = self.robot.pose[:2].copy()
         self.goals.append({"time": now, "position": goal.position.tolist(), "kind": goal.kind,
                            "waypoints": len(goal.waypoints), "outcome": "active"})  # fmt: skip
+        if goal.options:
+            self.goals[-1]["options"] = goal.options
 
     def next_leg(self, now: float) -> None:
         from slam2d.navigation import Navigator
