@@ -268,9 +268,10 @@ class Explorer:
         score, length, gamma = self.utility_terms(pose, points, gain, path, goals, shares)
         for c, sc in zip(live, score):
             c.utility = float(sc)
-        k = int(np.argmax(score))
+        best = np.argsort(-score, kind="stable")[:OPTIONS_KEPT]  # best first; ties keep the first, as argmax
+        k = int(best[0])
         terms = np.column_stack([gain * view.resolution**2, shares * view.resolution**2, path, length, gamma, score])
-        options = [_option(goals[i], i < len(live), terms[i]) for i in np.argsort(-score, kind="stable")[:OPTIONS_KEPT]]
+        options = [_option(goals[i], i < len(live), terms[i]) for i in best]
         if k >= len(live):
             return Goal(fronts[k - len(live)].copy(), "frontier", score=float(score[k]), options=options)
         way = self._route(pose, view, live[k], target[k], path[k])
