@@ -15,6 +15,7 @@ from slam2d.navigation import (
     run_navigation,
     world_grid,
 )
+from slam2d.navigation.dwa import arcs
 from slam2d.navigation.fsm import ACTIONS, sector_bits, state_code
 from slam2d.planning.grid import PlanningGrid
 from slam2d.sim import Robot, RobotConfig, World, scatter_wanderers
@@ -78,6 +79,45 @@ def test_dwa_with_no_admissible_arc_brakes_on_the_arc_the_robot_is_on():
     assert cmd.blocked and cmd.state == "no admissible arc"
     assert cmd.v == pytest.approx(0.8 - dwa.robot.max_accel * dwa.cfg.period)
     assert cmd.w / cmd.v == pytest.approx(-0.6 / 0.8)
+
+
+def scan_of_segments(segments, rng, noise: float = 0.01) -> np.ndarray:
+    """Hit points (M, 2) m of 360 beams (1 deg apart) from the origin on wall ``segments`` ((a, b) pairs),
+    ranges with Gaussian ``noise`` (m) as the simulator's laser."""
+    ang = np.deg2rad(np.arange(-180.0, 180.0, 1.0))
+    ray = np.column_stack([np.cos(ang), np.sin(ang)])
+    ranges = np.full(len(ang), np.inf)
+    for a, b in segments:
+        a, e = np.asarray(a, float), np.subtract(b, a)
+        den = ray[:, 0] * e[1] - ray[:, 1] * e[0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t, u = (a[0] * e[1] - a[1] * e[0]) / den, (a[0] * ray[:, 1] - a[1] * ray[:, 0]) / den
+        ranges = np.where((t > 0) & (u >= 0) & (u <= 1), np.minimum(ranges, t), ranges)
+    seen = np.isfinite(ranges)
+    return ray[seen] * (ranges[seen] + rng.normal(0.0, noise, seen.sum()))[:, None]
+
+
+def test_dwa_never_commands_an_arc_it_cannot_stop_on_short_of_a_door_corner():
+    """Out of a door at speed, turning right, a wall corner ahead on the right (the scene of a
+    contact in office_d): one period on each commanded arc, then braking on it, keeps the disc
+    1.5 cm from every laser point (an arc passing by may come within 2 cm). Thinning the points
+    to one per 4 cm square once let an arc through the corner pass the check (down to 0.3 cm)."""
+    dwa, rng = DynamicWindow(), np.random.default_rng(0)
+    walls = [((0.08, -0.76), (0.39, -0.22)), ((0.485, -0.27), (0.78, 0.10)), ((-0.31, 0.35), (-0.55, 0.11))]
+    path = np.column_stack([np.linspace(-0.04, 0.56, 20), np.linspace(0.015, 0.754, 20)])
+    checked = 0
+    for shift in np.stack(np.meshgrid(*[np.linspace(-0.03, 0.03, 7)] * 2), -1).reshape(-1, 2):
+        for v0, w0 in [(v0, w0) for v0 in (0.6, 0.7, 0.75, 0.8) for w0 in (-0.6, -0.5, -0.3)]:
+            points = scan_of_segments([(np.add(a, shift), np.add(b, shift)) for a, b in walls], rng)
+            cmd = dwa.command(np.zeros(3), np.array([v0, w0]), points, path)
+            if cmd.v < 1e-3 or cmd.state == "no admissible arc":  # a start it cannot stop from
+                continue
+            stop = cmd.v * dwa.cfg.period + cmd.v**2 / (2 * dwa.robot.max_accel)
+            on_arc = arcs([cmd.v], [cmd.w], np.linspace(0.0, stop / cmd.v, 400))[0, :, :2]
+            gap = np.sqrt(((on_arc[:, None] - points[None]) ** 2).sum(-1)).min() - dwa.robot.radius
+            assert gap > 0.015, (shift, v0, w0, cmd)
+            checked += 1
+    assert checked > 200
 
 
 def test_dwa_swerves_round_a_disc_that_appears_in_a_hall(hall):

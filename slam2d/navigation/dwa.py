@@ -30,10 +30,9 @@ from slam2d.config import Section
 from slam2d.navigation.common import Command, approach_speed, in_robot_frame, path_ahead, point_along
 from slam2d.sim.robot import RobotConfig
 
-__all__ = ["DwaConfig", "DynamicWindow", "arcs", "thin_points"]
+__all__ = ["DwaConfig", "DynamicWindow", "arcs"]
 
 _SQUEEZE = 0.02  # m, closest an arc passing by may bring the robot's disc to a point within the margin
-VOXEL = 0.04  # m, laser points are thinned to one per square of this side (float32 distances)
 TIGHT = (0.2, 0.3)  # m; with less clearance than the first, the carrot comes in, down to the second at none
 
 
@@ -65,15 +64,6 @@ def arcs(v, w, times) -> np.ndarray:
     turn = w * t
     chord = v * t * np.sinc(turn / (2 * np.pi))  # arc length x sin(turn / 2) / (turn / 2)
     return np.stack([chord * np.cos(turn / 2), chord * np.sin(turn / 2), turn], axis=-1)
-
-
-def thin_points(points: np.ndarray, size: float) -> np.ndarray:
-    """Indices of one point (the first) of ``points`` (M, 2) per ``size``-metre square: a dense
-    scan's near walls cost less, and no point moves."""
-    if len(points) == 0:
-        return np.zeros(0, np.int64)
-    _, first = np.unique(np.floor(points / size).astype(np.int64), axis=0, return_index=True)
-    return np.sort(first)
 
 
 class DynamicWindow:
@@ -115,7 +105,7 @@ class DynamicWindow:
         traj = arcs(v, w, self.times)
         unmapped = np.zeros(len(points), bool) if unmapped is None else np.asarray(unmapped, bool).reshape(-1)
         within = d2 < self._reach(v.max()) ** 2  # points that can matter to an arc
-        dist = self._distances(traj, points[within], unmapped[within], d2[within])
+        dist = self._distances(traj, points[within], unmapped[within])
         # a point that may move near the arcs: no squeezing along the path
         on_path = self._keeps_to(traj, pose, path, self.cfg.margin) & ~(unmapped & within).any()
         ok, clearance = self._admissible(v, dist, on_path)
@@ -165,17 +155,13 @@ class DynamicWindow:
         turn = self.robot.max_speed * max(float(np.cos(bend)), 0.0)
         return min(turn, approach_speed(left, self.cfg.decel * self.robot.max_accel))
 
-    def _distances(self, traj: np.ndarray, near: np.ndarray, moving: np.ndarray, d2: np.ndarray) -> np.ndarray:
+    def _distances(self, traj: np.ndarray, near: np.ndarray, moving: np.ndarray) -> np.ndarray:
         """Distance (S, K + 1) m from the robot's centre on each arc sample (now first) to the nearest
-        of the points ``near`` (M, 2) (``d2`` (M,) m^2 from the centre), less the grown margin of
-        ``moving`` (unmapped) ones."""
+        of the points ``near`` (M, 2), every one of them (thinning them let an arc through a corner
+        pass), less the grown margin of ``moving`` (unmapped) ones."""
         s, k = traj.shape[:2]
         if len(near) == 0:
             return np.full((s, k + 1), np.inf)
-        nearest = np.argsort(d2, kind="stable")
-        near, moving = near[nearest], moving[nearest]
-        thin = thin_points(near, VOXEL)  # the point nearest the robot in each square: a corner is not thinned away
-        near, moving = near[thin], moving[thin]
         order = np.argsort(moving, kind="stable")  # mapped points first, then the unmapped ones
         near, n_static = near[order].astype(np.float32), int((~moving).sum())
         now = np.full(s, np.sqrt(np.einsum("ij,ij->i", near, near).min()))  # the same points as along the arcs
