@@ -17,14 +17,15 @@ Admissible arcs are scored by
 - velocity: closeness to the target speed (full speed, lowered where the path
   ahead bends away from the heading and near the goal to the speed that stops there),
 
-and the best is returned. Arcs × trajectory samples × points are one numpy
-array: no Python loop over samples or beams.
+and the best is returned. Each arc sample's nearest laser point comes from a k-d tree
+of the points: no Python loop over samples or beams.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from pydantic import Field
+from scipy.spatial import cKDTree
 
 from slam2d.config import Section
 from slam2d.navigation.common import Command, approach_speed, in_robot_frame, path_ahead, point_along
@@ -162,18 +163,12 @@ class DynamicWindow:
         s, k = traj.shape[:2]
         if len(near) == 0:
             return np.full((s, k + 1), np.inf)
-        order = np.argsort(moving, kind="stable")  # mapped points first, then the unmapped ones
-        near, n_static = near[order].astype(np.float32), int((~moving).sum())
-        now = np.full(s, np.sqrt(np.einsum("ij,ij->i", near, near).min()))  # the same points as along the arcs
-        flat = traj[:, :, :2].reshape(-1, 2).astype(np.float32)
-        d2 = flat @ (-2.0 * near.T)  # |a - b|^2 = |a|^2 + |b|^2 - 2 a.b, one matrix product
-        d2 += np.einsum("ij,ij->i", near, near)[None, :]
-        ff = np.einsum("ij,ij->i", flat, flat)
+        flat = traj[:, :, :2].reshape(-1, 2)
         along = np.full((s, k), np.inf)
-        for cols, grow in ((slice(0, n_static), 0.0), (slice(n_static, None), self._growth())):
-            if d2[:, cols].shape[1]:
-                d = np.sqrt(np.maximum(d2[:, cols].min(axis=1) + ff, 0.0)).astype(np.float64).reshape(s, k)
-                along = np.minimum(along, d - grow)
+        for group, grow in ((near[~moving], 0.0), (near[moving], self._growth())):
+            if len(group):
+                along = np.minimum(along, cKDTree(group).query(flat)[0].reshape(s, k) - grow)
+        now = np.full(s, np.sqrt(np.einsum("ij,ij->i", near, near).min()))
         return np.column_stack([now, along])
 
     def _growth(self) -> np.ndarray:
@@ -210,8 +205,8 @@ class DynamicWindow:
         local = local[np.einsum("ij,ij->i", local, local) < (self.robot.max_speed * self.cfg.horizon + band) ** 2]
         if len(local) == 0:
             return np.zeros(len(traj), bool)
-        d2 = ((traj[:, :, None, :2] - local[None, None]) ** 2).sum(-1).min(axis=2)  # (S, K) to its points
-        return d2.max(axis=1) <= band**2
+        gap = cKDTree(local).query(traj[:, :, :2].reshape(-1, 2))[0].reshape(traj.shape[:2])  # (S, K) m
+        return gap.max(axis=1) <= band
 
     def _scores(self, v, traj, clearance, pose, path) -> np.ndarray:
         """Weighted score (S,) of every arc (higher is better)."""
