@@ -33,6 +33,7 @@ from slam2d.exploration.gridops import (
     information_gain,
     inside_polygon,
     shared_gain,
+    straight_reachable,
     unknown_in_sight,
 )
 from slam2d.exploration.hybrid import FINAL, HybridMap
@@ -391,8 +392,6 @@ class Explorer:
         node = self.hybrid.nodes.get(chosen.node)
         if self.cfg.backtrack != "graph" or node is None or node.role != FINAL:
             return []
-        from slam2d.exploration.gridops import straight_reachable
-
         blocked = view.state == OCCUPIED
         width = self.cfg.box_width
 
