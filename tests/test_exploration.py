@@ -411,6 +411,41 @@ def test_exploring_two_rooms_terminates_with_full_coverage(tmp_path, strategy):
     assert grid.free_mask()[cell[0], cell[1]]
 
 
+def test_a_bounded_exploration_stays_in_its_polygon_and_counts_coverage_inside_it(tmp_path):
+    """Bounds around room A of the two rooms: the laser sees into room B through the door, but no goal
+    (frontier, candidate or view of a pocket) lies outside the polygon, the robot stays in room A, and
+    the coverage and the map's IoU are counted inside the polygon."""
+    from slam2d.exploration.run import run_explore
+
+    world = two_rooms_png(tmp_path)
+    box = [[0.3, 0.3], [4.3, 0.3], [4.3, 3.7], [0.3, 3.7]]
+    cfg = explore_config.load(None, {
+        "output.root": str(tmp_path / "out"), "dataset.simulator.world": str(world), "seed": 1,
+        "exploration.start": [1.5, 2.0, 0.0], "exploration.max_time": 150, "exploration.animation": False,
+        "exploration.bounds": box,
+    })  # fmt: skip
+    folder = run_explore(cfg)
+    m = json.loads((folder / "metrics.json").read_text())
+    assert m["stop_reason"] == "done" and not m["premature_stop"] and m["coverage"] >= 0.99
+    assert m["reachable_area_m2"] < 4.0 * 3.0 and m["map_iou"] > 0.85  # room A alone
+    goals = np.array([g["position"] for g in json.loads((folder / "goals.json").read_text())])
+    assert len(goals) and (goals[:, 0] < 4.3).all()
+    path = np.loadtxt(folder / "trajectory_true.tum")
+    assert path[:, 1].max() < 4.3
+
+
+def test_bounds_must_be_a_polygon_around_the_start(tmp_path):
+    from slam2d.exploration.run import run_explore
+
+    for bad, what in (([[0, 0], [1, 0]], "at least 3"), ([[0, 0], [1, 0], [2, 0]], "no area")):
+        with pytest.raises(InputError, match=what):
+            explore_config.load(None, {"exploration.bounds": bad})
+    cfg = explore_config.load(None, {"output.root": str(tmp_path), "exploration.bounds": [[20, 20], [21, 20], [21, 21]]})
+    with pytest.raises(InputError, match="outside the polygon"):
+        run_explore(cfg)
+    assert not list(tmp_path.iterdir())
+
+
 def test_the_area_to_explore_leaves_out_what_a_plan_leaves_unknown(tmp_path):
     """A room whose wall has a one-pixel hole onto a band of the plan's unknown grey (205, a wall's
     interior in a scanned plan): the laser sees into the band through the hole, but the band is no

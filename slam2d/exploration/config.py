@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, ValidationError
+from pydantic import Field, ValidationError, field_validator
 
 from slam2d import config as config_mod
 from slam2d.config import ExperimentConfig, Section
@@ -63,6 +64,19 @@ class ExplorationConfig(Section):
     animation: bool = Field(True, description="an animated GIF of the exploration in the results folder")
     snapshot_period: float = Field(5.0, gt=0, description="s between map snapshots kept for the animation")
     options: dict[str, Any] = Field(default_factory=dict, description="navigator parameters (NavigatorConfig)")
+
+    @field_validator("bounds")
+    @classmethod
+    def _a_polygon(cls, bounds):
+        """At least three finite vertices enclosing some area (shoelace formula)."""
+        if bounds is None:
+            return bounds
+        if len(bounds) < 3 or not all(math.isfinite(v) for p in bounds for v in p):
+            raise ValueError(f"a polygon needs at least 3 finite (x, y) vertices, got {len(bounds)}")
+        area = sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(bounds, bounds[1:] + bounds[:1])) / 2
+        if abs(area) < 1e-9:
+            raise ValueError("the polygon encloses no area")
+        return bounds
 
 
 class ExploreConfig(ExperimentConfig):

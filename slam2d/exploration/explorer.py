@@ -142,6 +142,7 @@ class Explorer:
         self.decision_seconds: list[float] = []
         self.fallbacks = self.pocket_goals = self.tight_goals = 0
         self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest view counted on
+        self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
 
     # -- nodes and candidates --------------------------------------------------------------
 
@@ -283,16 +284,28 @@ class Explorer:
         counts as unexplored; rays stopped by gaps between occupied cells narrower than the robot's radius,
         so that the unknown inside furniture or behind a wall seen at a grazing angle keeps no goal open)."""
         if self._hidden_of[0] is not view:
-            state = pocket_state(view.state, int(self.radius / view.resolution))
+            state = pocket_state(view.state, int(self.radius / view.resolution), self._outside(view))
             self._hidden_of = view, GridView(state, view.resolution, view.origin)
         return self._hidden_of[1]
 
+    def _outside(self, view: GridView) -> np.ndarray | None:
+        """The view's cells (H, W) bool outside the bounding polygon, which no goal is chosen to see; None
+        without bounds."""
+        if self.cfg.bounds is None:
+            return None
+        frame = view.shape, tuple(np.asarray(view.origin, dtype=float)), view.resolution
+        if self._outside_of[0] != frame:
+            rows, cols = np.indices(view.shape)
+            inside = inside_polygon(view.to_world(np.column_stack([rows.ravel(), cols.ravel()])), self.cfg.bounds)
+            self._outside_of = frame, ~inside.reshape(view.shape)
+        return self._outside_of[1]
+
     def _pocket_state(self, view: GridView) -> np.ndarray:
-        retired = None
+        retired = self._outside(view)
+        retired = np.zeros(view.shape, dtype=bool) if retired is None else retired.copy()
         if len(self.retired):
             cells = view.to_cell(self.retired)
             cells = cells[view.inside(cells)]
-            retired = np.zeros(view.shape, dtype=bool)
             retired[cells[:, 0], cells[:, 1]] = True
         return pocket_state(view.state, int(self.radius / view.resolution), retired)
 
@@ -318,6 +331,8 @@ class Explorer:
         order = np.argsort(distance[rows, cols])
         cells = np.column_stack([rows[order], cols[order]])
         xy = view.to_world(cells)
+        if self.cfg.bounds is not None:
+            xy = xy[inside_polygon(xy, self.cfg.bounds)]
         avoid = self.visited + self.inaccessible
         if avoid:
             from scipy.spatial import cKDTree

@@ -26,7 +26,7 @@ from slam2d import config as config_mod
 from slam2d.errors import InputError
 from slam2d.exploration.config import ExploreConfig
 from slam2d.exploration.explorer import Explorer, Goal
-from slam2d.exploration.gridops import GridView, LiveClearance
+from slam2d.exploration.gridops import GridView, LiveClearance, inside_polygon
 
 log = logging.getLogger(__name__)
 
@@ -105,16 +105,19 @@ class _Loop:
             self.world, sim.world, self.truth_free, self.truth_frame, cfg.seed)  # fmt: skip
         if not self.world.free(start[None, :2], 0.2)[0]:
             raise InputError("exploration.start", f"({start[0]:.2f}, {start[1]:.2f}) is not free for the robot")
+        if self.ecfg.bounds is not None and not inside_polygon(start[None, :2], self.ecfg.bounds)[0]:
+            raise InputError("exploration.bounds", f"the start ({start[0]:.2f}, {start[1]:.2f}) is outside the polygon")
         self.robot = Robot(self.world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), seed=cfg.seed)
         # a goal the map comes to block is inaccessible at once: the explorer picks another
         self.options = _navigator_options({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
                                           True)  # fmt: skip
         # the robot's centre goes where the navigator plans: radius + inflation margin from walls
+        self.ignored = outside_bounds(self.world.unmapped, self.truth_frame, self.truth_free.shape, self.ecfg.bounds)
         self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2],
                                         self.robot.cfg.radius + self.options.inflation_margin,
-                                        sim.laser.range_max, self.world.unmapped)  # fmt: skip
+                                        sim.laser.range_max, self.ignored)  # fmt: skip
         self.reachable_disc = reachable_free(self.truth_free, self.truth_frame, start[:2], self.robot.cfg.radius,
-                                             sim.laser.range_max, self.world.unmapped)  # fmt: skip
+                                             sim.laser.range_max, self.ignored)  # fmt: skip
         self.slam = OnlineSlam(cfg)
         self.explorer = Explorer(self.ecfg, self.robot.cfg.radius, self.options.inflation_margin,
                                  sim.laser.range_max)  # fmt: skip
@@ -194,7 +197,7 @@ def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
     cfg = resolved(cfg)
     loop, ecfg = _Loop(cfg), cfg.exploration
     period = loop.options.period
-    cover = Coverage(loop.reachable, loop.truth_frame, cfg.mapping, loop.world.unmapped)
+    cover = Coverage(loop.reachable, loop.truth_frame, cfg.mapping, loop.ignored)
     step = loop.robot.step(0.0, 0.0, 0.0)
     t0 = step.scan.stamp
     loop.slam.add(step.scan)
@@ -397,6 +400,17 @@ def reachable_free(free: np.ndarray, frame, start_xy, radius: float = 0.25, max_
     origins = np.column_stack([cols * k + 0.5, rows * k + 0.5])
     area = visible_from(free, res, origins, max_range) | robot
     return area if unmapped is None else area & ~unmapped
+
+
+def outside_bounds(unmapped: np.ndarray | None, frame, shape, bounds) -> np.ndarray | None:
+    """The world's cells (H, W) bool that no coverage or IoU counts: the plan's ``unmapped`` ones and those
+    outside the bounding polygon ``bounds`` (K, 2) m; None when there are none."""
+    if bounds is None:
+        return unmapped
+    rows, cols = np.indices(shape)
+    centres = frame.cell_to_world(np.column_stack([rows.ravel(), cols.ravel()]))
+    outside = ~inside_polygon(centres, bounds).reshape(shape)
+    return outside if unmapped is None else outside | unmapped
 
 
 def seeded_start(world, name: str, free: np.ndarray, frame, seed: int) -> np.ndarray:
