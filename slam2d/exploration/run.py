@@ -110,7 +110,7 @@ class _Loop:
         self.robot = Robot(self.world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), seed=cfg.seed)
         # a goal the map comes to block is inaccessible at once: the explorer picks another
         self.options = _navigator_options({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
-                                          True)  # fmt: skip
+                                          True, "exploration.options")  # fmt: skip
         # the robot's centre goes where the navigator plans: radius + inflation margin from walls
         self.ignored = outside_bounds(self.world.unmapped, self.truth_frame, self.truth_free.shape, self.ecfg.bounds)
         self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2],

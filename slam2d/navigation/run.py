@@ -172,7 +172,8 @@ def _route_start(world: str) -> np.ndarray:
     return np.array([*route[0], np.arctan2(d[1], d[0])])
 
 
-def _navigator_options(options: dict[str, Any], slam: bool):
+def _navigator_options(options: dict[str, Any], slam: bool, section: str = "navigation.options"):
+    """The NavigatorConfig of ``options`` from the config's ``section`` (named in an error)."""
     from pydantic import ValidationError
 
     from slam2d.navigation import NavigatorConfig
@@ -183,7 +184,7 @@ def _navigator_options(options: dict[str, Any], slam: bool):
     except ValidationError as err:
         e = err.errors()[0]
         key = ".".join(str(p) for p in e["loc"])
-        raise InputError("navigation.options", f"'{key}': {e['msg']}") from None
+        raise InputError(section, f"'{key}': {e['msg']}") from None
 
 
 def _pose_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, float]:
