@@ -111,8 +111,8 @@ class _Loop:
         # a goal the map comes to block is inaccessible at once: the explorer picks another
         self.options = _navigator_options({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
                                           True, "exploration.options")  # fmt: skip
-        # the robot's centre goes where the navigator plans: radius + inflation margin from walls
         self.ignored = outside_bounds(self.world.unmapped, self.truth_frame, self.truth_free.shape, self.ecfg.bounds)
+        # the robot's centre goes where the navigator plans: radius + inflation margin from walls
         self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2],
                                         self.robot.cfg.radius + self.options.inflation_margin,
                                         sim.laser.range_max, self.ignored)  # fmt: skip
@@ -441,7 +441,8 @@ def seeded_start(world, name: str, free: np.ndarray, frame, seed: int) -> np.nda
 class Coverage:
     """Explored fraction of the reachable free area: a reachable true-free cell counts as explored
     when the SLAM grid knows (free or occupied) a cell within one cell of it. ``unmapped`` (H, W): the
-    cells the plan leaves unknown (None: none), about which the map's IoU says nothing."""
+    cells the plan leaves unknown and those outside the bounds (None: none), about which the map's IoU
+    says nothing."""
 
     def __init__(self, reachable: np.ndarray, frame, mapping, unmapped: np.ndarray | None = None):
         rows, cols = np.nonzero(reachable)
