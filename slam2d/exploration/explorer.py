@@ -29,6 +29,7 @@ from slam2d.exploration.gridops import (
     OCCUPIED,
     UNKNOWN,
     GridView,
+    cells_inside_polygon,
     geodesic,
     information_gain,
     inside_polygon,
@@ -295,9 +296,7 @@ class Explorer:
             return None
         frame = view.shape, tuple(np.asarray(view.origin, dtype=float)), view.resolution
         if self._outside_of[0] != frame:
-            rows, cols = np.indices(view.shape)
-            inside = inside_polygon(view.to_world(np.column_stack([rows.ravel(), cols.ravel()])), self.cfg.bounds)
-            self._outside_of = frame, ~inside.reshape(view.shape)
+            self._outside_of = frame, ~cells_inside_polygon(view.shape, view.to_world, self.cfg.bounds)
         return self._outside_of[1]
 
     def _pocket_state(self, view: GridView) -> np.ndarray:

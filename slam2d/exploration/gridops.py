@@ -274,6 +274,13 @@ def inside_polygon(points, polygon) -> np.ndarray:
     return (crosses & (x < xc)).sum(axis=1) % 2 == 1
 
 
+def cells_inside_polygon(shape, to_world, polygon) -> np.ndarray:
+    """Which cells (H, W) bool of a grid of ``shape`` have their centre inside ``polygon`` (K, 2) m;
+    ``to_world`` maps (N, 2) (row, col) cells to their centres (x, y) m."""
+    rows, cols = np.indices(shape)
+    return inside_polygon(to_world(np.column_stack([rows.ravel(), cols.ravel()])), polygon).reshape(shape)
+
+
 # --------------------------------------------------------------------------- visibility
 
 

@@ -26,7 +26,7 @@ from slam2d import config as config_mod
 from slam2d.errors import InputError
 from slam2d.exploration.config import ExploreConfig
 from slam2d.exploration.explorer import Explorer, Goal
-from slam2d.exploration.gridops import GridView, LiveClearance, inside_polygon
+from slam2d.exploration.gridops import GridView, LiveClearance, cells_inside_polygon, inside_polygon
 
 log = logging.getLogger(__name__)
 
@@ -111,7 +111,7 @@ class _Loop:
         # a goal the map comes to block is inaccessible at once: the explorer picks another
         self.options = _navigator_options({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
                                           True, "exploration.options")  # fmt: skip
-        self.ignored = outside_bounds(self.world.unmapped, self.truth_frame, self.truth_free.shape, self.ecfg.bounds)
+        self.ignored = ignored_cells(self.world.unmapped, self.truth_frame, self.truth_free.shape, self.ecfg.bounds)
         # the robot's centre goes where the navigator plans: radius + inflation margin from walls
         self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2],
                                         self.robot.cfg.radius + self.options.inflation_margin,
@@ -402,14 +402,12 @@ def reachable_free(free: np.ndarray, frame, start_xy, radius: float = 0.25, max_
     return area if unmapped is None else area & ~unmapped
 
 
-def outside_bounds(unmapped: np.ndarray | None, frame, shape, bounds) -> np.ndarray | None:
+def ignored_cells(unmapped: np.ndarray | None, frame, shape, bounds) -> np.ndarray | None:
     """The world's cells (H, W) bool that no coverage or IoU counts: the plan's ``unmapped`` ones and those
     outside the bounding polygon ``bounds`` (K, 2) m; None when there are none."""
     if bounds is None:
         return unmapped
-    rows, cols = np.indices(shape)
-    centres = frame.cell_to_world(np.column_stack([rows.ravel(), cols.ravel()]))
-    outside = ~inside_polygon(centres, bounds).reshape(shape)
+    outside = ~cells_inside_polygon(shape, frame.cell_to_world, bounds)
     return outside if unmapped is None else outside | unmapped
 
 
