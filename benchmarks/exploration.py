@@ -3,13 +3,14 @@ SLAM in the loop; coverage, efficiency, the simplified hybrid map and path repet
 
 Usage: nice .venv/bin/python benchmarks/exploration.py [--worlds office rooms] [--rooms NAME ...]
        [--furniture both|with|without] [--seeds N] [--first-seed K] [--strategies ...] [--workers W] [--max-time S]
-       [--log FILE] [--tables FILE]
+       [--log FILE] [--tables LOG [LOG ...]]
 
 Each run is ``slam2d explore`` without the results folder (``slam2d.exploration.run.explore``). Worlds:
 the office, and the room plans of ``$SLAM2D_DATA/rooms/`` (0.05 m/px; ``--rooms`` picks some by name,
 ``--furniture`` the furnished and / or unfurnished plans). The seed picks the start (a free place 0.5 m
 from walls inside the building) and the noise; every strategy starts from the same place for a seed.
-Each finished run is appended to the log (JSON lines), so that ``--tables LOG`` redraws the tables.
+Each finished run is appended to the log (JSON lines), so that ``--tables LOG ...`` redraws the tables (of
+several logs: a later run of a world, seed and strategy replaces an earlier one).
 """
 
 from __future__ import annotations
@@ -117,19 +118,33 @@ def tables(runs: list[dict]) -> str:
 
 
 def paired_ratios(runs: list[dict], strategy: str = "utility") -> list[str]:
-    """The table of ``strategy``'s distance to 99 % over each reference's on the same world and seed: median,
-    quartiles and range over the pairs where both reached 99 %, and how many pairs it was shorter in."""
-    d99 = {(r["world"], r["seed"], r["strategy"]): r["distance_to_99"] for r in runs}
-    out = [f"| {strategy} ÷ | pairs (world, seed) | median | quartiles | range | shorter in |", "|---|---|---|---|---|---|"]
+    """The table of ``strategy``'s distance to 90 and 99 % over each reference's on the same world and seed: median,
+    quartiles and range over the pairs where both reached that coverage, and how many pairs it was shorter in."""
+    out = [f"| {strategy} ÷ | to | pairs (world, seed) | median | quartiles | range | shorter in |",
+           "|---|---|---|---|---|---|---|"]
     for ref in ("nearest_frontier", "explore_lite"):
-        ratios = [d / d99[(w, seed, ref)] for (w, seed, s), d in d99.items()
-                  if s == strategy and not math.isnan(d) and not math.isnan(d99.get((w, seed, ref), math.nan))]
-        if len(ratios) < 2:
-            continue
-        q = statistics.quantiles(ratios, n=4)
-        out.append(f"| {ref} | {len(ratios)} | {statistics.median(ratios):.2f} | {q[0]:.2f}–{q[2]:.2f} | "
-                   f"{min(ratios):.2f}–{max(ratios):.2f} | {sum(x < 1 for x in ratios)} |")  # fmt: skip
+        for level in (90, 99):
+            d = {(r["world"], r["seed"], r["strategy"]): r[f"distance_to_{level}"] for r in runs}
+            ratios = [v / d[(w, seed, ref)] for (w, seed, s), v in d.items()
+                      if s == strategy and not math.isnan(v) and not math.isnan(d.get((w, seed, ref), math.nan))]
+            if len(ratios) < 2:
+                continue
+            q = statistics.quantiles(ratios, n=4)
+            out.append(f"| {ref} | {level} % | {len(ratios)} | {statistics.median(ratios):.2f} | {q[0]:.2f}–{q[2]:.2f} | "
+                       f"{min(ratios):.2f}–{max(ratios):.2f} | {sum(x < 1 for x in ratios)} |")  # fmt: skip
     return out + [""]
+
+
+def read_logs(paths) -> list[dict]:
+    """The runs of the logs ``paths`` (JSON lines), in order; a later run of the same world, seed and strategy
+    replaces an earlier one (a re-run on newer code)."""
+    runs = {}
+    for path in paths:
+        for line in Path(path).read_text().splitlines():
+            if line.strip():
+                r = json.loads(line)
+                runs[r["world"], r["seed"], r["strategy"]] = r
+    return list(runs.values())
 
 
 def main() -> None:
@@ -143,10 +158,12 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--max-time", type=float, default=1800.0)
     ap.add_argument("--log", default="exploration_runs.jsonl")
-    ap.add_argument("--tables", default=None, help="only print the tables of this log")
+    ap.add_argument("--tables", nargs="+", default=None, metavar="LOG",
+                    help="only print the tables of these logs (a later run of a world, seed and strategy replaces an "
+                         "earlier one)")  # fmt: skip
     a = ap.parse_args()
     if a.tables:
-        print(tables([json.loads(line) for line in Path(a.tables).read_text().splitlines() if line.strip()]))
+        print(tables(read_logs(a.tables)))
         return
     jobs = [(w, s, seed, a.max_time) for w in worlds(a.worlds, a.rooms, a.furniture) for seed in range(a.first_seed, a.first_seed + a.seeds)
             for s in a.strategies]  # fmt: skip
