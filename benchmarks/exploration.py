@@ -130,8 +130,8 @@ def paired_ratios(runs: list[dict], strategy: str = "utility") -> list[str]:
             if len(ratios) < 2:
                 continue
             q = statistics.quantiles(ratios, n=4)
-            out.append(f"| {ref} | {level} % | {len(ratios)} | {statistics.median(ratios):.2f} | {q[0]:.2f}–{q[2]:.2f} | "
-                       f"{min(ratios):.2f}–{max(ratios):.2f} | {sum(x < 1 for x in ratios)} |")  # fmt: skip
+            out.append(f"| {ref} | {level} % | {len(ratios)} | {statistics.median(ratios):.2f} | "
+                       f"{q[0]:.2f}–{q[2]:.2f} | {min(ratios):.2f}–{max(ratios):.2f} | {sum(x < 1 for x in ratios)} |")  # fmt: skip
     return out + [""]
 
 
