@@ -75,24 +75,15 @@ def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None 
     return out
 
 
-def enclosed_pockets(scored: np.ndarray, state: np.ndarray) -> np.ndarray:
-    """``scored`` (a ``pocket_state`` grid of the map ``state``, both (H, W) int8) for the views of
-    pockets. The unknown cells on an obstacle's face (unknown in ``state``, not UNKNOWN in ``scored``,
-    within a cell of an OCCUPIED one) turn OCCUPIED: rays neither run along a wall's unseen side nor
-    enter a block of walls through its unobserved cells. The UNKNOWN cells 4-connected to the grid's
-    edge turn FREE: the outside, seen through an open end or gaps in the outer wall, is left to the
-    frontiers. What stays UNKNOWN is enclosed: behind furniture, in corners, in rooms seen through a
-    gap."""
-    from scipy import ndimage
-
+def opaque_faces(scored: np.ndarray, state: np.ndarray) -> np.ndarray:
+    """``scored`` (a ``pocket_state`` grid of the map ``state``, both (H, W) int8) with the unknown
+    cells on an obstacle's face OCCUPIED: unknown in ``state``, not UNKNOWN in ``scored``, within a cell
+    of an OCCUPIED one. Rays then neither run along a wall's unseen side nor enter a block of walls
+    through its unobserved cells."""
     occupied = scored == OCCUPIED
     near = _window_any(_window_any(occupied, 1, 1, False, 0), 1, 1, False, 1)
     out = scored.copy()
     out[near & (state == UNKNOWN) & (scored != UNKNOWN) & ~occupied] = OCCUPIED
-    hidden = np.pad(out == UNKNOWN, 1, constant_values=True)  # beyond the grid: the outside
-    labels, _ = ndimage.label(hidden)
-    outside = labels[1:-1, 1:-1] == labels[0, 0]
-    out[outside] = FREE
     return out
 
 
@@ -321,18 +312,16 @@ class Explorer:
         return self._outside_of[1]
 
     def _pocket_state(self, view: GridView) -> np.ndarray:
-        """The grid views of pockets are scored on: ``pocket_state`` with the gaps the robot cannot pass
-        (narrower than its width) closed, the retired targets and the cells outside the bounds left out,
-        then ``enclosed_pockets``. Stricter than the information gain's grid, so that after the frontiers
-        are done the robot does not peel blocks of walls through pinholes or look into the outside."""
+        """The grid views of pockets are scored on: ``pocket_state`` without the retired targets and the
+        cells outside the bounds, with ``opaque_faces`` (stricter than the information gain's grid, so that
+        after the frontiers are done the robot does not peel blocks of walls a column at a time)."""
         retired = self._outside(view)
         retired = np.zeros(view.shape, dtype=bool) if retired is None else retired.copy()
         if len(self.retired):
             cells = view.to_cell(self.retired)
             cells = cells[view.inside(cells)]
             retired[cells[:, 0], cells[:, 1]] = True
-        width = int(2 * self.radius / view.resolution)
-        return enclosed_pockets(pocket_state(view.state, width, retired), view.state)
+        return opaque_faces(pocket_state(view.state, int(self.radius / view.resolution), retired), view.state)
 
     def _pocket_goal(self, pose, view: GridView, distance) -> Goal | None:
         """When no frontier (or candidate) is left: the nearest reachable place (sampled every
