@@ -699,3 +699,33 @@ def test_views_of_pockets_do_not_see_into_a_wall_block_through_a_gap_but_still_b
     assert (faces[16, 16:22] == OCCUPIED).all() and (faces[40, 30:45] == OCCUPIED).all()  # the faces
     assert (faces[17:20, 17:21] == UNKNOWN).all() and (faces[46, 31:44] == FREE).all()  # not the rest
     assert np.array_equal(faces == UNKNOWN, scored == UNKNOWN)  # the hidden cells stay as they were
+
+
+def test_views_of_pockets_leave_the_outside_to_the_frontiers_but_keep_a_pocket_at_the_outer_wall():
+    """Slivers of the outside between beams through a room's open end kept robots looking after 99 %;
+    the space behind a desk at the outer wall, whose wall stretch is unseen, joins the outside unless the
+    wall is bridged."""
+    from slam2d.exploration.explorer import pocket_state, without_outside
+    from slam2d.exploration.gridops import unknown_in_sight
+
+    state = np.full((70, 90), UNKNOWN, dtype=np.int8)
+    state[10:50, 10:60] = FREE  # a room ...
+    state[9, 9:61] = state[50, 9:61] = OCCUPIED
+    state[9:51, 9] = state[9:51, 60] = OCCUPIED
+    state[26:34, 60] = FREE  # ... open to the east, where beams fan out into the outside
+    for row in (22, 26, 30, 33, 37):
+        cols = np.arange(61, 90)
+        state[np.round(30 + (row - 30) * (cols - 60) / 30).astype(int), cols] = FREE
+    state[44, 25:41] = OCCUPIED  # a desk at the north wall, the wall behind it never seen
+    state[45:51, 24:42] = UNKNOWN
+    scored = pocket_state(state, 1)
+    res = 0.05
+    view = lambda grid: GridView(grid, res, (0.0, 0.0))  # noqa: E731
+    seen = lambda grid, xy: unknown_in_sight(view(grid), xy, 6.0, 360)  # noqa: E731
+    opening, beside = (56 * res, 30 * res), (21 * res, 47.5 * res)  # (x, y) m: at the open end, beside the desk
+    kept = without_outside(scored, 40)
+    assert seen(scored, opening)[:, 61:].any() and not seen(kept, opening)[:, 61:].any()  # no sliver is a target
+    pocket = np.s_[45:50, 25:41]
+    behind = seen(scored, beside)[pocket]
+    assert behind.sum() >= 20 and np.array_equal(seen(kept, beside)[pocket], behind)  # kept
+    assert not seen(without_outside(scored, 0), beside)[pocket].any()  # unbridged, it is the outside's

@@ -44,6 +44,7 @@ FRONTIER_STRATEGIES = ("nearest_frontier", "explore_lite")
 POCKET_SPACING = 0.2  # m between the places tried as views of pockets
 POCKET_RAYS = 360  # rays cast from each of them (one a degree, as the laser's beams)
 POCKET_BATCH = 8, 256  # places scored at a time, nearest first: the first batch, doubling up to the last
+WALL_SPAN = 2.0  # m: a wall's unseen stretch (behind furniture) bridged when telling pockets from the outside
 OPTIONS_KEPT = 10  # a utility decision's best options kept with its goal (goals.json)
 OPTION_TERMS = "gain_m2", "share_m2", "path_m", "L_m", "gamma_rad", "F"
 
@@ -61,17 +62,38 @@ def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None 
     hidden = ~_window_any(_window_any(known, 1, 1, False, 0), 1, 1, False, 1)  # outside the grid: unknown
     if retired is not None:
         hidden &= ~retired
-    size = max(1, wall_cells) + 1  # a closing by a size x size square: a dilation, then the mirrored erosion
-    lo, hi = size // 2, size - 1 - size // 2
-    grown = np.pad(state == OCCUPIED, size)
-    for axis in (0, 1):
-        grown = _window_any(grown, lo, hi, False, axis)
-    for axis in (0, 1):
-        grown = ~_window_any(~grown, hi, lo, False, axis)  # an erosion; outside the padded grid: occupied
-    closed = grown[size:-size, size:-size]
+    closed = _gaps_closed(state == OCCUPIED, wall_cells)
     out = np.full(state.shape, FREE, dtype=np.int8)
     out[hidden] = UNKNOWN
     out[closed] = OCCUPIED
+    return out
+
+
+def _gaps_closed(mask: np.ndarray, gap_cells: int) -> np.ndarray:
+    """``mask`` (H, W) bool with its gaps of at most ``gap_cells`` filled: a closing by a square of
+    gap_cells + 1 cells (a dilation, then the mirrored erosion; beyond the grid nothing is set)."""
+    size = max(1, gap_cells) + 1
+    lo, hi = size // 2, size - 1 - size // 2
+    grown = np.pad(mask, size)
+    for axis in (0, 1):
+        grown = _window_any(grown, lo, hi, False, axis)
+    for axis in (0, 1):
+        grown = ~_window_any(~grown, hi, lo, False, axis)
+    return grown[size:-size, size:-size]
+
+
+def without_outside(scored: np.ndarray, span_cells: int) -> np.ndarray:
+    """``scored`` (a ``pocket_state`` grid, (H, W) int8) with the outside FREE:
+    the UNKNOWN cells 4-connected to the grid's edge, seen through an open end or gaps in the outer wall
+    (the frontiers' business). A wall's unseen stretches of up to ``span_cells`` (behind furniture) are
+    bridged first, so that a pocket behind a desk at the outer wall stays a pocket."""
+    from scipy import ndimage
+
+    bridged = _gaps_closed(scored == OCCUPIED, span_cells)
+    hidden = np.pad((scored == UNKNOWN) & ~bridged, 1, constant_values=True)  # beyond the grid: outside
+    labels, _ = ndimage.label(hidden)
+    out = scored.copy()
+    out[labels[1:-1, 1:-1] == labels[0, 0]] = FREE
     return out
 
 
@@ -321,7 +343,8 @@ class Explorer:
             cells = view.to_cell(self.retired)
             cells = cells[view.inside(cells)]
             retired[cells[:, 0], cells[:, 1]] = True
-        return opaque_faces(pocket_state(view.state, int(self.radius / view.resolution), retired), view.state)
+        scored = opaque_faces(pocket_state(view.state, int(self.radius / view.resolution), retired), view.state)
+        return without_outside(scored, int(WALL_SPAN / view.resolution))
 
     def _pocket_goal(self, pose, view: GridView, distance) -> Goal | None:
         """When no frontier (or candidate) is left: the nearest reachable place (sampled every
