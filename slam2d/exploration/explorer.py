@@ -83,10 +83,10 @@ def _gaps_closed(mask: np.ndarray, gap_cells: int) -> np.ndarray:
 
 
 def without_outside(scored: np.ndarray, span_cells: int) -> np.ndarray:
-    """``scored`` (a ``pocket_state`` grid, (H, W) int8) with the outside FREE:
-    the UNKNOWN cells 4-connected to the grid's edge, seen through an open end or gaps in the outer wall
-    (the frontiers' business). A wall's unseen stretches of up to ``span_cells`` (behind furniture) are
-    bridged first, so that a pocket behind a desk at the outer wall stays a pocket."""
+    """``scored`` (a ``pocket_state`` grid, (H, W) int8) with the outside FREE: the UNKNOWN cells
+    4-connected to the grid's edge, seen through an open end or gaps in the outer wall (the frontiers'
+    business). Gaps of up to ``span_cells`` between OCCUPIED cells (a wall's stretch unseen behind
+    furniture) are bridged first, so that a pocket behind a desk at the outer wall stays a pocket."""
     from scipy import ndimage
 
     bridged = _gaps_closed(scored == OCCUPIED, span_cells)
@@ -335,8 +335,9 @@ class Explorer:
 
     def _pocket_state(self, view: GridView) -> np.ndarray:
         """The grid views of pockets are scored on: ``pocket_state`` without the retired targets and the
-        cells outside the bounds, with ``opaque_faces`` (stricter than the information gain's grid, so that
-        after the frontiers are done the robot does not peel blocks of walls a column at a time)."""
+        cells outside the bounds, then ``opaque_faces`` and ``without_outside``. Stricter than the
+        information gain's grid, so that once the frontiers are done the robot neither peels blocks of walls
+        a column at a time nor looks for slivers of the outside."""
         retired = self._outside(view)
         retired = np.zeros(view.shape, dtype=bool) if retired is None else retired.copy()
         if len(self.retired):
