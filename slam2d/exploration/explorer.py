@@ -59,7 +59,7 @@ def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None 
     space behind walls and inside furniture. FREE: the rest, which rays cross.
     """
     known = state != UNKNOWN
-    hidden = ~_window_any(_window_any(known, 1, 1, False, 0), 1, 1, False, 1)  # outside the grid: unknown
+    hidden = ~_within_a_cell(known)  # outside the grid: unknown
     if retired is not None:
         hidden &= ~retired
     closed = _gaps_closed(state == OCCUPIED, wall_cells)
@@ -67,6 +67,11 @@ def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None 
     out[hidden] = UNKNOWN
     out[closed] = OCCUPIED
     return out
+
+
+def _within_a_cell(mask: np.ndarray) -> np.ndarray:
+    """Cells (H, W) bool with a set cell of ``mask`` among their 3 x 3 neighbourhood (beyond the grid: unset)."""
+    return _window_any(_window_any(mask, 1, 1, False, 0), 1, 1, False, 1)
 
 
 def _gaps_closed(mask: np.ndarray, gap_cells: int) -> np.ndarray:
@@ -103,7 +108,7 @@ def opaque_faces(scored: np.ndarray, state: np.ndarray) -> np.ndarray:
     of an OCCUPIED one. Rays then neither run along a wall's unseen side nor enter a block of walls
     through its unobserved cells."""
     occupied = scored == OCCUPIED
-    near = _window_any(_window_any(occupied, 1, 1, False, 0), 1, 1, False, 1)
+    near = _within_a_cell(occupied)
     out = scored.copy()
     out[near & (state == UNKNOWN) & (scored != UNKNOWN) & ~occupied] = OCCUPIED
     return out
