@@ -226,6 +226,34 @@ def test_frontiers_regions_goal_size_visited_and_bounds():
     assert find_frontiers(view, [1.5, 2.0], dist, 0.4, 0.55, polygon=box) == []  # outside the bounds
 
 
+def test_a_thick_walls_unseen_face_is_no_frontier_but_a_door_into_the_unknown_is():
+    """A room whose west wall (7 cells thick) was seen from the far side only: its interior, between
+    the occupied far face and the room, is unknown; the east wall has a 1 m door into an unknown room."""
+    state = np.full((60, 100), FREE, dtype=np.int8)
+    state[:, 0:10] = FREE  # the far side of the west wall, seen
+    state[:, 10] = OCCUPIED  # the west wall's far face
+    state[:, 11:18] = UNKNOWN  # its interior and the unseen near face (7 cells, 0.35 m)
+    state[:, 70] = OCCUPIED  # the east wall, with a door
+    state[25:45, 70] = FREE
+    state[:, 71:] = UNKNOWN  # the room behind the door, never seen
+    state[0, :] = state[-1, :] = state[:, 0] = OCCUPIED
+    view = view_of(state)
+    plain, deep = frontier_mask(state), frontier_mask(state, depth=8)  # 8 cells: the robot's 0.4 m
+    assert plain[1:-1, 18].sum() >= 50  # Yamauchi's definition: the whole unseen face
+    assert not deep[:, :70].any()  # the strip no deeper than the robot is no opening
+    assert deep[27:43, 70].all() and np.array_equal(deep[:, 70:], plain[:, 70:])  # the door stays
+    dist = geodesic(view.traversable(0.25), view.to_cell([2.2, 1.5]), 0.05)
+    found = find_frontiers(view, [2.2, 1.5], dist, 0.4, 0.55, depth=0.4)
+    assert len(found) == 1 and found[0].goal[0] == pytest.approx(3.5, abs=0.1)  # the door
+    assert len(find_frontiers(view, [2.2, 1.5], dist, 0.4, 0.55)) == 2
+    assert np.array_equal(frontier_mask(state, depth=6)[:, 18], plain[:, 18])  # 7 cells deep: open to 6
+    assert not frontier_mask(state, depth=7)[:, 18].any()
+    thin = state.copy()
+    thin[1:-1, 11:18] = FREE
+    thin[1:-1, 14:16] = UNKNOWN  # a strip of unknown between free cells, two cells wide
+    assert frontier_mask(thin)[1:-1, [13, 16]].sum() >= 100 and not frontier_mask(thin, depth=8)[:, :70].any()
+
+
 def test_information_gain_counts_unknown_cells_in_sight():
     state = np.full((100, 100), UNKNOWN, dtype=np.int8)
     state[:, :50] = FREE
@@ -428,8 +456,8 @@ def test_a_bounded_exploration_stays_in_its_polygon_and_counts_coverage_inside_i
     m = json.loads((folder / "metrics.json").read_text())
     assert m["stop_reason"] == "done" and not m["premature_stop"] and m["coverage"] >= 0.99
     assert m["reachable_area_m2"] < 4.0 * 3.0 and m["map_iou"] > 0.85  # room A alone
-    goals = np.array([g["position"] for g in json.loads((folder / "goals.json").read_text())])
-    assert len(goals) and (goals[:, 0] < 4.3).all()
+    goals = np.array([g["position"] for g in json.loads((folder / "goals.json").read_text())]).reshape(-1, 2)
+    assert (goals[:, 0] < 4.3).all()  # room A is seen from the start: often no goal at all
     path = np.loadtxt(folder / "trajectory_true.tum")
     assert path[:, 1].max() < 4.3
 

@@ -23,7 +23,7 @@ from numba import njit
 from slam2d import geometry
 from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candidates
 from slam2d.exploration.config import ExplorationConfig
-from slam2d.exploration.frontiers import find_frontiers, frontier_mask
+from slam2d.exploration.frontiers import depth_cells, find_frontiers, frontier_mask
 from slam2d.exploration.gridops import (
     FREE,
     OCCUPIED,
@@ -174,7 +174,7 @@ class Explorer:
         width = 2 * robot_radius
         safe = robot_radius + cfg.safe_margin
         self.params = CandidateParams(width=width, delta=cfg.delta, safe_d=safe, safe_dis=safe, d_tho=cfg.d_tho)
-        self.min_frontier = cfg.min_frontier or width
+        self.min_frontier, self.width = cfg.min_frontier or width, width
         self.hybrid = HybridMap(cfg.node_step, cfg.box_width)
         self.visited: list[np.ndarray] = []
         self.inaccessible: list[np.ndarray] = []
@@ -280,7 +280,7 @@ class Explorer:
     def _frontiers(self, pose, view, distance) -> list:
         avoid = self.visited + self.inaccessible
         return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
-                              self.cfg.avoid_radius)  # fmt: skip
+                              self.cfg.avoid_radius, self.width)  # fmt: skip
 
     def _frontier_goal(self, pose, view, distance, strategy) -> Goal | None:
         found = self._frontiers(pose, view, distance)
@@ -485,12 +485,16 @@ class Explorer:
             return False
         cell = view.to_cell(goal.position)
         k = int(np.ceil((self.radius + 0.3) / view.resolution)) + 1
+        depth = depth_cells(self.width, view.resolution)
         h, w = view.shape
         r0, r1 = max(cell[0] - k, 0), min(cell[0] + k + 1, h)
         c0, c1 = max(cell[1] - k, 0), min(cell[1] + k + 1, w)
         if r0 >= r1 or c0 >= c1:
             return False
-        return not frontier_mask(view.state[max(r0 - 1, 0) : r1 + 1, max(c0 - 1, 0) : c1 + 1])[1:-1, 1:-1].any()
+        m = depth + 1  # the cells a frontier test looks at around the window
+        lo = np.array([max(r0 - m, 0), max(c0 - m, 0)])
+        mask = frontier_mask(view.state[lo[0] : r1 + m, lo[1] : c1 + m], depth=depth)
+        return not mask[r0 - lo[0] : r1 - lo[0], c0 - lo[1] : c1 - lo[1]].any()
 
     def reached(self, goal: Goal) -> None:
         self.visited.append(goal.position.copy())

@@ -1,7 +1,8 @@
 """Frontiers on the occupancy grid (Yamauchi 1997; the 2018 thesis, summary §4).
 
-A frontier cell is a known-free cell with an unknown 4-neighbour; 8-connected frontier
-cells form a region; a region shorter than the robot's width is no frontier. The
+A frontier cell is a known-free cell with an unknown 4-neighbour beyond which the unknown runs
+deeper than the robot's width; 8-connected frontier cells form a region; a region shorter than
+the robot's width is no frontier. The
 region's goal is its centre, or the reachable cell nearest to it (the region's own
 cells first, then cells within the robot's reach of the region). Goals near a visited
 or inaccessible goal, and regions outside an optional bounding polygon, are left out.
@@ -34,15 +35,18 @@ class Frontier:
     min_distance: float
 
 
-def frontier_mask(state: np.ndarray, wall_gap: int = WALL_GAP) -> np.ndarray:
+def frontier_mask(state: np.ndarray, wall_gap: int = WALL_GAP, depth: int = 0) -> np.ndarray:
     """Frontier cells (H, W) bool: free cells with an unknown 4-neighbour (the grid's edge counts as
     unknown) and no occupied cell within ``wall_gap`` cells (Chebyshev): unknown cells seen through
-    gaps in a wall's cells are not open space."""
-    return _frontier_mask(np.asarray(state, dtype=np.int8), int(wall_gap))
+    gaps in a wall's cells are not open space. With ``depth`` (cells), the unknown must also run
+    straight on from a neighbour for more than ``depth`` cells (or to the grid's edge): a strip of
+    unknown no deeper than that between known cells, such as the unseen face of a thick wall, is
+    no opening."""
+    return _frontier_mask(np.asarray(state, dtype=np.int8), int(wall_gap), int(depth))
 
 
 @njit(cache=True)
-def _frontier_mask(state, wall_gap):
+def _frontier_mask(state, wall_gap, depth):
     h, w = state.shape
     mask = np.zeros((h, w), dtype=np.bool_)
     for r in range(h):
@@ -52,8 +56,25 @@ def _frontier_mask(state, wall_gap):
             if not (r == 0 or c == 0 or r == h - 1 or c == w - 1 or state[r - 1, c] == UNKNOWN
                     or state[r + 1, c] == UNKNOWN or state[r, c - 1] == UNKNOWN or state[r, c + 1] == UNKNOWN):  # fmt: skip
                 continue
-            mask[r, c] = not _occupied_within(state, r, c, wall_gap)
+            if _occupied_within(state, r, c, wall_gap):
+                continue
+            mask[r, c] = (_unknown_run(state, r, c, 1, 0, depth) or _unknown_run(state, r, c, -1, 0, depth)
+                          or _unknown_run(state, r, c, 0, 1, depth) or _unknown_run(state, r, c, 0, -1, depth))  # fmt: skip
     return mask
+
+
+@njit(cache=True)
+def _unknown_run(state, r, c, dr, dc, depth):
+    """Whether the cells from (r, c) in the step (dr, dc) are unknown for more than ``depth`` cells
+    (at least one), or up to the grid's edge."""
+    h, w = state.shape
+    for k in range(1, depth + 2):
+        rr, cc = r + k * dr, c + k * dc
+        if rr < 0 or cc < 0 or rr >= h or cc >= w:
+            return True
+        if state[rr, cc] != UNKNOWN:
+            return False
+    return True
 
 
 @njit(cache=True)
@@ -64,6 +85,11 @@ def _occupied_within(state, r, c, k):
             if state[rr, cc] == OCCUPIED:
                 return True
     return False
+
+
+def depth_cells(depth: float, resolution: float) -> int:
+    """``depth`` m in whole cells of ``resolution`` m."""
+    return int(round(depth / resolution))
 
 
 def frontier_regions(mask: np.ndarray, min_cells: int) -> list[np.ndarray]:
@@ -111,15 +137,16 @@ def _label8(mask):
 
 
 def find_frontiers(view: GridView, robot_xy, distance: np.ndarray, min_size: float, reach: float,
-                   polygon=None, avoid=(), avoid_radius: float = 0.5) -> list[Frontier]:  # fmt: skip
+                   polygon=None, avoid=(), avoid_radius: float = 0.5, depth: float = 0.0) -> list[Frontier]:  # fmt: skip
     """Reachable frontier regions of ``view``.
 
     ``distance`` (H, W) m: path length from the robot over traversable cells (inf: unreachable);
     ``min_size`` m: shortest region (cells × resolution); ``reach`` m: how far from the region a
     goal cell may lie; ``polygon`` (K, 2) m: frontier cells outside are ignored; goals within
-    ``avoid_radius`` of an ``avoid`` point (visited, inaccessible) are left out.
+    ``avoid_radius`` of an ``avoid`` point (visited, inaccessible) are left out; ``depth`` m: how deep
+    the unknown must run on from a frontier cell (``frontier_mask``).
     """
-    mask = frontier_mask(view.state)
+    mask = frontier_mask(view.state, depth=depth_cells(depth, view.resolution))
     if polygon is not None:
         rows, cols = np.nonzero(mask)
         keep = inside_polygon(view.to_world(np.column_stack([rows, cols])), polygon)
