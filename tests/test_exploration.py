@@ -712,21 +712,41 @@ def test_views_of_pockets_do_not_see_into_a_wall_block_through_a_gap_but_still_b
     state[15:22, 15:23] = OCCUPIED  # a block of walls, its inside unknown, seen into through a 2-cell gap
     state[16:21, 16:22] = UNKNOWN
     state[21, 18:20] = FREE
-    state[40:47, 30:45] = UNKNOWN  # behind a desk: hidden cells seen from the room below
-    state[39, 30:45] = OCCUPIED
+    state[44:50, 30:45] = UNKNOWN  # behind a desk at the north wall, seen through its open east end
+    state[43, 29:45] = state[43:50, 29] = OCCUPIED
     scored = pocket_state(state, 1)
-    faces = opaque_faces(scored, state)
+    faces = opaque_faces(scored, state, 8)
     res = 0.05
     before, after = GridView(scored, res, (0.0, 0.0)), GridView(faces, res, (0.0, 0.0))
-    gap, desk = (18.5 * res, 23 * res), (37.5 * res, 48.5 * res)  # (x, y) m
+    gap, desk = (18.5 * res, 23 * res), (47.5 * res, 46.5 * res)  # (x, y) m
     seen = lambda view, xy: unknown_in_sight(view, xy, 6.0, 360)  # noqa: E731
-    block, pocket = np.s_[15:22, 15:23], np.s_[40:47, 30:45]
+    block, pocket = np.s_[15:22, 15:23], np.s_[44:50, 30:45]
     assert seen(before, gap)[block].any() and not seen(after, gap)[block].any()  # its inner face stops rays
     kept = seen(after, desk)[pocket]
-    assert np.array_equal(kept, seen(before, desk)[pocket]) and kept.sum() >= 4 * 13  # behind the desk: kept
-    assert (faces[16, 16:22] == OCCUPIED).all() and (faces[40, 30:45] == OCCUPIED).all()  # the faces
-    assert (faces[17:20, 17:21] == UNKNOWN).all() and (faces[46, 31:44] == FREE).all()  # not the rest
+    assert np.array_equal(kept, seen(before, desk)[pocket]) and kept.sum() >= 4 * 12  # behind the desk: kept
+    assert (faces[16, 16:22] == OCCUPIED).all() and (faces[44, 30:45] == OCCUPIED).all()  # the faces
+    assert (faces[17:20, 17:21] == UNKNOWN).all() and (faces[46, 44] == FREE).all()  # not the rest (its mouth)
     assert np.array_equal(faces == UNKNOWN, scored == UNKNOWN)  # the hidden cells stay as they were
+
+
+def test_views_of_pockets_do_not_see_into_a_thick_wall_through_its_unseen_face():
+    """A wall 7 cells thick seen as occupied from the far room only: from the near room, its inside is
+    hidden behind free cells. Rays must not enter such a strip, no deeper than the robot's width (8 cells);
+    a strip deeper than that still lets them in."""
+    from slam2d.exploration.explorer import opaque_faces, pocket_state
+    from slam2d.exploration.gridops import unknown_in_sight
+
+    state = np.full((40, 60), FREE, dtype=np.int8)
+    state[[0, -1], :] = state[:, [0, -1]] = OCCUPIED
+    state[1:-1, 12] = OCCUPIED  # the far face
+    state[1:-1, 13:20] = UNKNOWN  # the inside and the near face the laser never marked
+    scored = pocket_state(state, 1)
+    view = lambda grid: GridView(grid, 0.05, (0.0, 0.0))  # noqa: E731
+    room = (30 * 0.05, 20 * 0.05)  # (x, y) m, in the near room
+    inside = unknown_in_sight(view(opaque_faces(scored, state)), room, 6.0, 360)
+    assert inside[:, 14:19].sum() >= 5 * 25  # without the depth, the inside is a target
+    assert not unknown_in_sight(view(opaque_faces(scored, state, 8)), room, 6.0, 360).any()
+    assert unknown_in_sight(view(opaque_faces(scored, state, 6)), room, 6.0, 360).any()  # 7 cells: deeper than 6
 
 
 def test_views_of_pockets_leave_the_outside_to_the_frontiers_but_keep_a_pocket_at_the_outer_wall():

@@ -23,7 +23,7 @@ from numba import njit
 from slam2d import geometry
 from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candidates
 from slam2d.exploration.config import ExplorationConfig
-from slam2d.exploration.frontiers import depth_cells, find_frontiers, frontier_mask
+from slam2d.exploration.frontiers import depth_cells, find_frontiers, frontier_mask, shallow_entries
 from slam2d.exploration.gridops import (
     FREE,
     OCCUPIED,
@@ -102,15 +102,18 @@ def without_outside(scored: np.ndarray, span_cells: int) -> np.ndarray:
     return out
 
 
-def opaque_faces(scored: np.ndarray, state: np.ndarray) -> np.ndarray:
+def opaque_faces(scored: np.ndarray, state: np.ndarray, depth: int = 0) -> np.ndarray:
     """``scored`` (a ``pocket_state`` grid of the map ``state``, both (H, W) int8) with the unknown
     cells on an obstacle's face OCCUPIED: unknown in ``state``, not UNKNOWN in ``scored``, within a cell
-    of an OCCUPIED one. Rays then neither run along a wall's unseen side nor enter a block of walls
-    through its unobserved cells."""
+    of an OCCUPIED one, or opening a strip of unknown no deeper than ``depth`` cells from a free cell
+    (``shallow_entries``). Rays then neither run along a wall's unseen side nor enter a block of walls
+    through its unobserved cells or a thick wall through its unseen face."""
     occupied = scored == OCCUPIED
-    near = _within_a_cell(occupied)
+    face = _within_a_cell(occupied)
+    if depth > 0:
+        face |= shallow_entries(state, depth)
     out = scored.copy()
-    out[near & (state == UNKNOWN) & (scored != UNKNOWN) & ~occupied] = OCCUPIED
+    out[face & (state == UNKNOWN) & (scored != UNKNOWN) & ~occupied] = OCCUPIED
     return out
 
 
@@ -349,7 +352,8 @@ class Explorer:
             cells = view.to_cell(self.retired)
             cells = cells[view.inside(cells)]
             retired[cells[:, 0], cells[:, 1]] = True
-        scored = opaque_faces(pocket_state(view.state, int(self.radius / view.resolution), retired), view.state)
+        scored = pocket_state(view.state, int(self.radius / view.resolution), retired)
+        scored = opaque_faces(scored, view.state, depth_cells(self.width, view.resolution))
         return without_outside(scored, int(WALL_SPAN / view.resolution))
 
     def _pocket_goal(self, pose, view: GridView, distance) -> Goal | None:

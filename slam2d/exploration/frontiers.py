@@ -63,6 +63,27 @@ def _frontier_mask(state, wall_gap, depth):
     return mask
 
 
+def shallow_entries(state: np.ndarray, depth: int) -> np.ndarray:
+    """Unknown cells (H, W) bool that open a strip of unknown no deeper than ``depth`` cells seen from a
+    free 4-neighbour (the strips ``frontier_mask`` finds no opening: a thick wall's unseen face)."""
+    return _shallow_entries(np.asarray(state, dtype=np.int8), int(depth))
+
+
+@njit(cache=True)
+def _shallow_entries(state, depth):
+    h, w = state.shape
+    out = np.zeros((h, w), dtype=np.bool_)
+    for r in range(h):
+        for c in range(w):
+            if state[r, c] != FREE:
+                continue
+            for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+                rr, cc = r + dr, c + dc
+                if 0 <= rr < h and 0 <= cc < w and state[rr, cc] == UNKNOWN:
+                    out[rr, cc] |= not _unknown_run(state, r, c, dr, dc, depth)
+    return out
+
+
 @njit(cache=True)
 def _unknown_run(state, r, c, dr, dc, depth):
     """Whether the cells from (r, c) in the step (dr, dc) are unknown for more than ``depth`` cells
