@@ -223,9 +223,12 @@ class ExploreView(_View):
 
 
 def frontier_points(grid, mapping: MappingConfig) -> np.ndarray:
-    """Centres (N, 2) m of the frontier cells of an OccupancyGrid (free cells next to unknown ones)."""
-    from slam2d.exploration.frontiers import frontier_mask
+    """Centres (N, 2) m of the frontier cells of an OccupancyGrid, as the explorer of the simulated robot
+    finds them (free cells next to unknown that runs deeper than the robot's width)."""
+    from slam2d.exploration.frontiers import depth_cells, frontier_mask
     from slam2d.exploration.gridops import GridView
+    from slam2d.sim.robot import ROBOT_RADIUS
 
     view = GridView.of(grid, mapping.free_thresh, mapping.occupied_thresh)
-    return view.to_world(np.argwhere(frontier_mask(view.state)))
+    depth = depth_cells(2 * ROBOT_RADIUS, view.resolution)
+    return view.to_world(np.argwhere(frontier_mask(view.state, depth=depth)))

@@ -64,8 +64,9 @@ def _frontier_mask(state, wall_gap, depth):
 
 
 def shallow_entries(state: np.ndarray, depth: int) -> np.ndarray:
-    """Unknown cells (H, W) bool that open a strip of unknown no deeper than ``depth`` cells seen from a
-    free 4-neighbour (the strips ``frontier_mask`` finds no opening: a thick wall's unseen face)."""
+    """Unknown cells (H, W) bool next to free ones, through which no free 4-neighbour sees the unknown
+    run on straight for more than ``depth`` cells (the strips ``frontier_mask`` finds no opening in: a
+    thick wall's unseen face; a wedge of unknown beside a wall is entered where it is deep)."""
     return _shallow_entries(np.asarray(state, dtype=np.int8), int(depth))
 
 
@@ -75,12 +76,15 @@ def _shallow_entries(state, depth):
     out = np.zeros((h, w), dtype=np.bool_)
     for r in range(h):
         for c in range(w):
-            if state[r, c] != FREE:
+            if state[r, c] != UNKNOWN:
                 continue
+            entered = deep = False
             for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-                rr, cc = r + dr, c + dc
-                if 0 <= rr < h and 0 <= cc < w and state[rr, cc] == UNKNOWN:
-                    out[rr, cc] |= not _unknown_run(state, r, c, dr, dc, depth)
+                fr, fc = r - dr, c - dc  # a free neighbour looking in the step (dr, dc)
+                if 0 <= fr < h and 0 <= fc < w and state[fr, fc] == FREE:
+                    entered = True
+                    deep |= _unknown_run(state, fr, fc, dr, dc, depth)
+            out[r, c] = entered and not deep
     return out
 
 
