@@ -734,6 +734,7 @@ def test_views_of_pockets_do_not_see_into_a_thick_wall_through_its_unseen_face()
     hidden behind free cells. Rays must not enter such a strip, no deeper than the robot's width (8 cells);
     a strip deeper than that still lets them in."""
     from slam2d.exploration.explorer import opaque_faces, pocket_state
+    from slam2d.exploration.frontiers import shallow_entries
     from slam2d.exploration.gridops import unknown_in_sight
 
     state = np.full((40, 60), FREE, dtype=np.int8)
@@ -747,6 +748,12 @@ def test_views_of_pockets_do_not_see_into_a_thick_wall_through_its_unseen_face()
     assert inside[:, 14:19].sum() >= 5 * 25  # without the depth, the inside is a target
     assert not unknown_in_sight(view(opaque_faces(scored, state, 8)), room, 6.0, 360).any()
     assert unknown_in_sight(view(opaque_faces(scored, state, 6)), room, 6.0, 360).any()  # 7 cells: deeper than 6
+    for i in range(16):  # a wedge of unknown floor beside the east wall, behind a door jamb: a staircase edge
+        state[1 + i, 43 + i : 59] = UNKNOWN
+    scored = pocket_state(state, 1)
+    wedge = unknown_in_sight(view(opaque_faces(scored, state, 8)), room, 6.0, 360)[:, 40:]
+    assert wedge.sum() >= 30  # entered where it is deep (from the west at the top, from below at the wall)
+    assert not shallow_entries(state, 8)[1 + 12, 43 + 12]  # shallow from the west (3 cells), deep from below
 
 
 def test_views_of_pockets_leave_the_outside_to_the_frontiers_but_keep_a_pocket_at_the_outer_wall():
