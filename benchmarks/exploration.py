@@ -108,6 +108,7 @@ def tables(runs: list[dict]) -> str:
                 a, k = med(r["nodes_all"] for r in rs), med(r["nodes_final"] for r in rs)
                 out.append(f"| {world} | {s} | {len(rs)} | {a:.0f} | {k:.0f} | {100 * k / a:.0f} % |")
     out.append("")
+    out.extend(distances_by_world(runs))
     out.extend(paired_ratios(runs))
     out.append("| strategy | runs | median path repetition | median goals | median inaccessible goals |")
     out.append("|---|---|---|---|---|")
@@ -115,6 +116,27 @@ def tables(runs: list[dict]) -> str:
         out.append(f"| {s} | {len(rs)} | {100 * med(r['path_repetition'] for r in rs):.0f} % | "
                    f"{med(r['goals'] for r in rs):.0f} | {med(r['goals_inaccessible'] for r in rs):.0f} |")  # fmt: skip
     return "\n".join(out)
+
+
+def distances_by_world(runs: list[dict], trio=("nearest_frontier", "explore_lite", "utility")) -> list[str]:
+    """Per world and seed run by all of ``trio``: each one's distance to 90 / 99 % (the shortest to 99 % in bold)
+    and in all, and the last one's distance to 99 % over each other's."""
+    by = {(r["world"], r["seed"], r["strategy"]): r for r in runs}
+    head = " | ".join(f"{s}: to 90 / 99 % (m)" for s in trio)
+    out = [f"| world | seed | reachable area (m²) | {head} | in all (m) | {trio[-1]} ÷ {trio[0]}, ÷ {trio[1]} (99 %) |",
+           "|" + "---|" * (len(trio) + 5)]
+    for world, seed in sorted({(w, seed) for w, seed, _ in by}):
+        rs = [by.get((world, seed, s)) for s in trio]
+        if None in rs:
+            continue
+        d99 = [r["distance_to_99"] for r in rs]
+        best = min(range(len(rs)), key=lambda i: math.inf if math.isnan(d99[i]) else d99[i])
+        cells = [f"{fmt(r['distance_to_90'])} / " + (f"**{fmt(d)}**" if i == best else fmt(d))
+                 for i, (r, d) in enumerate(zip(rs, d99))]  # fmt: skip
+        ratios = ", ".join(fmt(d99[-1] / d, 2) for d in d99[:-1])
+        totals = " / ".join(f"{r['distance']:.0f}" for r in rs)
+        out.append(f"| {world} | {seed} | {rs[0]['reachable_area_m2']:.0f} | {' | '.join(cells)} | {totals} | {ratios} |")
+    return out + [""]
 
 
 def paired_ratios(runs: list[dict], strategy: str = "utility") -> list[str]:
