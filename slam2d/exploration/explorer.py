@@ -23,7 +23,7 @@ from numba import njit
 from slam2d import geometry
 from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candidates
 from slam2d.exploration.config import ExplorationConfig
-from slam2d.exploration.frontiers import depth_cells, find_frontiers, frontier_mask, shallow_entries
+from slam2d.exploration.frontiers import WALL_GAP, depth_cells, find_frontiers, frontier_mask, shallow_entries
 from slam2d.exploration.gridops import (
     FREE,
     OCCUPIED,
@@ -495,7 +495,7 @@ class Explorer:
         c0, c1 = max(cell[1] - k, 0), min(cell[1] + k + 1, w)
         if r0 >= r1 or c0 >= c1:
             return False
-        m = depth + 1  # the cells a frontier test looks at around the window
+        m = max(depth + 1, WALL_GAP)  # the cells a frontier test looks at around the window
         lo = np.array([max(r0 - m, 0), max(c0 - m, 0)])
         mask = frontier_mask(view.state[lo[0] : r1 + m, lo[1] : c1 + m], depth=depth)
         return not mask[r0 - lo[0] : r1 - lo[0], c0 - lo[1] : c1 - lo[1]].any()

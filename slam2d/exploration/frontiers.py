@@ -2,10 +2,10 @@
 
 A frontier cell is a known-free cell with an unknown 4-neighbour beyond which the unknown runs
 deeper than the robot's width; 8-connected frontier cells form a region; a region shorter than
-the robot's width is no frontier. The
-region's goal is its centre, or the reachable cell nearest to it (the region's own
-cells first, then cells within the robot's reach of the region). Goals near a visited
-or inaccessible goal, and regions outside an optional bounding polygon, are left out.
+the robot's width is no frontier. The region's goal is its centre, or the reachable cell nearest
+to it (the region's own cells first, then cells within the robot's reach of the region). Goals
+near a visited or inaccessible goal, and regions outside an optional bounding polygon, are left
+out.
 """
 
 from __future__ import annotations
