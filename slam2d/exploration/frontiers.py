@@ -51,16 +51,19 @@ def _frontier_mask(state, wall_gap, depth):
     mask = np.zeros((h, w), dtype=np.bool_)
     for r in range(h):
         for c in range(w):
-            if state[r, c] != FREE:
-                continue
-            if not (r == 0 or c == 0 or r == h - 1 or c == w - 1 or state[r - 1, c] == UNKNOWN
-                    or state[r + 1, c] == UNKNOWN or state[r, c - 1] == UNKNOWN or state[r, c + 1] == UNKNOWN):  # fmt: skip
-                continue
-            if _occupied_within(state, r, c, wall_gap):
-                continue
-            mask[r, c] = (_unknown_run(state, r, c, 1, 0, depth) or _unknown_run(state, r, c, -1, 0, depth)
-                          or _unknown_run(state, r, c, 0, 1, depth) or _unknown_run(state, r, c, 0, -1, depth))  # fmt: skip
+            if state[r, c] == FREE and _opens(state, r, c, depth):
+                mask[r, c] = not _occupied_within(state, r, c, wall_gap)
     return mask
+
+
+@njit(cache=True)
+def _opens(state, r, c, depth):
+    """Whether the unknown runs on from (r, c) in one of the four steps for more than ``depth`` cells (at
+    least one), or up to the grid's edge."""
+    for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        if _unknown_run(state, r, c, dr, dc, depth):
+            return True
+    return False
 
 
 def shallow_entries(state: np.ndarray, depth: int) -> np.ndarray:
