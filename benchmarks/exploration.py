@@ -3,14 +3,15 @@ SLAM in the loop; coverage, efficiency, the simplified hybrid map and path repet
 
 Usage: nice .venv/bin/python benchmarks/exploration.py [--worlds office rooms] [--rooms NAME ...]
        [--furniture both|with|without] [--seeds N] [--first-seed K] [--strategies ...] [--workers W] [--max-time S]
-       [--log FILE] [--tables LOG [LOG ...]]
+       [--log FILE] [--tables LOG [LOG ...] [--figure PNG]]
 
 Each run is ``slam2d explore`` without the results folder (``slam2d.exploration.run.explore``). Worlds:
 the office, and the room plans of ``$SLAM2D_DATA/rooms/`` (0.05 m/px; ``--rooms`` picks some by name,
 ``--furniture`` the furnished and / or unfurnished plans). The seed picks the start (a free place 0.5 m
 from walls inside the building) and the noise; every strategy starts from the same place for a seed.
 Each finished run is appended to the log (JSON lines), so that ``--tables LOG ...`` redraws the tables (of
-several logs: a later run of a world, seed and strategy replaces an earlier one).
+several logs: a later run of a world, seed and strategy replaces an earlier one); ``--figure PNG`` draws
+their spread over worlds and seeds.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ from pathlib import Path
 
 from slam2d.exploration.config import STRATEGIES
 
+REFERENCES = ("nearest_frontier", "explore_lite")  # what the utility is compared with
+TARGETS = {"nearest_frontier": 0.85, "explore_lite": 0.90}  # the utility's distance to 99 % over each, at most
 ROOMS = ("Freiburg52_scan", "Freiburg79_scan", "lab_b_scan", "lab_c_scan", "lab_d_scan", "lab_ipa", "office_a",
          "office_b", "office_c", "office_d")  # fmt: skip
 
@@ -77,7 +80,7 @@ def tables(runs: list[dict]) -> str:
         n = len(rs)
         reached = sum(r["coverage"] >= 0.99 for r in rs)
         ratio = {ref: fmt(d99[s] / d99[ref], 2) if ref in d99 and not math.isnan(d99[ref]) else "–"
-                 for ref in ("nearest_frontier", "explore_lite")}
+                 for ref in REFERENCES}
         out.append(f"| {s} | {n} | {100 * reached / n:.0f} % | {sum(r['premature_stop'] for r in rs)} | "
                    f"{sum(r['collisions'] > 0 for r in rs)} | {100 * med(r['coverage'] for r in rs):.1f} % | "
                    f"{fmt(med(r['map_iou'] for r in rs), 3)} | {fmt(med(r['distance_to_90'] for r in rs))} | "
@@ -139,22 +142,82 @@ def distances_by_world(runs: list[dict], trio=("nearest_frontier", "explore_lite
     return out + [""]
 
 
+def paired(runs: list[dict], strategy: str, ref: str, level: int) -> list[tuple[str, int, float]]:
+    """(world, seed, ``strategy``'s distance to ``level`` % coverage ÷ ``ref``'s) for every world and seed where
+    both runs reached that coverage."""
+    d = {(r["world"], r["seed"], r["strategy"]): r[f"distance_to_{level}"] for r in runs}
+    return [(w, seed, v / d[(w, seed, ref)]) for (w, seed, s), v in d.items()
+            if s == strategy and not math.isnan(v) and not math.isnan(d.get((w, seed, ref), math.nan))]  # fmt: skip
+
+
 def paired_ratios(runs: list[dict], strategy: str = "utility") -> list[str]:
     """The table of ``strategy``'s distance to 90 and 99 % over each reference's on the same world and seed: median,
     quartiles and range over the pairs where both reached that coverage, and how many pairs it was shorter in."""
     out = [f"| {strategy} ÷ | to | pairs (world, seed) | median | quartiles | range | shorter in |",
            "|---|---|---|---|---|---|---|"]
-    for ref in ("nearest_frontier", "explore_lite"):
+    for ref in REFERENCES:
         for level in (90, 99):
-            d = {(r["world"], r["seed"], r["strategy"]): r[f"distance_to_{level}"] for r in runs}
-            ratios = [v / d[(w, seed, ref)] for (w, seed, s), v in d.items()
-                      if s == strategy and not math.isnan(v) and not math.isnan(d.get((w, seed, ref), math.nan))]
+            ratios = [x for _, _, x in paired(runs, strategy, ref, level)]
             if len(ratios) < 2:
                 continue
             q = statistics.quantiles(ratios, n=4)
             out.append(f"| {ref} | {level} % | {len(ratios)} | {statistics.median(ratios):.2f} | "
                        f"{q[0]:.2f}–{q[2]:.2f} | {min(ratios):.2f}–{max(ratios):.2f} | {sum(x < 1 for x in ratios)} |")  # fmt: skip
     return out + [""]
+
+
+def figure(runs: list[dict], path: str, strategy: str = "utility") -> None:
+    """Draw the spread over worlds and seeds to ``path`` (PNG): left, ``strategy``'s distance to 90 and 99 % over
+    each reference's, pair by pair (box: quartiles; dashed: the targets at 99 %, ``TARGETS``); right, every
+    run's distance to 99 % against the world's reachable area."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.3))
+    jitter = np.random.default_rng(0)
+    for i, (ref, level) in enumerate((ref, level) for ref in REFERENCES for level in (90, 99)):
+        pairs = paired(runs, strategy, ref, level)
+        x = np.array([v for _, _, v in pairs])
+        furnished = np.array(["furnitures" in w for w, _, _ in pairs], dtype=bool)
+        if len(x):
+            left.boxplot(x, positions=[i], widths=0.55, showfliers=False, medianprops={"color": "black"})
+        for mask, colour in ((~furnished, "tab:blue"), (furnished, "tab:orange")):
+            left.scatter(i + jitter.uniform(-0.2, 0.2, mask.sum()), x[mask], s=9, alpha=0.6, color=colour, zorder=3)
+        if level == 99:
+            left.hlines(TARGETS[ref], i - 0.35, i + 0.35, colors="tab:red", linestyles="--", zorder=4)
+    left.axhline(1.0, color="grey", lw=0.8)
+    left.set_yscale("log")
+    left.set_yticks([0.5, 0.6, 0.7, 0.85, 1.0, 1.2, 1.5, 2.0], ["0.5", "0.6", "0.7", "0.85", "1", "1.2", "1.5", "2"])
+    left.minorticks_off()
+    left.set_xticks(range(4), [f"÷ {ref}\nto {level} %" for ref in REFERENCES for level in (90, 99)], fontsize=8)
+    left.set_ylabel(f"{strategy}'s distance ÷ the other's (same world, seed)")
+    left.scatter([], [], s=9, color="tab:blue", label="unfurnished")
+    left.scatter([], [], s=9, color="tab:orange", label="furnished")
+    left.plot([], [], "--", color="tab:red", label="target")
+    left.legend(fontsize=8)
+    for s in STRATEGIES:
+        rs = [r for r in runs if r["strategy"] == s and not math.isnan(r["distance_to_99"])]
+        if rs:
+            right.scatter([r["reachable_area_m2"] for r in rs], [r["distance_to_99"] for r in rs], s=10, alpha=0.6,
+                          label=f"{s} ({len(rs)})")  # fmt: skip
+    right.set_xscale("log")
+    right.set_yscale("log")
+    right.minorticks_off()
+    for axis, (lo, hi) in ((right.xaxis, right.get_xlim()), (right.yaxis, right.get_ylim())):
+        ticks = [t for t in (10, 20, 50, 100, 200, 500, 1000, 2000) if lo <= t <= hi]
+        axis.set_ticks(ticks, [str(t) for t in ticks])
+    right.set_xlabel("reachable area (m²)")
+    right.set_ylabel("distance to 99 % coverage (m)")
+    right.legend(fontsize=8)
+    seeds = sorted({r["seed"] for r in runs})
+    fig.suptitle(f"{len({r['world'] for r in runs})} worlds, seed{'s' * (len(seeds) > 1)} {', '.join(map(str, seeds))}, "
+                 f"{len(runs)} runs", fontsize=10)  # fmt: skip
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def read_logs(paths) -> list[dict]:
@@ -183,9 +246,13 @@ def main() -> None:
     ap.add_argument("--tables", nargs="+", default=None, metavar="LOG",
                     help="only print the tables of these logs (a later run of a world, seed and strategy replaces an "
                          "earlier one)")  # fmt: skip
+    ap.add_argument("--figure", metavar="PNG", help="with --tables: also draw the spread over worlds and seeds")
     a = ap.parse_args()
     if a.tables:
-        print(tables(read_logs(a.tables)))
+        runs = read_logs(a.tables)
+        print(tables(runs))
+        if a.figure:
+            figure(runs, a.figure)
         return
     jobs = [(w, s, seed, a.max_time) for w in worlds(a.worlds, a.rooms, a.furniture) for seed in range(a.first_seed, a.first_seed + a.seeds)
             for s in a.strategies]  # fmt: skip

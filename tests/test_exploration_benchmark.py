@@ -1,0 +1,45 @@
+"""The exploration benchmark's pairing of runs (benchmarks/exploration.py): ratios per world and seed, and the
+figure of their spread."""
+
+import importlib.util
+import math
+from pathlib import Path
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "exploration.py"
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("exploration_bench", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _run(world, seed, strategy, d90, d99):
+    return {"world": world, "seed": seed, "strategy": strategy, "distance_to_90": d90, "distance_to_99": d99,
+            "reachable_area_m2": 300.0}  # fmt: skip
+
+
+RUNS = [
+    _run("lab", 0, "utility", 40.0, 80.0), _run("lab", 0, "nearest_frontier", 50.0, 100.0),
+    _run("lab", 0, "explore_lite", 40.0, 160.0),
+    _run("lab", 1, "utility", 30.0, math.nan), _run("lab", 1, "nearest_frontier", 60.0, 90.0),  # never reached 99 %
+    _run("lab_furnitures", 0, "utility", 20.0, 30.0), _run("lab_furnitures", 0, "nearest_frontier", 10.0, 20.0),
+]  # fmt: skip
+
+
+def test_each_pair_is_the_same_world_and_seed_and_a_run_short_of_the_coverage_is_left_out():
+    bench = _bench()
+    assert sorted(bench.paired(RUNS, "utility", "nearest_frontier", 99)) == [("lab", 0, 0.8), ("lab_furnitures", 0, 1.5)]
+    assert sorted(bench.paired(RUNS, "utility", "nearest_frontier", 90)) == [
+        ("lab", 0, 0.8), ("lab", 1, 0.5), ("lab_furnitures", 0, 2.0)]  # fmt: skip
+    assert bench.paired(RUNS, "utility", "explore_lite", 99) == [("lab", 0, 0.5)]
+    table = "\n".join(bench.paired_ratios(RUNS))
+    assert "| nearest_frontier | 90 % | 3 | 0.80 | " in table
+    assert table.splitlines()[3].endswith("| 0.80–1.50 | 1 |")  # to 99 %: the range, shorter in one pair
+
+
+def test_the_figure_of_the_spread_is_drawn(tmp_path):
+    out = tmp_path / "spread.png"
+    _bench().figure(RUNS, str(out))
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 10_000
