@@ -534,6 +534,41 @@ def test_explore_command_reports_bad_input_in_one_line(tmp_path):
     assert not out.exists() or not list(out.iterdir())
 
 
+def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped():
+    """A gap the robot drove through, drawn narrower than the robot on its map (0.3 m, the robot 0.4 m wide),
+    closes a small room: from inside, the way out is its own path back past the gap, without the loop it drove
+    inside; from the large room, or once the ways out are used up, there is none."""
+    from types import SimpleNamespace
+
+    from slam2d.exploration.run import MAX_RETRACES, _way_out
+
+    state = np.full((60, 100), FREE, dtype=np.int8)  # 5 m x 3 m at 5 cm
+    state[[0, -1], :] = state[:, [0, -1]] = OCCUPIED
+    state[:, 70] = OCCUPIED  # the wall at x = 3.5 m
+    state[27:33, 70] = FREE  # the gap, y 1.35-1.65 m
+    state[:20, 71:] = state[41:, 71:] = OCCUPIED  # the small room: x 3.55-4.95 m, y 1.0-2.05 m
+    view = view_of(state)
+    straight = np.column_stack([np.linspace(1.0, 4.2, 65), np.full(65, 1.5)])
+    t = np.linspace(0, 2 * np.pi, 60)
+    circle = np.column_stack([4.2 + 0.3 * np.sin(t), 1.5 + 0.2 * (1 - np.cos(t))])  # a loop of 1.6 m
+    est = [np.array([x, y, 0.0]) for x, y in np.vstack([straight, circle])]
+    loop = SimpleNamespace(view=lambda: view, robot=SimpleNamespace(cfg=SimpleNamespace(radius=0.2)),
+                           slam=SimpleNamespace(pose=est[-1]), retraces=0)  # fmt: skip
+    way = _way_out(loop, est)
+    assert way is not None and loop.retraces == 1
+    large = np.isfinite(geodesic(view.traversable(0.2), view.to_cell([2.0, 1.5]), view.resolution))
+    end = view.to_cell(way[-1])
+    assert large[end[0], end[1]] and abs(way[-1][1] - 1.5) < 0.05  # in the large room, on the path it came by
+    assert np.hypot(*(way[0] - est[-1][:2])) < 0.15  # from where the robot stands
+    length = np.hypot(*np.diff(way, axis=0).T).sum()
+    assert length < 1.2 * (est[-1][0] - way[-1][0])  # straight back: the loop in the small room is not retraced
+    outside = SimpleNamespace(view=lambda: view, robot=loop.robot, slam=SimpleNamespace(pose=np.array([2.0, 1.5, 0.0])),
+                              retraces=0)  # fmt: skip
+    assert _way_out(outside, [np.array([x, y, 0.0]) for x, y in straight[:30]]) is None  # not cut off
+    loop.retraces = MAX_RETRACES
+    assert _way_out(loop, est) is None
+
+
 def test_pocket_cells_are_hidden_unknown_cells_walls_close_small_gaps_and_escape_turns_to_open_space():
     from slam2d.exploration.explorer import pocket_state
     from slam2d.exploration.run import _open_heading

@@ -26,7 +26,7 @@ from slam2d import config as config_mod
 from slam2d.errors import InputError
 from slam2d.exploration.config import ExploreConfig
 from slam2d.exploration.explorer import Explorer, Goal
-from slam2d.exploration.gridops import GridView, LiveClearance, cells_inside_polygon, inside_polygon
+from slam2d.exploration.gridops import GridView, LiveClearance, cells_inside_polygon, geodesic, inside_polygon
 
 log = logging.getLogger(__name__)
 
@@ -132,6 +132,8 @@ class _Loop:
         self.replans = self.recoveries = self.escapes = 0
         self.contacts: list = []
         self.escape = None  # (heading rad, start (x, y), start time) while backing out of a tight spot
+        self.retrace = None  # (the way back (K, 2) m, start time) while driving out of a trap
+        self.retraces = 0
 
     def view(self) -> GridView:
         m = self.cfg.mapping
@@ -227,32 +229,36 @@ def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
             next_check = now + ecfg.check_period
             if loop.explorer.spent(loop.goal, loop.view()):
                 loop.close_goal("spent")
-        if loop.goal is None:
+        if loop.goal is None and loop.retrace is None:
             loop.set_goal(loop.explorer.decide(pose, loop.view()), now)
             if loop.goal is None and now >= WARMUP:
-                stop = "done"
-                break
-        if loop.goal is None:  # the first scans: no cell is free yet (log-odds need a few misses)
+                way = _way_out(loop, est)
+                if way is None:
+                    stop = "done"
+                    break
+                loop.retrace = way, now
+        if loop.goal is None and loop.retrace is None:  # the first scans: no cell is free yet
             step = _wait(loop, step, period, truth, est, stamps)
             continue
-        d_leg = float(np.hypot(*(pose[:2] - loop.legs[0])))
-        view_leg = loop.goal.kind == "pocket" and len(loop.legs) == 1
-        if d_leg < (POCKET_REACHED if view_leg else ecfg.goal_reached):
-            if view_leg:  # stand still at a view long enough for the grid's cells to settle
-                loop.dwell = now + POCKET_DWELL if loop.dwell is None else loop.dwell
-                if now < loop.dwell:
-                    step = _wait(loop, step, period, truth, est, stamps)
+        if loop.goal is not None:
+            d_leg = float(np.hypot(*(pose[:2] - loop.legs[0])))
+            view_leg = loop.goal.kind == "pocket" and len(loop.legs) == 1
+            if d_leg < (POCKET_REACHED if view_leg else ecfg.goal_reached):
+                if view_leg:  # stand still at a view long enough for the grid's cells to settle
+                    loop.dwell = now + POCKET_DWELL if loop.dwell is None else loop.dwell
+                    if now < loop.dwell:
+                        step = _wait(loop, step, period, truth, est, stamps)
+                        continue
+                if len(loop.legs) > 1:
+                    loop.next_leg(now)
                     continue
-            if len(loop.legs) > 1:
-                loop.next_leg(now)
-                continue
-            loop.close_goal("reached")
-            loop.explorer.observe(pose, step.scan, loop.view(), force=True)
-            idle += 1
-            if idle < 20:
-                continue
-        cmd = None
-        if loop.escape is not None:
+                loop.close_goal("reached")
+                loop.explorer.observe(pose, step.scan, loop.view(), force=True)
+                idle += 1
+                if idle < 20:
+                    continue
+        cmd = _retrace(loop, step, now) if loop.retrace is not None else None
+        if cmd is None and loop.escape is not None:
             cmd = _escape(loop, step, now)
         if cmd is None and loop.nav is not None:
             cmd = loop.nav.step(pose, step.velocity, step.scan.points_in_base(), loop.slam.grid, now - loop.goal_t0)
@@ -324,6 +330,70 @@ def _escape(loop: _Loop, step, now: float):
         loop.escape = None, start, since  # blocked after all: choose again
         return Command(0.0, 0.0, False, "escape")
     return Command(0.15, float(np.clip(2.0 * err, -1.0, 1.0)), False, "escape")
+
+
+TRAPPED_SHARE = 0.5  # the robot is trapped when its map lets it reach less than this share of the known free space
+MAX_RETRACES = 3  # ways out driven in a run at most
+RETRACE_SPACING = 0.1  # m between the points of a way out
+RETRACE_LOOKAHEAD = 0.3  # m: the point of the way out steered at
+
+
+def _way_out(loop: _Loop, est: list) -> np.ndarray | None:
+    """When no goal is left: the robot's own way back (K, 2) m, latest first, to where it last was in the larger part
+    of the known free space, if its map cuts it off from that part (a gap it drove through that the map has since
+    drawn narrower than the robot: the robot can pass it, the planner no longer plans through it); else None."""
+    if loop.retraces >= MAX_RETRACES:
+        return None
+    view = loop.view()
+    passable = view.traversable(loop.robot.cfg.radius)
+    reach = np.isfinite(geodesic(passable, view.to_cell(loop.slam.pose[:2]), view.resolution))
+    if reach.sum() >= TRAPPED_SHARE * passable.sum():
+        return None
+    path = np.array(est)[:, :2]
+    cells = view.to_cell(path)
+    inside = view.inside(cells)
+    cut_off = np.zeros(len(path), dtype=bool)
+    cut_off[inside] = passable[cells[inside, 0], cells[inside, 1]] & ~reach[cells[inside, 0], cells[inside, 1]]
+    if not cut_off.any():
+        return None
+    k = int(np.nonzero(cut_off)[0][-1])
+    i, way = len(path) - 1, []
+    while i > k:  # back along the path; where it passed near here before, from its earliest pass (loops skipped)
+        near = np.nonzero(np.hypot(*(path[k:i] - path[i]).T) < RETRACE_SPACING)[0]
+        i = max(k + int(near[0]) - 1, k) if len(near) else i - 1
+        way.append(path[i])
+    way = np.array(way)
+    loop.retraces += 1
+    log.info("trapped at (%.2f, %.2f): driving %.1f m back the way the robot came", *path[-1],
+             float(np.hypot(*np.diff(np.vstack([path[-1], way]), axis=0).T).sum()))  # fmt: skip
+    return way
+
+
+def _retrace(loop: _Loop, step, now: float):
+    """Follow the way out (``_way_out``): turn on the spot towards the point RETRACE_LOOKAHEAD m ahead on it, then
+    drive at 0.15 m/s; None (and the way dropped) at its end, when a laser point blocks the disc, or after its time
+    (20 s + 10 s a metre)."""
+    from slam2d.navigation.common import Command
+
+    way, since = loop.retrace
+    pose = loop.slam.pose
+    near = np.hypot(*(way - pose[:2]).T)
+    if near[-1] < RETRACE_SPACING or now - since > 20.0 + 10.0 * RETRACE_SPACING * len(way):
+        loop.retrace = None
+        return None
+    ahead = np.nonzero(near >= RETRACE_LOOKAHEAD)[0]
+    ahead = ahead[ahead >= int(np.argmin(near))]
+    target = way[ahead[0]] if len(ahead) else way[-1]
+    err = float(np.arctan2(target[1] - pose[1], target[0] - pose[0]) - pose[2])
+    err = float(np.arctan2(np.sin(err), np.cos(err)))
+    if abs(err) > 0.3:
+        return Command(0.0, float(np.clip(2.0 * err, -1.0, 1.0)), False, "retrace turn")
+    points = step.scan.points_in_base()
+    front = (points[:, 0] > 0) & (points[:, 0] < 0.15 + loop.robot.cfg.radius)
+    if (np.abs(points[front, 1]) < loop.robot.cfg.radius).any():
+        loop.retrace = None
+        return None
+    return Command(0.15, float(np.clip(2.0 * err, -1.0, 1.0)), False, "retrace")
 
 
 def _open_heading(points: np.ndarray, radius: float, reach: float = 1.0) -> float:
@@ -515,7 +585,7 @@ def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, colli
         "goals": len(run.goals), "goals_reached": outcomes.count("reached"), "goals_spent": outcomes.count("spent"),
         "goals_inaccessible": outcomes.count("inaccessible"), "frontier_fallbacks": ex.fallbacks,
         "pocket_goals": ex.pocket_goals, "tight_goals": ex.tight_goals,
-        "replans": loop.replans, "recoveries": loop.recoveries, "escapes": loop.escapes,
+        "replans": loop.replans, "recoveries": loop.recoveries, "escapes": loop.escapes, "retraces": loop.retraces,
         "path_repetition": path_repetition(run.truth[:, :2]),
         "coverage_disc": Coverage(loop.reachable_disc, loop.truth_frame, loop.cfg.mapping)(run.grid),
         "map_iou": cover.iou(run.grid),
