@@ -15,4 +15,4 @@ fi
 PYTHON=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PYTHON" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q -e ".[${SLAM2D_EXTRAS:-dev}]"  # CI adds ray: SLAM2D_EXTRAS=dev,ray
+.venv/bin/python -m pip install -q -c constraints.txt -e ".[${SLAM2D_EXTRAS:-dev}]"  # CI adds ray: SLAM2D_EXTRAS=dev,ray
