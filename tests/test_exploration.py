@@ -534,6 +534,26 @@ def test_explore_command_reports_bad_input_in_one_line(tmp_path):
     assert not out.exists() or not list(out.iterdir())
 
 
+def test_rays_aimed_at_the_few_unknown_cells_count_what_all_rays_count():
+    """With few unknown cells a point casts only the rays aimed at one within reach: the same gains, shares and
+    cells in sight as with every ray, from random points (inside unknown cells and near the grid's edge too)."""
+    from slam2d.exploration.gridops import _cast
+
+    rng = np.random.default_rng(5)
+    for trial in range(6):
+        state = rng.choice([FREE, OCCUPIED], size=(60, 80), p=[0.93, 0.07]).astype(np.int8)
+        state[rng.random(state.shape) < 0.01 * (trial + 1)] = UNKNOWN
+        state[30:33, 40:44] = UNKNOWN
+        points = rng.uniform([0, 0], [80, 60], size=(150, 2))  # (x, y) grid units
+        unknown = np.ascontiguousarray(np.argwhere(state == UNKNOWN))
+        for rays, reach in ((90, 8.0), (360, 20.0)):
+            every = _cast(state, points, rays, reach, 2, unknown, False)
+            aimed = _cast(state, points, rays, reach, 2, unknown, True)
+            for a, b in zip(every, aimed):
+                assert np.array_equal(a, b)
+    assert every[0].max() > 0 and (every[0] == 0).any()  # some points see unknown cells, some none
+
+
 def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped():
     """A gap the robot drove through, drawn narrower than the robot on its map (0.3 m, the robot 0.4 m wide),
     closes a small room: from inside, the way out is its own path back past the gap, without the loop it drove

@@ -177,21 +177,77 @@ def _ray_start(gx, gy, b, n_rays):
     return int(np.floor(gx)), int(np.floor(gy)), step_c, step_r, inv_x, inv_y, tmx, tmy
 
 
+RAYS_AIMED_BELOW = 8192  # unknown cells: with fewer, each point casts only the rays aimed at one within reach
+
+
 @njit(cache=True)
-def _cast(state, gxy, n_rays, max_t, rounds):
+def _aim(gx, gy, shape, unknown, max_t, need):
+    """Set ``need`` (R,) bool for the rays from (gx, gy) grid units that may count a cell within ``max_t``: those
+    whose angle lies in the angular span of one of the ``unknown`` cells (K, 2) (row, col) within reach (a ray that
+    enters a cell crosses its square), or of a stretch of the grid's edge (of ``shape``) within reach (steps beyond
+    it count); all of them from inside an unknown cell. The others meet only free cells before an occupied one."""
+    need[:] = False
+    scale = need.shape[0] / (2.0 * np.pi)
+    reach = max_t + 1.0
+    for side in range(4):  # the edges at x = 0, x = W, y = 0, y = H: the direction to each, the distance
+        mid, d = np.pi, gx
+        if side == 1:
+            mid, d = 0.0, shape[1] - gx
+        elif side == 2:
+            mid, d = -0.5 * np.pi, gy
+        elif side == 3:
+            mid, d = 0.5 * np.pi, shape[0] - gy
+        if d <= 0.0:
+            need[:] = True
+            return
+        if d < reach:  # the edge's stretch within reach: seen under 2 atan(half its length / d)
+            _span(need, mid, -np.arctan2(np.sqrt(reach * reach - d * d), d), scale)
+    for k in range(unknown.shape[0]):
+        cx, cy = unknown[k, 1] + 0.5 - gx, unknown[k, 0] + 0.5 - gy
+        if cx * cx + cy * cy > reach * reach:
+            continue
+        if abs(cx) <= 0.501 and abs(cy) <= 0.501:
+            need[:] = True
+            return
+        mid = np.arctan2(cy, cx)
+        lo = 0.0
+        for corner in range(4):
+            d = np.arctan2(cy + (corner // 2) - 0.5, cx + (corner % 2) - 0.5) - mid
+            lo = min(lo, -abs((d + np.pi) % (2.0 * np.pi) - np.pi))
+        _span(need, mid, lo, scale)
+
+
+@njit(cache=True)
+def _span(need, mid, lo, scale):
+    """Set the rays of ``need`` (R,) whose angle (ray b at 2 pi b / R) lies within ``mid`` ± |``lo``| rad."""
+    n = need.shape[0]
+    for b in range(int(np.ceil((mid + lo) * scale - 1e-6)), int(np.floor((mid - lo) * scale + 1e-6)) + 1):
+        need[b % n] = True
+
+
+@njit(cache=True)
+def _cast(state, gxy, n_rays, max_t, rounds, unknown, aimed):
     """Rays from each point (P, 2) grid units through free and unknown cells until an occupied one: ``own`` (P,)
     unknown cells in sight (steps beyond the map counted as unknown), the ``mark`` (H, W) of the last point seeing
-    each cell (1-based), and with ``rounds`` = 2 the ``shares`` (P,): a cell seen from k of the points is 1/k."""
+    each cell (1-based), and with ``rounds`` = 2 the ``shares`` (P,): a cell seen from k of the points is 1/k.
+    With ``aimed``, only the rays ``_aim`` finds aimed at one of the ``unknown`` cells (K, 2) are cast (the same
+    counts)."""
     h, w = state.shape
     n = gxy.shape[0]
-    mark = np.zeros((h, w), dtype=np.int64)
-    seers = np.zeros((h, w), dtype=np.int64)
+    mark = np.zeros((h, w), dtype=np.int32)
+    shared = rounds > 1
+    seers = np.zeros((h if shared else 1, w if shared else 1), dtype=np.int32)  # points seeing each cell
     own, shares = np.zeros(n), np.zeros(n)
+    need = np.ones(n_rays, dtype=np.bool_)
     for rnd in range(rounds):  # count the points seeing each cell, then share it among them
         for p in range(n):
             token = rnd * n + p + 1
             gx, gy = gxy[p, 0], gxy[p, 1]
+            if aimed:
+                _aim(gx, gy, state.shape, unknown, max_t, need)
             for b in range(n_rays):
+                if not need[b]:
+                    continue
                 c, r, step_c, step_r, inv_x, inv_y, tmx, tmy = _ray_start(gx, gy, b, n_rays)
                 t = 0.0
                 while t < max_t:
@@ -207,8 +263,9 @@ def _cast(state, gxy, n_rays, max_t, rounds):
                         if s == 2 and mark[r, c] != token:
                             mark[r, c] = token
                             if rnd == 0:
-                                seers[r, c] += 1
                                 own[p] += 1
+                                if shared:
+                                    seers[r, c] += 1
                             else:
                                 shares[p] += 1.0 / seers[r, c]
                     t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
@@ -218,7 +275,11 @@ def _cast(state, gxy, n_rays, max_t, rounds):
 def _rays(view: GridView, points, max_range: float, rays: int, rounds: int):
     gxy = np.ascontiguousarray((np.asarray(points, dtype=np.float64).reshape(-1, 2) - np.asarray(view.origin))
                                / view.resolution)  # fmt: skip
-    return _cast(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution, rounds)
+    state = np.ascontiguousarray(view.state)
+    unknown = state == UNKNOWN
+    aimed = np.count_nonzero(unknown) < RAYS_AIMED_BELOW
+    cells = np.ascontiguousarray(np.argwhere(unknown) if aimed else np.zeros((0, 2), dtype=np.int64))
+    return _cast(state, gxy, int(rays), float(max_range) / view.resolution, rounds, cells, aimed)
 
 
 def information_gain(view: GridView, points, max_range: float, rays: int = 180) -> np.ndarray:
