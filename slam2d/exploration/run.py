@@ -362,6 +362,8 @@ def _way_out(loop: _Loop, est: list) -> np.ndarray | None:
         near = np.nonzero(np.hypot(*(path[k:i] - path[i]).T) < RETRACE_SPACING)[0]
         i = max(k + int(near[0]) - 1, k) if len(near) else i - 1
         way.append(path[i])
+    if not way:  # cut off where it stands: nothing to drive back along
+        return None
     way = np.array(way)
     loop.retraces += 1
     log.info("trapped at (%.2f, %.2f): driving %.1f m back the way the robot came", *path[-1],
