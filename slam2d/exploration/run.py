@@ -322,14 +322,13 @@ def _escape(loop: _Loop, step, now: float):
         heading = pose[2] + _open_heading(points, loop.robot.cfg.radius)
         loop.escape = heading, start, since
         loop.escapes += 1
-    err = float(np.arctan2(np.sin(heading - pose[2]), np.cos(heading - pose[2])))
+    err = _heading_error(heading, pose)
     if abs(err) > 0.15:
-        return Command(0.0, float(np.clip(2.0 * err, -1.0, 1.0)), False, "escape turn")
-    ahead = (points[:, 0] > 0) & (points[:, 0] < 0.25 + loop.robot.cfg.radius)
-    if (np.abs(points[ahead, 1]) < loop.robot.cfg.radius + 0.01).any():
+        return _towards(err, 0.0, "escape turn")
+    if _blocked_ahead(points, loop.robot.cfg.radius, 0.25, 0.01):
         loop.escape = None, start, since  # blocked after all: choose again
         return Command(0.0, 0.0, False, "escape")
-    return Command(0.15, float(np.clip(2.0 * err, -1.0, 1.0)), False, "escape")
+    return _towards(err, 0.15, "escape")
 
 
 TRAPPED_SHARE = 0.5  # the robot is trapped when its map lets it reach less than this share of the known free space
@@ -353,7 +352,7 @@ def _way_out(loop: _Loop, est: list) -> np.ndarray | None:
     cells = view.to_cell(path)
     inside = view.inside(cells)
     cut_off = np.zeros(len(path), dtype=bool)
-    cut_off[inside] = passable[cells[inside, 0], cells[inside, 1]] & ~reach[cells[inside, 0], cells[inside, 1]]
+    cut_off[inside] = (passable & ~reach)[cells[inside, 0], cells[inside, 1]]
     if not cut_off.any():
         return None
     k = int(np.nonzero(cut_off)[0][-1])
@@ -375,8 +374,6 @@ def _retrace(loop: _Loop, step, now: float):
     """Follow the way out (``_way_out``): turn on the spot towards the point RETRACE_LOOKAHEAD m ahead on it, then
     drive at 0.15 m/s; None (and the way dropped) at its end, when a laser point blocks the disc, or after its time
     (20 s + 10 s a metre)."""
-    from slam2d.navigation.common import Command
-
     way, since = loop.retrace
     pose = loop.slam.pose
     near = np.hypot(*(way - pose[:2]).T)
@@ -386,16 +383,32 @@ def _retrace(loop: _Loop, step, now: float):
     ahead = np.nonzero(near >= RETRACE_LOOKAHEAD)[0]
     ahead = ahead[ahead >= int(np.argmin(near))]
     target = way[ahead[0]] if len(ahead) else way[-1]
-    err = float(np.arctan2(target[1] - pose[1], target[0] - pose[0]) - pose[2])
-    err = float(np.arctan2(np.sin(err), np.cos(err)))
+    err = _heading_error(float(np.arctan2(target[1] - pose[1], target[0] - pose[0])), pose)
     if abs(err) > 0.3:
-        return Command(0.0, float(np.clip(2.0 * err, -1.0, 1.0)), False, "retrace turn")
-    points = step.scan.points_in_base()
-    front = (points[:, 0] > 0) & (points[:, 0] < 0.15 + loop.robot.cfg.radius)
-    if (np.abs(points[front, 1]) < loop.robot.cfg.radius).any():
+        return _towards(err, 0.0, "retrace turn")
+    if _blocked_ahead(step.scan.points_in_base(), loop.robot.cfg.radius, 0.15, 0.0):
         loop.retrace = None
         return None
-    return Command(0.15, float(np.clip(2.0 * err, -1.0, 1.0)), False, "retrace")
+    return _towards(err, 0.15, "retrace")
+
+
+def _heading_error(heading: float, pose) -> float:
+    """``heading`` (rad) less the pose's, wrapped to (-pi, pi]."""
+    return float(np.arctan2(np.sin(heading - pose[2]), np.cos(heading - pose[2])))
+
+
+def _towards(err: float, v: float, state: str):
+    """Drive at ``v`` m/s, turning at twice the heading error ``err`` (rad), at most 1 rad/s."""
+    from slam2d.navigation.common import Command
+
+    return Command(v, float(np.clip(2.0 * err, -1.0, 1.0)), False, state)
+
+
+def _blocked_ahead(points: np.ndarray, radius: float, reach: float, margin: float) -> bool:
+    """Whether a laser point (M, 2) (robot frame) lies in the disc's sweep up to ``reach`` m ahead, with ``margin``
+    m to spare at its sides."""
+    ahead = (points[:, 0] > 0) & (points[:, 0] < reach + radius)
+    return bool((np.abs(points[ahead, 1]) < radius + margin).any())
 
 
 def _open_heading(points: np.ndarray, radius: float, reach: float = 1.0) -> float:
