@@ -80,9 +80,9 @@ def test_icp_pose_graph_beats_odometry_on_the_start_of_intel(data_file):
     assert est["rot_abs_mean"] < 0.5, est
 
 
-def bent_odometry(scans):
-    """The scans with wheel odometry bent by 0.5 deg per metre travelled (a wheel-radius mismatch) instead of the
-    simulator's: drift beyond the local window, which the frontend (odometry) cannot see."""
+def bent_odometry(scans, bend_deg: float = 0.5):
+    """The scans with wheel odometry bent by ``bend_deg`` per metre travelled (a wheel-radius mismatch)
+    instead of the simulator's: drift beyond the local window, which the frontend (odometry) cannot see."""
     import dataclasses
 
     odom, last = None, None
@@ -91,7 +91,7 @@ def bent_odometry(scans):
             odom = np.asarray(scan.odom, float)
         else:
             true = geometry.between(last, scan.ground_truth)
-            odom = geometry.compose(odom, true + [0.0, 0.0, np.deg2rad(0.5) * np.hypot(true[0], true[1])])
+            odom = geometry.compose(odom, true + [0.0, 0.0, np.deg2rad(bend_deg) * np.hypot(true[0], true[1])])
         last = scan.ground_truth
         yield dataclasses.replace(scan, odom=odom.copy())
 
@@ -106,19 +106,21 @@ class OdometryHalfDegree:
 
 
 def test_a_loop_beyond_the_local_window_is_found_by_the_drift_grown_search():
-    """After a lap of bent odometry the return to the start lies more than the +-2 m window away:
-    with a window that grows with the path between the keyframes the loop closes; with a fixed one it does not."""
+    """Odometry bent 0.75 deg per metre, loops searched only between keyframes 40 m of travel apart
+    (the revisits after a lap, not the office's many short ones): the return lies beyond the +-2 m
+    window. With a window that grows with the path between the keyframes the loop closes; with a
+    fixed one it does not."""
     def bent_run(*overrides):
         cfg = config.load(None, ["backend.name=pose_graph", "dataset.max_scans=800",
-                                 "frontend.name=test_odometry_half_degree",
+                                 "frontend.name=test_odometry_half_degree", "backend.loop_closure.min_travel=40",
                                  *overrides])
-        return SlamPipeline(cfg).run(bent_odometry(open_dataset(cfg.dataset, seed=cfg.seed)))
+        return SlamPipeline(cfg).run(bent_odometry(open_dataset(cfg.dataset, seed=cfg.seed), 0.75))
 
     def end_error(result):
         return np.hypot(*(result.poses[-1, :2] - result.ground_truth[-1, :2]))
 
-    assert end_error(bent_run("backend.name=none")) > 3.0
-    assert end_error(bent_run("backend.loop_closure.drift=0")) > 2.0
+    assert end_error(bent_run("backend.name=none")) > 4.0
+    assert end_error(bent_run("backend.loop_closure.drift=0")) > 0.8
     grown = bent_run()
-    assert end_error(grown) < 0.2
+    assert end_error(grown) < 0.4
     assert grown.stats["loop matcher accepted_grown_window"] > 0

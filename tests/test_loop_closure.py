@@ -295,3 +295,45 @@ def test_a_closure_the_estimate_does_not_follow_keeps_the_window_open(office, ke
     assert across >= 0.99 * np.hypot(residual[0], residual[1]) / cfg.drift > 30.0
     online[closure.j] = geometry.compose(online[closure.i], closure.delta)  # the estimate follows the closure
     assert lc.path_lengths(closure.j, online)[closure.i] < 1e-3
+
+
+def _scan(segments: np.ndarray, origin, beams: int = 720, max_range: float = 12.0):
+    """Hit points (N, 2) of a laser at ``origin`` (x, y) on ``segments`` (K, 2, 2), in the laser's frame (heading 0)."""
+    a = np.linspace(-np.pi, np.pi, beams, endpoint=False)
+    d = np.column_stack([np.cos(a), np.sin(a)])
+    p, e = segments[:, 0] - origin, segments[:, 1] - segments[:, 0]
+    cross = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (p[None, :, 0] * e[None, :, 1] - p[None, :, 1] * e[None, :, 0]) / cross
+        u = (p[None, :, 0] * d[:, None, 1] - p[None, :, 1] * d[:, None, 0]) / cross
+    t = np.where((t > 0) & (u >= 0) & (u <= 1), t, np.inf).min(axis=1)
+    hit = t < max_range
+    return d[hit] * t[hit, None]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_sided_submap_does_not_pair_the_two_faces_of_a_thick_wall(seed):
+    """A corridor along x (walls y = +-2, a niche at x -3..-2 in the north wall) and a wall block
+    0.25 m thick (x 0..0.25) standing out of the south wall to y = -0.5; ranges with 1 cm noise.
+    The submap is seen from the east of the block, the scan from its west: only the block's east
+    face is in the submap, only its west face in the scan. Matched on points alone, the scan
+    slides a wall's thickness along the corridor to put one face on the other, and the fit looks
+    tight; with the side each point was seen from, the niche places it."""
+    rng = np.random.default_rng(seed)
+
+    def noisy(points):
+        return points * (1 + rng.normal(0.0, 0.01, len(points)) / np.hypot(points[:, 0], points[:, 1]))[:, None]
+
+    segs = np.array([[[-20, 2], [-3, 2]], [[-3, 2], [-3, 2.3]], [[-3, 2.3], [-2, 2.3]], [[-2, 2.3], [-2, 2]],
+                     [[-2, 2], [20, 2]], [[-20, -2], [0, -2]], [[0, -2], [0, -0.5]], [[0, -0.5], [0.25, -0.5]],
+                     [[0.25, -0.5], [0.25, -2]], [[0.25, -2], [20, -2]]], dtype=float)  # fmt: skip
+    seen_from = [np.array([x, 0.0]) for x in (1.5, 2.0, 2.5, 3.0)]
+    sub = [noisy(_scan(segs, o)) + o for o in seen_from]
+    views = np.vstack([o - q for o, q in zip(seen_from, sub)])
+    views /= np.hypot(views[:, 0], views[:, 1])[:, None]
+    truth = np.array([-1.0, 0.5, 0.0])
+    scan, guess = noisy(_scan(segs, truth[:2])), truth + [0.4, -0.1, 0.02]
+    blind = match(ProbabilityGrid(np.vstack(sub), 0.05), scan, guess, 1.0, WINDOW_THETA)
+    sided = match(ProbabilityGrid(np.vstack(sub), 0.05, views=views), scan, guess, 1.0, WINDOW_THETA)
+    assert pose_error(blind.pose, truth)[0] > 0.2  # a wall's thickness off
+    assert pose_error(sided.pose, truth)[0] < 0.03 and sided.score > CFG.min_score

@@ -41,6 +41,9 @@ REFINE_REVERT_SCORE = 0.02  # keep the search pose if refinement loses more scor
 REFINE_MAX_STEPS = 3.0  # ... or moves it more than this many cells or angular steps
 COV_FLOOR_XY_CELLS = 0.5  # std floor added to the covariance, in cells
 COV_FLOOR_THETA = np.deg2rad(0.25)  # rad; std floor added to the covariance
+SIDE_NEIGHBOURS = 8  # submap points searched for one on the scan's side
+SIDES = 16  # sectors of the directions a sided grid tells surfaces apart by (bits of a uint16)
+SIDE_REACH = 4  # a surface counts as seen from a point's side if their sectors are at most this many apart (90 deg)
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,7 +51,8 @@ class MatchResult:
     """Outcome of :func:`match`.
 
     pose: (3,) pose of the scan in the submap frame (m, m, rad).
-    score: mean likelihood in [0, 1] of the scan points at ``pose``.
+    score: mean likelihood in [0, 1] of the scan points at ``pose`` (on a sided
+      grid too over all surfaces: the sides choose the pose, not the score).
     covariance: (3, 3) of ``pose``.
     search_score: best grid score of branch and bound, before refinement.
     evaluated: number of (rotation, translation) candidates scored.
@@ -70,13 +74,21 @@ class MatchResult:
 def voxel_filter(points, cell: float) -> np.ndarray:
     """One point (the first) per ``cell`` x ``cell`` square (m) of finite points (M, 2)."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    pts = pts[np.isfinite(pts).all(axis=1)]
-    if len(pts) == 0:
-        return pts
-    ij = np.floor(pts / cell).astype(np.int64)
+    return pts[_voxel_first(pts, cell)]
+
+
+def _voxel_first(pts: np.ndarray, cell: float, group=None) -> np.ndarray:
+    """Indices, in order, of the first finite point of (M, 2) per ``cell`` square (m) and ``group`` (M,) int."""
+    finite = np.flatnonzero(np.isfinite(pts).all(axis=1))
+    if len(finite) == 0:
+        return finite
+    ij = np.floor(pts[finite] / cell).astype(np.int64)
     ij -= ij.min(axis=0)
-    _, first = np.unique(ij[:, 0] * (ij[:, 1].max() + 1) + ij[:, 1], return_index=True)
-    return pts[np.sort(first)]
+    key = ij[:, 0] * (ij[:, 1].max() + 1) + ij[:, 1]
+    if group is not None:
+        key = key * 4 + np.asarray(group, dtype=np.int64)[finite]
+    _, first = np.unique(key, return_index=True)
+    return finite[np.sort(first)]
 
 
 def angular_step(points, resolution: float) -> float:
@@ -100,6 +112,7 @@ class _Pyramid:
     """
 
     levels: list[np.ndarray]
+    sides: np.ndarray | None  # a sided grid's ``sides`` padded like level 0, flattened
     origin: np.ndarray
     shape: tuple[int, int]
     resolution: float
@@ -113,12 +126,29 @@ class ProbabilityGrid:
     resolution: cell size (m); sigma: field std (m), default one cell.
     Keeps the points (voxel-filtered at half a cell), a k-d tree over them
     and their normals for refinement and scoring.
+
+    views: optional unit vectors (M, 2) from each point towards the place it was
+    seen from. With them the normals face that side, and the exact score, the
+    refinement and the covariance pair a scan point only with surfaces seen from
+    the scan's side: the two faces of a thick wall, one in the submap and one in
+    the scan, would otherwise match a wall's thickness off. Points seen from
+    different quadrants keep one point each per voxel.
     """
 
-    def __init__(self, points, resolution: float = 0.05, sigma: float | None = None):
+    def __init__(self, points, resolution: float = 0.05, sigma: float | None = None, views=None):
         if not resolution > 0:
             raise ValueError(f"resolution must be > 0 m, got {resolution}")
-        pts = voxel_filter(points, resolution / 2)
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        if views is not None:
+            views = np.asarray(views, dtype=np.float64).reshape(-1, 2)
+            if len(views) != len(points):
+                raise ValueError(f"views must be (M, 2) like the points, got {views.shape} for {points.shape}")
+            quadrant = (views[:, 0] < 0).astype(np.int64) * 2 + (views[:, 1] < 0)
+            keep = _voxel_first(points, resolution / 2, quadrant)
+            views = views[keep]
+        else:
+            keep = _voxel_first(points, resolution / 2)
+        pts = points[keep]
         if len(pts) == 0:
             raise ValueError("a probability grid needs at least one finite submap point")
         self.resolution = float(resolution)
@@ -130,7 +160,17 @@ class ProbabilityGrid:
         self.field = _likelihood_field(cells, (int(ny), int(nx)), self.sigma / resolution)
         self.points = pts
         self.tree = cKDTree(pts)
-        self.normals, self.has_normal = _normals(self.tree, pts, NORMAL_RADIUS_CELLS * resolution)
+        self.normals, self.has_normal, spread = _normals(self.tree, pts, NORMAL_RADIUS_CELLS * resolution)
+        self.sided = views is not None
+        self.facing = None  # (M, 2): the side each point's surface was seen from
+        self.sides = None  # (ny, nx) uint16: bit k set where a surface facing sector k is within the field's reach
+        if self.sided:  # normals face the side each point was seen from
+            self.normals *= np.where(np.einsum("ij,ij->i", self.normals, views) < 0, -1.0, 1.0)[:, None]
+            self.facing = np.where(spread[:, None], self.normals, views)  # a lone point faces its view
+            sector = _sector(np.arctan2(self.facing[:, 1], self.facing[:, 0]))
+            bits = np.left_shift(1, sector).astype(np.uint16)
+            reach = int(np.ceil(FIELD_CUTOFF_SIGMAS * self.sigma / resolution))
+            self.sides = _splat_or(cells[:, 1], cells[:, 0], bits, self.field.shape, reach)
         self._pyramids: dict[tuple[int, int], _Pyramid] = {}
 
     def __repr__(self) -> str:
@@ -147,8 +187,14 @@ class ProbabilityGrid:
     def _build_pyramid(self, window: int, depth: int) -> _Pyramid:
         pad = 2 * window + 2 ** (depth + 1) + 2
         levels = _pooled_levels(self.field, depth, pad)
+        sides = None
+        if self.sides is not None:
+            sides = np.zeros(levels.shape[1:], np.uint16)
+            sides[pad:pad + self.sides.shape[0], pad:pad + self.sides.shape[1]] = self.sides
+            sides = sides.ravel()
         return _Pyramid(
             levels=[lv.ravel() for lv in levels],
+            sides=sides,
             origin=self.origin - pad * self.resolution,
             shape=levels.shape[1:],
             resolution=self.resolution,
@@ -156,13 +202,31 @@ class ProbabilityGrid:
             depth=depth,
         )
 
-    def score(self, points_in_submap) -> float:
-        """Mean likelihood in [0, 1] of points (N, 2) given in the submap frame (exact distances)."""
+    def score(self, points_in_submap, origin=None) -> float:
+        """Mean likelihood in [0, 1] of points (N, 2) given in the submap frame (exact distances);
+        with ``origin`` (2,), where they were seen from, of a sided grid: surfaces on their side only."""
         pts = np.asarray(points_in_submap, dtype=np.float64).reshape(-1, 2)
         if len(pts) == 0:
             return 0.0
-        d, _ = self.tree.query(pts, distance_upper_bound=5.0 * self.sigma)
+        d, _ = self.nearest(pts, 5.0 * self.sigma, origin)
         return float(np.mean(np.exp(-0.5 * (np.minimum(d, 1e3) / self.sigma) ** 2)))
+
+    def nearest(self, pts: np.ndarray, max_dist: float, origin=None) -> tuple[np.ndarray, np.ndarray]:
+        """Distance (N,) (m; inf beyond ``max_dist``) and index (N,) of each point's nearest submap
+        point; with ``origin`` (2,) on a sided grid, the nearest whose surface faces ``origin``'s side."""
+        if origin is None or not self.sided:
+            return self.tree.query(pts, distance_upper_bound=max_dist)
+        k = min(SIDE_NEIGHBOURS, len(self.points))
+        d, j = self.tree.query(pts, k=k, distance_upper_bound=max_dist)
+        d, j = d.reshape(len(pts), k), j.reshape(len(pts), k)
+        found = np.isfinite(d)
+        jj = np.minimum(j, len(self.points) - 1)
+        facing = np.einsum("nkc,nkc->nk", self.facing[jj], (np.asarray(origin, dtype=np.float64) - pts)[:, None, :])
+        other_side = found & (facing < 0)
+        d = np.where(other_side, np.inf, d)
+        first = np.argmin(d, axis=1)
+        rows = np.arange(len(pts))
+        return d[rows, first], j[rows, first]
 
 
 @njit(cache=True, nogil=True)
@@ -189,6 +253,41 @@ def _pooled_levels(field, depth, pad):  # pragma: no cover - compiled
         for i in range(hgt):
             for j in range(wid):
                 dst[i, j] = max(rows[i, j], rows[i + h, j]) if i + h < hgt else rows[i, j]
+    return out
+
+
+def _sector(angle) -> np.ndarray:
+    """Sector (int64) of directions ``angle`` (rad) among ``SIDES``, sector k centred on k * 360 / SIDES deg."""
+    return np.floor(np.mod(np.asarray(angle) + np.pi / SIDES, 2 * np.pi) / (2 * np.pi / SIDES)).astype(np.int64) % SIDES
+
+
+def _facing_bits(points: np.ndarray, thetas: np.ndarray) -> np.ndarray:
+    """Bits (A, N) uint16 of the surface sectors seen from each point's side: points (N, 2) seen
+    from the origin, rotated by each angle (A,); a surface is on the point's side when its normal's
+    sector is within ``SIDE_REACH`` of the sector of the point's view (the direction back to the
+    origin). Never a surface seen from the other side (normal and view more than 90 deg apart)
+    unless the two are within 22.5 deg of perpendicular."""
+    s = _sector(np.arctan2(-points[:, 1], -points[:, 0])[None] + np.asarray(thetas)[:, None])
+    table = np.zeros(SIDES, np.uint16)
+    for d in range(-SIDE_REACH, SIDE_REACH + 1):
+        table |= np.left_shift(1, (np.arange(SIDES) + d) % SIDES).astype(np.uint16)
+    return table[s]
+
+
+@njit(cache=True, nogil=True)
+def _splat_or(rows, cols, bits, shape, reach):  # pragma: no cover - compiled
+    """Grid ``shape`` (uint16) OR-ing each point's ``bits`` over the cells within ``reach`` cells of (row, col)."""
+    ny, nx = shape
+    out = np.zeros((ny, nx), dtype=np.uint16)
+    for p in range(len(rows)):
+        for dy in range(-reach, reach + 1):
+            y = rows[p] + dy
+            if y < 0 or y >= ny:
+                continue
+            for dx in range(-reach, reach + 1):
+                x = cols[p] + dx
+                if 0 <= x < nx and dx * dx + dy * dy <= reach * reach:
+                    out[y, x] |= bits[p]
     return out
 
 
@@ -220,11 +319,12 @@ def _splat_max(rows, cols, ny, nx, kernel):  # pragma: no cover - compiled
     return field
 
 
-def _normals(tree: cKDTree, pts: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals (M, 2) of points from their neighbours' scatter, and where they are reliable (M,).
+def _normals(tree: cKDTree, pts: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit normals (M, 2) of points from their neighbours' scatter, where they are reliable (M,),
+    and where they have any (M,).
 
-    A normal is reliable with at least 3 neighbours within ``radius`` (m) spread
-    along a line (smaller scatter eigenvalue <= 10 % of the larger).
+    A normal is had with at least 3 neighbours within ``radius`` (m), and reliable
+    when they spread along a line (smaller scatter eigenvalue <= 10 % of the larger).
     """
     k = min(NORMAL_NEIGHBOURS, len(pts))
     d, j = tree.query(pts, k=k, distance_upper_bound=radius)
@@ -239,7 +339,7 @@ def _normals(tree: cKDTree, pts: np.ndarray, radius: float) -> tuple[np.ndarray,
     half_gap = np.hypot(0.5 * (sxx - syy), sxy)
     small, large = 0.5 * (sxx + syy) - half_gap, 0.5 * (sxx + syy) + half_gap
     normals = np.column_stack([-np.sin(along), np.cos(along)])
-    return normals, (count >= 3) & (small <= 0.1 * large)
+    return normals, (count >= 3) & (small <= 0.1 * large), count >= 3
 
 
 # --------------------------------------------------------------------------- branch and bound
@@ -262,9 +362,13 @@ def _discretise(pyr: _Pyramid, points: np.ndarray, start: np.ndarray, thetas: np
     return np.where(inside, row * nx + col, w * nx + w)
 
 
-def _scores(level: np.ndarray, flat: np.ndarray, cands: np.ndarray, width: int) -> np.ndarray:
-    """Mean of ``level`` over the points of each candidate (C, 3) = (angle index, dx, dy) cells."""
-    return _scores_kernel(level, flat, np.ascontiguousarray(cands), width)
+def _scores(level: np.ndarray, flat: np.ndarray, sides, cands: np.ndarray, width: int) -> np.ndarray:
+    """Mean of ``level`` over the points of each candidate (C, 3) = (angle index, dx, dy) cells;
+    with ``sides`` = (the grid's side bits, the points' facing bits (A, N)), 0 for a point whose
+    cell holds no surface seen from its side."""
+    if sides is None:
+        return _scores_kernel(level, flat, np.ascontiguousarray(cands), width)
+    return _sided_scores_kernel(level, flat, np.ascontiguousarray(cands), width, *sides)
 
 
 @njit(cache=True, nogil=True)
@@ -277,6 +381,22 @@ def _scores_kernel(level, flat, cands, width):  # pragma: no cover - compiled
         total = 0.0
         for i in range(n_pts):
             total += level[row[i] + shift]
+        out[c] = total / max(n_pts, 1)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _sided_scores_kernel(level, flat, cands, width, grid_bits, point_bits):  # pragma: no cover - compiled
+    n_pts = flat.shape[1]
+    out = np.empty(cands.shape[0], dtype=np.float64)
+    for c in range(cands.shape[0]):
+        row, facing = flat[cands[c, 0]], point_bits[cands[c, 0]]
+        shift = cands[c, 2] * width + cands[c, 1]
+        total = 0.0
+        for i in range(n_pts):
+            cell = row[i] + shift
+            if grid_bits[cell] & facing[i]:
+                total += level[cell]
         out[c] = total / max(n_pts, 1)
     return out
 
@@ -304,49 +424,56 @@ def _outside(cands: np.ndarray, size: int, exclude) -> np.ndarray:
     return ~inside
 
 
-def _greedy(pyr: _Pyramid, flat: np.ndarray, cand: np.ndarray, level: int, exclude=None):
+def _level(pyr: _Pyramid, flat: np.ndarray, k: int, facing) -> tuple:
+    """``_scores``'s level, indices and sides at level ``k``: sided at level 0 with ``facing`` bits."""
+    return pyr.levels[k], flat, (pyr.sides, facing) if k == 0 and facing is not None else None
+
+
+def _greedy(pyr: _Pyramid, flat: np.ndarray, cand: np.ndarray, level: int, exclude=None, facing=None):
     """Descend from ``cand`` at ``level`` to level 0 through the best child: (candidate, score, evaluated)."""
     width, evaluated, score = pyr.shape[1], 0, 0.0
     for k in range(level, 0, -1):
         kids = _children(cand[None], k, pyr.window, exclude)
         if len(kids) == 0:
             return cand, -np.inf, evaluated
-        s = _scores(pyr.levels[k - 1], flat, kids, width)
+        s = _scores(*_level(pyr, flat, k - 1, facing), kids, width)
         evaluated += len(kids)
         cand, score = kids[np.argmax(s)], float(s.max())
     if level == 0:
-        score = float(_scores(pyr.levels[0], flat, cand[None], width)[0])
+        score = float(_scores(*_level(pyr, flat, 0, facing), cand[None], width)[0])
         evaluated += 1
     return cand, score, evaluated
 
 
-def _branch_and_bound(pyr: _Pyramid, flat: np.ndarray, min_score: float, exclude=None):
+def _branch_and_bound(pyr: _Pyramid, flat: np.ndarray, min_score: float, exclude=None, facing=None):
     """Best (angle index, dx, dy) over all angles and the translational window, its score, evaluations.
 
     Level-synchronous branch and bound: every level's surviving blocks are
     scored in one gather; a block survives while its pooled upper bound beats
     the best exact score so far (found by greedy descents) and ``min_score``.
     ``exclude`` = (dx, dy, r) cells leaves out the translations within r of
-    (dx, dy) (the runner-up search). The score is -inf when nothing is left.
+    (dx, dy) (the runner-up search); with ``facing`` bits (A, N) of the points,
+    level 0 counts only surfaces seen from each point's side (no more than the
+    field, so the pooled levels still bound it). The score is -inf when nothing is left.
     """
     w, depth, width = pyr.window, pyr.depth, pyr.shape[1]
     offs = np.arange(-w, w + 1, 2**depth, dtype=np.int64)
     a, dx, dy = np.meshgrid(np.arange(len(flat), dtype=np.int64), offs, offs, indexing="ij")
     cands = np.column_stack([a.ravel(), dx.ravel(), dy.ravel()])
     cands = cands[_outside(cands, 2**depth, exclude)]
-    bound = _scores(pyr.levels[depth], flat, cands, width)
+    bound = _scores(*_level(pyr, flat, depth, facing), cands, width)
     evaluated = len(cands)
     best, best_score = None, -np.inf
     for k in range(depth, 0, -1):
         if len(cands) == 0:
             break
-        c, s, n = _greedy(pyr, flat, cands[np.argmax(bound)], k, exclude)
+        c, s, n = _greedy(pyr, flat, cands[np.argmax(bound)], k, exclude, facing)
         evaluated += n
         if s > best_score:
             best, best_score = c, s
         keep = bound > max(best_score, min_score)
         cands = _children(cands[keep], k, w, exclude)
-        bound = _scores(pyr.levels[k - 1], flat, cands, width)
+        bound = _scores(*_level(pyr, flat, k - 1, facing), cands, width)
         evaluated += len(cands)
     if len(cands) and (best is None or bound.max() > best_score):
         best, best_score = cands[np.argmax(bound)], float(bound.max())
@@ -359,7 +486,7 @@ def _branch_and_bound(pyr: _Pyramid, flat: np.ndarray, min_score: float, exclude
 def _point_to_line(grid: ProbabilityGrid, points: np.ndarray, pose: np.ndarray, max_dist: float):
     """Residuals (K,), Jacobian (K, 3) w.r.t. (x, y, theta) and Huber weights (K,) at ``pose``."""
     q = geometry.transform_points(pose, points)
-    d, j = grid.tree.query(q, distance_upper_bound=max_dist)
+    d, j = grid.nearest(q, max_dist, pose[:2])
     ok = np.isfinite(d)
     ok[ok] = grid.has_normal[j[ok]]
     j, q, p = j[ok], q[ok], points[ok]
@@ -447,7 +574,8 @@ def match(
     found, step, search_score, evaluated, runner_up, rival = _search(
         grid, pts, initial, window_xy, window_theta, min_score, depth, ambiguity_xy, ambiguity_ratio
     )
-    pose, score = _polish(grid, pts, found, step)
+    pose = _polish(grid, pts, found, step)
+    score = grid.score(geometry.transform_points(pose, pts))  # on every surface, as a blind grid scores it
     window = [window_xy, window_xy, window_theta] if prior_window is None else prior_window
     cov = _covariance(grid, pts, pose, np.asarray(window, dtype=np.float64))
     return MatchResult(pose, score, cov, search_score, evaluated, runner_up, rival)
@@ -465,7 +593,8 @@ def _search(grid, pts, initial, window_xy, window_theta, min_score, depth, ambig
     thetas = initial[2] + step * np.arange(-n_steps, n_steps + 1)
     pyr = grid.pyramid(window, depth)
     flat = _discretise(pyr, pts, initial[:2], thetas)
-    best, score, evaluated = _branch_and_bound(pyr, flat, min_score)
+    facing = None if pyr.sides is None else _facing_bits(pts, thetas)
+    best, score, evaluated = _branch_and_bound(pyr, flat, min_score, facing=facing)
 
     def pose_of(cand):
         return np.array([*(initial[:2] + res * cand[1:]), geometry.wrap_angle(thetas[cand[0]])])
@@ -474,21 +603,23 @@ def _search(grid, pts, initial, window_xy, window_theta, min_score, depth, ambig
     if ambiguity_xy > 0 and score >= min_score:  # below min_score the caller rejects the match anyway
         floor = ambiguity_ratio * score
         exclude = (int(best[1]), int(best[2]), int(np.ceil(ambiguity_xy / res - 1e-9)))
-        other, second, n = _branch_and_bound(pyr, flat, floor, exclude)
+        other, second, n = _branch_and_bound(pyr, flat, floor, exclude, facing)
         evaluated += n
         if second >= floor:
             runner_up, rival = second, pose_of(other)
     return pose_of(best), step, score, evaluated, runner_up, rival
 
 
-def _polish(grid: ProbabilityGrid, pts: np.ndarray, found: np.ndarray, step: float) -> tuple[np.ndarray, float]:
-    """Refined pose and its exact score; the search pose if refinement strays or loses score."""
+def _polish(grid: ProbabilityGrid, pts: np.ndarray, found: np.ndarray, step: float) -> np.ndarray:
+    """Refined pose; the search pose if refinement loses (exact, sided) score, or strays without
+    gaining any (the search's cells and view sectors only approximate the sides: where it still
+    paired a wall's two faces, refinement moves the pose by the wall's thickness)."""
     refined = _refine(grid, pts, found)
-    score = grid.score(geometry.transform_points(refined, pts))
-    found_score = grid.score(geometry.transform_points(found, pts))
+    score = grid.score(geometry.transform_points(refined, pts), refined[:2])
+    found_score = grid.score(geometry.transform_points(found, pts), found[:2])
     moved = geometry.between(found, refined)
     limit = REFINE_MAX_STEPS * np.array([grid.resolution, step])
     strayed = np.hypot(moved[0], moved[1]) > limit[0] or abs(moved[2]) > limit[1]
-    if strayed or score < found_score - REFINE_REVERT_SCORE:
-        return found, found_score
-    return refined, score
+    if (strayed and score <= found_score) or score < found_score - REFINE_REVERT_SCORE:
+        return found
+    return refined

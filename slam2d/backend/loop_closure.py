@@ -344,10 +344,9 @@ class LoopCloser:
         if cached is not None and cached.members == members and self._unmoved(cached.relative, relative):
             self._submaps.move_to_end(anchor)
             return cached
-        pts = np.vstack([geometry.transform_points(p, self._points[k]) for k, p in zip(members, relative)])
-        if len(pts) < MIN_POINTS:
+        if sum(len(self._points[k]) for k in members) < MIN_POINTS:
             return None
-        submap = _Submap(members, relative, ProbabilityGrid(pts, self.cfg.resolution))
+        submap = _Submap(members, relative, self._grid(members, relative))
         self._submaps[anchor] = submap
         if len(self._submaps) > SUBMAP_CACHE:
             self._submaps.popitem(last=False)
@@ -364,8 +363,16 @@ class LoopCloser:
         anchor = members[int(np.argmin(dist))]
         near = [k for k, d in zip(members, dist) if d <= reach]
         relative = geometry.between(poses[anchor], poses[near])
-        pts = np.vstack([geometry.transform_points(p, self._points[k]) for k, p in zip(near, relative)])
-        return _Submap(tuple(near), relative, ProbabilityGrid(pts, self.cfg.resolution)), anchor
+        return _Submap(tuple(near), relative, self._grid(near, relative)), anchor
+
+    def _grid(self, members, relative: np.ndarray) -> ProbabilityGrid:
+        """The sided grid of the members' points at their poses ``relative`` (n, 3), each point
+        seen from its keyframe's position."""
+        pts = [geometry.transform_points(p, self._points[k]) for k, p in zip(members, relative)]
+        views = [p[:2] - q for p, q in zip(relative, pts)]
+        views = np.vstack(views)
+        views /= np.maximum(np.hypot(views[:, 0], views[:, 1]), 1e-9)[:, None]
+        return ProbabilityGrid(np.vstack(pts), self.cfg.resolution, views=views)
 
     def _unmoved(self, old: np.ndarray, new: np.ndarray) -> bool:
         """Whether relative member poses changed less than the reuse tolerances."""
