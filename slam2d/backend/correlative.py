@@ -78,7 +78,7 @@ def voxel_filter(points, cell: float) -> np.ndarray:
 
 
 def _voxel_first(pts: np.ndarray, cell: float, group=None) -> np.ndarray:
-    """Indices, in order, of the first finite point of (M, 2) per ``cell`` square (m) and ``group`` (M,) int."""
+    """Indices, in order, of the first finite point of (M, 2) per ``cell`` square (m) and ``group`` (M,) in 0..3."""
     finite = np.flatnonzero(np.isfinite(pts).all(axis=1))
     if len(finite) == 0:
         return finite
@@ -128,11 +128,11 @@ class ProbabilityGrid:
     and their normals for refinement and scoring.
 
     views: optional unit vectors (M, 2) from each point towards the place it was
-    seen from. With them the normals face that side, and the exact score, the
-    refinement and the covariance pair a scan point only with surfaces seen from
-    the scan's side: the two faces of a thick wall, one in the submap and one in
-    the scan, would otherwise match a wall's thickness off. Points seen from
-    different quadrants keep one point each per voxel.
+    seen from. With them the normals face that side, and the search, the
+    refinement, the covariance (and ``score`` given an origin) pair a scan point
+    only with surfaces seen from the scan's side: the two faces of a thick wall,
+    one in the submap and one in the scan, would otherwise match a wall's
+    thickness off. Points seen from different quadrants keep one point each per voxel.
     """
 
     def __init__(self, points, resolution: float = 0.05, sigma: float | None = None, views=None):

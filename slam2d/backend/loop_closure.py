@@ -369,8 +369,7 @@ class LoopCloser:
         """The sided grid of the members' points at their poses ``relative`` (n, 3), each point
         seen from its keyframe's position."""
         pts = [geometry.transform_points(p, self._points[k]) for k, p in zip(members, relative)]
-        views = [p[:2] - q for p, q in zip(relative, pts)]
-        views = np.vstack(views)
+        views = np.vstack([p[:2] - q for p, q in zip(relative, pts)])
         views /= np.maximum(np.hypot(views[:, 0], views[:, 1]), 1e-9)[:, None]
         return ProbabilityGrid(np.vstack(pts), self.cfg.resolution, views=views)
 
