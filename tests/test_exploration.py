@@ -406,7 +406,9 @@ def two_rooms_png(tmp_path):
 
 
 @pytest.mark.parametrize("strategy", ["nearest_frontier", "utility"])
-def test_exploring_two_rooms_terminates_with_full_coverage(tmp_path, strategy):
+def test_exploring_two_rooms_terminates_with_full_coverage(tmp_path, strategy, caplog):
+    import logging
+
     from slam2d.exploration.run import run_explore
 
     world = two_rooms_png(tmp_path)
@@ -415,7 +417,9 @@ def test_exploring_two_rooms_terminates_with_full_coverage(tmp_path, strategy):
         "exploration.strategy": strategy, "exploration.start": [1.5, 2.0, 0.0], "exploration.max_time": 150,
         "exploration.animation": strategy == "utility",
     })  # fmt: skip
-    folder = run_explore(cfg)
+    with caplog.at_level(logging.INFO, logger="slam2d.backend.pose_graph"):
+        folder = run_explore(cfg)
+    assert any(r.message.startswith("batch LM") for r in caplog.records)  # the final map at batch poses
     m = json.loads((folder / "metrics.json").read_text())
     assert m["stop_reason"] == "done" and not m["premature_stop"]
     assert m["coverage"] >= 0.99 and m["collisions"] == 0

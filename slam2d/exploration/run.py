@@ -287,6 +287,7 @@ def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
     if loop.nav is not None:
         loop.close_goal("stopped")
     loop.explorer.hybrid.finish()
+    loop.slam.finish()  # the final batch optimisation, as `slam2d run` ends: the map is drawn at its poses
     grid = loop.slam.grid
     now = step.scan.stamp - t0
     curve.append((now, driven, cover(grid)))
