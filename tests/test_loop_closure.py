@@ -226,7 +226,7 @@ def test_likelihood_field_matches_the_distance_transform():
     rng = np.random.default_rng(3)
     cells = np.column_stack([rng.integers(0, 60, 40), rng.integers(0, 45, 40)])  # (col, row)
     sigma = 1.5
-    field = _likelihood_field(cells, (45, 60), sigma)
+    field, _ = _likelihood_field(cells, (45, 60), sigma)
     occupied = np.zeros((45, 60), dtype=bool)
     occupied[cells[:, 1], cells[:, 0]] = True
     d = distance_transform_edt(~occupied)

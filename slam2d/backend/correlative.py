@@ -157,20 +157,17 @@ class ProbabilityGrid:
         self.origin = pts.min(axis=0) - margin
         cells = np.floor((pts - self.origin) / resolution).astype(np.int64)
         nx, ny = np.floor((pts.max(axis=0) + margin - self.origin) / resolution).astype(np.int64) + 1
-        self.field = _likelihood_field(cells, (int(ny), int(nx)), self.sigma / resolution)
         self.points = pts
         self.tree = cKDTree(pts)
         self.normals, self.has_normal, spread = _normals(self.tree, pts, NORMAL_RADIUS_CELLS * resolution)
-        self.sided = views is not None
-        self.facing = None  # (M, 2): the side each point's surface was seen from
-        self.sides = None  # (ny, nx) uint16: bit k set where a surface facing sector k is within the field's reach
-        if self.sided:  # normals face the side each point was seen from
+        self.facing = None  # (M, 2): the side each point's surface was seen from (a sided grid)
+        bits = None
+        if views is not None:  # normals face the side each point was seen from
             self.normals *= np.where(np.einsum("ij,ij->i", self.normals, views) < 0, -1.0, 1.0)[:, None]
             self.facing = np.where(spread[:, None], self.normals, views)  # a lone point faces its view
-            sector = _sector(np.arctan2(self.facing[:, 1], self.facing[:, 0]))
-            bits = np.left_shift(1, sector).astype(np.uint16)
-            reach = int(np.ceil(FIELD_CUTOFF_SIGMAS * self.sigma / resolution))
-            self.sides = _splat_or(cells[:, 1], cells[:, 0], bits, self.field.shape, reach)
+            bits = np.left_shift(1, _sector(np.arctan2(self.facing[:, 1], self.facing[:, 0]))).astype(np.uint16)
+        # sides: (ny, nx) uint16 of a sided grid, bit k set where a surface facing sector k is within the field's reach
+        self.field, self.sides = _likelihood_field(cells, (int(ny), int(nx)), self.sigma / resolution, bits)
         self._pyramids: dict[tuple[int, int], _Pyramid] = {}
 
     def __repr__(self) -> str:
@@ -214,7 +211,7 @@ class ProbabilityGrid:
     def nearest(self, pts: np.ndarray, max_dist: float, origin=None) -> tuple[np.ndarray, np.ndarray]:
         """Distance (N,) (m; inf beyond ``max_dist``) and index (N,) of each point's nearest submap
         point; with ``origin`` (2,) on a sided grid, the nearest whose surface faces ``origin``'s side."""
-        if origin is None or not self.sided:
+        if origin is None or self.facing is None:
             return self.tree.query(pts, distance_upper_bound=max_dist)
         k = min(SIDE_NEIGHBOURS, len(self.points))
         d, j = self.tree.query(pts, k=k, distance_upper_bound=max_dist)
@@ -274,38 +271,34 @@ def _facing_bits(points: np.ndarray, thetas: np.ndarray) -> np.ndarray:
     return table[s]
 
 
-@njit(cache=True, nogil=True)
-def _splat_or(rows, cols, bits, shape, reach):  # pragma: no cover - compiled
-    """Grid ``shape`` (uint16) OR-ing each point's ``bits`` over the cells within ``reach`` cells of (row, col)."""
-    ny, nx = shape
-    out = np.zeros((ny, nx), dtype=np.uint16)
-    for p in range(len(rows)):
-        for dy in range(-reach, reach + 1):
-            y = rows[p] + dy
-            if y < 0 or y >= ny:
-                continue
-            for dx in range(-reach, reach + 1):
-                x = cols[p] + dx
-                if 0 <= x < nx and dx * dx + dy * dy <= reach * reach:
-                    out[y, x] |= bits[p]
-    return out
-
-
-def _likelihood_field(cells: np.ndarray, shape: tuple[int, int], sigma_cells: float) -> np.ndarray:
+def _likelihood_field(cells: np.ndarray, shape: tuple[int, int], sigma_cells: float, bits=None):
     """exp(-d^2 / 2 sigma^2) on a grid of ``shape`` (d: distance to the nearest occupied cell
-    ``cells`` (M, 2) = (col, row)), cut to 0 beyond ``FIELD_CUTOFF_SIGMAS`` sigma."""
+    ``cells`` (M, 2) = (col, row)), cut to 0 beyond ``FIELD_CUTOFF_SIGMAS`` sigma; and with ``bits``
+    (M,) uint16 of the cells' points, the grid of the bits OR-ed over the field's reach of each
+    (else None)."""
     r = int(np.ceil(FIELD_CUTOFF_SIGMAS * sigma_cells))
     off = np.arange(-r, r + 1)
     d2 = (off[:, None] ** 2 + off[None, :] ** 2) / sigma_cells**2
     kernel = np.where(d2 <= FIELD_CUTOFF_SIGMAS**2, np.exp(-0.5 * d2), 0.0).astype(np.float32)
-    flat = np.unique(cells[:, 1] * shape[1] + cells[:, 0])
-    return _splat_max(flat // shape[1], flat % shape[1], shape[0], shape[1], kernel)
+    flat = cells[:, 1] * shape[1] + cells[:, 0]
+    if bits is None:
+        flat, cell_bits = np.unique(flat), np.zeros(0, np.uint16)
+    else:  # one entry per cell, its points' bits OR-ed
+        order = np.argsort(flat, kind="stable")
+        flat, first = np.unique(flat[order], return_index=True)
+        cell_bits = np.bitwise_or.reduceat(np.asarray(bits, np.uint16)[order], first)
+    field, sides = _splat_max(flat // shape[1], flat % shape[1], shape[0], shape[1], kernel, cell_bits)
+    return field, (sides if bits is not None else None)
 
 
 @njit(cache=True, nogil=True)
-def _splat_max(rows, cols, ny, nx, kernel):  # pragma: no cover - compiled
-    """Grid (ny, nx) holding, per cell, the max of ``kernel`` centred on each (row, col)."""
+def _splat_max(rows, cols, ny, nx, kernel, bits):  # pragma: no cover - compiled
+    """Grid (ny, nx) holding, per cell, the max of ``kernel`` centred on each (row, col), and with
+    ``bits`` (P,) (else empty) the grid of the bits OR-ed over each kernel's support (else 0 x 0)."""
     field = np.zeros((ny, nx), dtype=np.float32)
+    sided = bits.shape[0] > 0
+    sy, sx = (ny, nx) if sided else (0, 0)
+    sides = np.zeros((sy, sx), dtype=np.uint16)
     r = kernel.shape[0] // 2
     for p in range(len(rows)):
         for dy in range(-r, r + 1):
@@ -314,9 +307,13 @@ def _splat_max(rows, cols, ny, nx, kernel):  # pragma: no cover - compiled
                 continue
             for dx in range(-r, r + 1):
                 x = cols[p] + dx
-                if 0 <= x < nx and kernel[dy + r, dx + r] > field[y, x]:
-                    field[y, x] = kernel[dy + r, dx + r]
-    return field
+                if 0 <= x < nx:
+                    k = kernel[dy + r, dx + r]
+                    if k > field[y, x]:
+                        field[y, x] = k
+                    if sided and k > 0:
+                        sides[y, x] |= bits[p]
+    return field, sides
 
 
 def _normals(tree: cKDTree, pts: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -23,6 +23,7 @@ import numpy as np
 from scipy import ndimage
 
 from slam2d import config as config_mod
+from slam2d import geometry
 from slam2d.errors import InputError
 from slam2d.exploration.config import ExploreConfig
 from slam2d.exploration.explorer import Explorer, Goal
@@ -394,8 +395,8 @@ def _retrace(loop: _Loop, step, now: float):
 
 
 def _heading_error(heading: float, pose) -> float:
-    """``heading`` (rad) less the pose's, wrapped to (-pi, pi]."""
-    return float(np.arctan2(np.sin(heading - pose[2]), np.cos(heading - pose[2])))
+    """``heading`` (rad) less the pose's, wrapped to [-pi, pi)."""
+    return float(geometry.wrap_angle(heading - pose[2]))
 
 
 def _towards(err: float, v: float, state: str):
