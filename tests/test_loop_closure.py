@@ -272,6 +272,20 @@ def test_wide_search_closes_a_revisit_far_beyond_the_local_window(office, keyfra
     assert lc.stats["accepted_wide"] == len(found)
 
 
+def test_a_wide_match_whose_scan_sees_no_keyframe_is_checked_on_the_nearest(office, keyframes, closer):
+    """The fine check of a wide match takes the keyframes within the scan's view of the match; a scan
+    whose ranges reach none of them (short returns in the open) is checked on the nearest one alone."""
+    gt, points = office
+    kf, _ = keyframes
+    members = list(range(10, 20))
+    pose = gt[kf[15]] + np.array([3.0, 0.0, 0.0])  # 3 m from every member's position but the nearest's
+    short = points[kf[15]] * (0.5 / np.hypot(*points[kf[15]].T).max())  # every return within 0.5 m
+    submap, anchor = closer._view_submap(members, pose, short, gt[kf])
+    nearest = members[int(np.argmin(np.hypot(*(gt[kf[members], :2] - pose[:2]).T)))]
+    assert anchor == nearest and submap.members == (nearest,)
+    assert len(submap.grid.points) > 0
+
+
 def test_a_closure_the_estimate_does_not_follow_keeps_the_window_open(office, keyframes):
     """A closure pins its pair in the path lengths (windows) only once the estimate agrees with it:
     while the estimate still holds the 6.4 m drift (a robust kernel holding back one large

@@ -357,11 +357,12 @@ class LoopCloser:
         ``points``' ranges, m) in the frame of the nearest of them (its anchor), and that anchor.
 
         A revisit in the opposite direction sees what keyframes far behind the
-        nearest one saw, not what the nearest one saw."""
+        nearest one saw, not what the nearest one saw. The anchor is always a member, even
+        when the scan's view reaches none of their positions (a short-ranged scan in the open)."""
         dist = np.hypot(*(poses[members, :2] - pose[:2]).T)
         reach = float(np.percentile(np.hypot(points[:, 0], points[:, 1]), VIEW_PERCENTILE))
         anchor = members[int(np.argmin(dist))]
-        near = [k for k, d in zip(members, dist) if d <= reach]
+        near = [k for k, d in zip(members, dist) if d <= reach or k == anchor]
         relative = geometry.between(poses[anchor], poses[near])
         return _Submap(tuple(near), relative, self._grid(near, relative)), anchor
 
