@@ -117,7 +117,7 @@ class BackendConfig(Section):
     )
     keyframe_distance: float = Field(0.2, ge=0, description="m travelled before a new keyframe")
     keyframe_angle_deg: float = Field(10.0, ge=0, description="rotation before a new keyframe")
-    robust: Literal["none", "huber", "cauchy", "dcs"] = Field("cauchy", description="kernel on loop-closure factors")
+    robust: Literal["none", "huber", "cauchy", "dcs"] = Field("cauchy", description="kernel on loop-closure and landmark factors")
     robust_param: float = Field(2.0, gt=0, description="kernel width (whitened units)")
     gnc: bool = Field(False, description="graduated non-convexity in the final batch optimisation")
     loop_closure: LoopClosureConfig = LoopClosureConfig()

@@ -317,6 +317,30 @@ def test_landmarks_are_initialised_and_estimated():
     assert pose_diff(pg.optimize_batch(), truth) < 0.01  # the biased observation pulls a little
 
 
+def test_a_wrongly_associated_landmark_does_not_pull_the_graph_apart():
+    """A frontend matching a corner to a landmark 3 m away re-observes it from keyframe 14: under the
+    loops' kernel the graph stays on the truth; without one that one observation bends the square."""
+    truth = square()
+    landmark, wrong = np.array([2.0, 2.0]), np.array([-1.0, 4.0])
+
+    def observe(pg, k, point):
+        local = geometry.transform_points(geometry.inverse(truth[k]), point[None])[0]
+        pg.add_landmark_observation(k, 7, np.arctan2(local[1], local[0]), np.hypot(*local), np.diag([1e-4, 1e-4]))
+
+    def solve(robust, wrongly: bool) -> float:
+        pg = build(truth, odometry(truth, seed=3), robust=robust)
+        for k in (0, 4, 8, 12):
+            observe(pg, k, landmark)
+        if wrongly:
+            observe(pg, 14, wrong)
+        pg.update()
+        return pose_diff(pg.optimize_batch(), truth)
+
+    right = solve("cauchy", False)  # the odometry's noise alone: about 0.14 m
+    assert abs(solve("cauchy", True) - right) < 0.01
+    assert solve("none", True) > right + 1.0
+
+
 def test_g2o_round_trip(tmp_path):
     truth = square()
     pg = build(truth, odometry(truth, seed=7), [true_loop(truth)])

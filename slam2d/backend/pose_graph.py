@@ -160,8 +160,10 @@ class PoseGraph:
 
     def add_landmark_observation(self, key: int, landmark_id: int, bearing: float, range: float, covariance) -> int:
         """Bearing (rad, sensor = keyframe frame) and range (m) of landmark ``landmark_id``
-        from keyframe ``key`` with 2x2 ``covariance`` (rad^2, m^2). A new landmark is
-        initialised from this observation. Returns the factor index."""
+        from keyframe ``key`` with 2x2 ``covariance`` (rad^2, m^2), under the loops' robust kernel:
+        re-observing a landmark mapped long ago closes a loop, and a frontend's wrong association
+        must not pull the graph apart. A new landmark is initialised from this observation.
+        Returns the factor index."""
         import gtsam
 
         key = self._check_key(key)
@@ -173,7 +175,7 @@ class PoseGraph:
             local = np.array([range * np.cos(bearing), range * np.sin(bearing)])
             self._new_values.insert(lkey, self._pose_value(key).transformFrom(local))
             self._landmarks.add(int(landmark_id))
-        model = gtsam.noiseModel.Gaussian.Covariance(cov)
+        model = rb.wrap(gtsam.noiseModel.Gaussian.Covariance(cov), rb.m_estimator(self.cfg.robust, self.cfg.robust_param))
         factor = gtsam.BearingRangeFactor2D(pose_key(key), lkey, gtsam.Rot2(float(bearing)), float(range), model)
         return self._add(_Factor("landmark", factor, key, int(landmark_id)))
 
