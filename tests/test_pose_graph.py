@@ -319,7 +319,7 @@ def test_landmarks_are_initialised_and_estimated():
 
 def test_a_wrongly_associated_landmark_does_not_pull_the_graph_apart():
     """A frontend matching a corner to a landmark 3 m away re-observes it from keyframe 14: under the
-    loops' kernel the graph stays on the truth; without one that one observation bends the square."""
+    loops' kernel the graph stays where the right observations put it; without one it bends the square."""
     truth = square()
     landmark, wrong = np.array([2.0, 2.0]), np.array([-1.0, 4.0])
 

@@ -175,7 +175,8 @@ class PoseGraph:
             local = np.array([range * np.cos(bearing), range * np.sin(bearing)])
             self._new_values.insert(lkey, self._pose_value(key).transformFrom(local))
             self._landmarks.add(int(landmark_id))
-        model = rb.wrap(gtsam.noiseModel.Gaussian.Covariance(cov), rb.m_estimator(self.cfg.robust, self.cfg.robust_param))
+        kernel = rb.m_estimator(self.cfg.robust, self.cfg.robust_param)
+        model = rb.wrap(gtsam.noiseModel.Gaussian.Covariance(cov), kernel)
         factor = gtsam.BearingRangeFactor2D(pose_key(key), lkey, gtsam.Rot2(float(bearing)), float(range), model)
         return self._add(_Factor("landmark", factor, key, int(landmark_id)))
 
