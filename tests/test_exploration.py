@@ -4,6 +4,7 @@ of the hybrid map, the utility, and a whole exploration of a small two-room worl
 from __future__ import annotations
 
 import json
+import logging
 
 import numpy as np
 import pytest
@@ -407,8 +408,6 @@ def two_rooms_png(tmp_path):
 
 @pytest.mark.parametrize("strategy", ["nearest_frontier", "utility"])
 def test_exploring_two_rooms_terminates_with_full_coverage(tmp_path, strategy, caplog):
-    import logging
-
     from slam2d.exploration.run import run_explore
 
     world = two_rooms_png(tmp_path)
