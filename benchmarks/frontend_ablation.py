@@ -1,7 +1,7 @@
 """Frontend ablation: every frontend on the simulator default, intel.bag and aces.bag, alone and with the pose graph.
 
 Reads the variants of a sweep file (default ``experiments/ablation_frontends.yaml``),
-runs them one after another in this process with ``slam2d.experiment.run_experiment``
+runs them one after another in this process with ``slam2d.runs.run.run_experiment``
 (one heavy job at a time: the whole Intel log needs up to 1 GB) and builds the
 table from each run's ``metrics.json``:
 
@@ -34,7 +34,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from slam2d.experiment import load_sweep, run_experiment, variant_config
+from slam2d.runs.run import run_experiment
+from slam2d.runs.sweep import load_sweep, variant_config
 
 DATASETS = {"simulator": "simulator default", "intel.bag": "intel.bag", "aces.bag": "aces.bag"}
 

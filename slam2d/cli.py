@@ -48,7 +48,7 @@ def _stopped(what: str) -> None:
 @contextmanager
 def _stoppable(what: str):
     """SIGINT or SIGTERM in the block: "stopped: WHAT" and exit 130, whatever error the signal became."""
-    from slam2d.experiment import stop_on_signals, stopped
+    from slam2d.runs.signals import stop_on_signals, stopped
 
     try:
         with stop_on_signals():
@@ -89,7 +89,7 @@ def run(
     quiet: bool = QUIET_OPT, viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT,
 ) -> None:
     """Run one experiment; print the results folder."""
-    from slam2d.experiment import run_experiment
+    from slam2d.runs.run import run_experiment
 
     with _command(quiet):
         target = _viz_target(viz, viz_save)
@@ -107,7 +107,7 @@ def ablate(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Run every variant of a sweep in parallel; write one table (Markdown + CSV)."""
-    from slam2d.experiment import SweepStopped, run_sweep
+    from slam2d.runs.sweep import run_sweep, SweepStopped
 
     with _command(quiet, "no sweep folder written"):
         try:
@@ -132,7 +132,7 @@ def dump_config(
 ) -> None:
     """Print the fully resolved config (defaults included) as YAML."""
     from slam2d import config as config_mod
-    from slam2d.experiment import command_model, resolved
+    from slam2d.runs.commands import command_model, resolved
 
     try:
         model = command_model(command, "--command")
@@ -150,7 +150,8 @@ def _command_config(command: str, config: Optional[Path], set_: list[str], flags
     """The config of ``command`` from ``config`` (or defaults), ``--set`` overrides, then the short
     flags given (``flags``: dotted key -> value or None)."""
     from slam2d import config as config_mod
-    from slam2d.experiment import command_model, output_root
+    from slam2d.runs.commands import command_model
+    from slam2d.runs.results import output_root
 
     if flags.get("output.root") is not None:
         output_root(flags["output.root"], "--out")  # its error names the option
@@ -246,7 +247,7 @@ def map_layers(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Make mapping layers (sparse, quadtree, line map, wall mesh) of an existing map."""
-    from slam2d.experiment import results_folder
+    from slam2d.runs.results import results_folder
 
     with _command(quiet):
         chosen = _layer_names(layers)
@@ -290,7 +291,7 @@ def optimize(
 ) -> None:
     """Optimise a pose graph in one batch: optimised g2o, overlay figure, metrics."""
     with _command(quiet):
-        from slam2d.experiment import results_folder
+        from slam2d.runs.results import results_folder
 
         with results_folder(root, f"optimize-{graph_path.stem}", "--out") as (work, published):
             metrics = _optimize_into(work, graph_path, init, robust, robust_param, outliers, outlier_kind,

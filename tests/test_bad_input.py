@@ -16,12 +16,13 @@ import pytest
 import yaml
 from test_readers import _flaser, _write_bag
 
-from slam2d import experiment
 from slam2d.datasets import base
 from slam2d.datasets.carmen import CarmenSource
 from slam2d.datasets.rosbag import RosbagSource
 from slam2d.errors import InputError
-from slam2d.experiment import run_sweep
+from slam2d.runs import signals
+from slam2d.runs import sweep as sweeps
+from slam2d.runs.sweep import run_sweep
 
 N = 300
 RANGES = [1.0, 2.0, 3.0, 4.0]
@@ -312,7 +313,7 @@ def test_bad_executor_leaves_no_folder_and_same_second_sweeps_do_not_collide(tmp
         def now(cls, tz=None):
             return datetime(2026, 1, 2, 3, 4, 5)
 
-    monkeypatch.setattr(experiment, "datetime", Frozen)
+    monkeypatch.setattr(sweeps, "datetime", Frozen)
     first, _ = run_sweep(sweep, quiet=True)
     second, _ = run_sweep(sweep, quiet=True)
     assert (first.name, second.name) == ("ablate-sweep-20260102-030405", "ablate-sweep-20260102-030405-2")
@@ -345,7 +346,7 @@ def test_binary_config_and_relations_files(tmp_path):
     ({"variants": [{"name": ".hidden", "set": {"seed": 1}}]}, r"variant '.hidden'.*key 'name': .*no leading '.'"),
 ])
 def test_bad_sweep_files(tmp_path, sweep, message):
-    from slam2d.experiment import load_sweep
+    from slam2d.runs.sweep import load_sweep
 
     path = tmp_path / "sweep.yaml"
     path.write_text(yaml.safe_dump(sweep))
@@ -367,7 +368,7 @@ def test_bad_overrides_refused_by_the_config(override, message):
 
 def test_output_root_that_is_a_file_and_tilde(tmp_path, monkeypatch):
     from slam2d import config
-    from slam2d.experiment import run_experiment
+    from slam2d.runs.run import run_experiment
 
     afile = tmp_path / "afile"
     afile.write_text("x")
@@ -381,7 +382,7 @@ def test_output_root_that_is_a_file_and_tilde(tmp_path, monkeypatch):
 
 def test_resolution_too_fine_for_any_map_is_refused_before_the_run(tmp_path, monkeypatch):
     from slam2d import config, pipeline
-    from slam2d.experiment import run_experiment
+    from slam2d.runs.run import run_experiment
 
     monkeypatch.setattr(pipeline.SlamPipeline, "run", lambda *a, **k: pytest.fail("the SLAM ran"))
     cfg = config.load(None, [f"output.root={tmp_path}", "mapping.resolution=1e-7"])
@@ -416,7 +417,7 @@ def test_duplicate_yaml_key_is_an_error_naming_the_line(tmp_path):
 
 
 def test_metrics_json_has_null_not_nan(tmp_path):
-    from slam2d.experiment import json_text
+    from slam2d.runs.results import json_text
 
     text = json_text({"a": float("nan"), "b": np.array([1.0, np.inf]), "c": np.float64(2.0), "d": (np.nan,)})
     assert json.loads(text) == {"a": None, "b": [1.0, None], "c": 2.0, "d": [None]}
@@ -459,9 +460,9 @@ def test_an_error_a_signal_caused_is_reported_as_stopped(tmp_path, monkeypatch):
     import typer
 
     from slam2d import cli
-    from slam2d.experiment import results_folder
+    from slam2d.runs.results import results_folder
 
-    monkeypatch.setattr(experiment, "_STOPPED", True)  # a signal arrived; its exception became another one
+    monkeypatch.setattr(signals, "_STOPPED", True)  # a signal arrived; its exception became another one
     with pytest.raises(typer.Exit) as stop:
         with cli._stoppable("no results folder written"):
             raise ImportError("initialization failed")  # pybind11 modules say so when an import is interrupted

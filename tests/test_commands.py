@@ -16,7 +16,8 @@ from typer.testing import CliRunner
 from slam2d import config
 from slam2d.cli import app
 from slam2d.errors import InputError
-from slam2d.experiment import SweepStopped, read_sweep, run_command, run_sweep
+from slam2d.runs.commands import run_command
+from slam2d.runs.sweep import read_sweep, run_sweep, SweepStopped
 from slam2d.planning.config import PlanConfig
 from slam2d.segmentation.config import SegmentConfig
 

@@ -10,7 +10,9 @@ from typer.testing import CliRunner
 from slam2d import config
 from slam2d.cli import app
 from slam2d.errors import InputError
-from slam2d.experiment import load_sweep, resolved, run_experiment, run_sweep
+from slam2d.runs.commands import resolved
+from slam2d.runs.run import run_experiment
+from slam2d.runs.sweep import load_sweep, run_sweep
 
 SMALL = ["dataset.max_scans=40", "mapping.resolution=0.1"]
 

@@ -274,7 +274,7 @@ SWEEP = yaml.safe_dump({"name": "s", "workers": 2, "config": {"dataset": {"max_s
 @given(ops=st.lists(LINE_OPS, min_size=1, max_size=5))
 def test_fuzz_config_and_sweep_yaml(tmp_path_factory, ops):
     from slam2d import config
-    from slam2d.experiment import load_sweep
+    from slam2d.runs.sweep import load_sweep
 
     folder = _fuzz_dir(tmp_path_factory, "yaml")
     (folder / "c.yaml").write_bytes(mutate(CONFIG, ops))

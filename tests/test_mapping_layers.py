@@ -371,7 +371,7 @@ def test_run_writes_the_chosen_layers_and_map_makes_them_again(tmp_path):
 
     from slam2d import config
     from slam2d.cli import app
-    from slam2d.experiment import run_experiment
+    from slam2d.runs.run import run_experiment
     from slam2d.mapping.quadtree import QuadTree
 
     cfg = config.load(None, ["dataset.max_scans=40", "mapping.resolution=0.1", f"output.root={tmp_path / 'r'}",

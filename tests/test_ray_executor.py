@@ -12,7 +12,7 @@ import yaml
 
 from slam2d import config as config_mod
 from slam2d.errors import InputError
-from slam2d.experiment import _collect, _run_variant_anywhere, run_sweep
+from slam2d.runs.sweep import _collect, run_sweep, _run_variant_anywhere
 
 try:
     import ray

@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from slam2d.evaluation.report import write_report
-from slam2d.experiment import run_sweep
+from slam2d.runs.sweep import run_sweep
 
 
 def _chromium() -> str:

@@ -16,7 +16,7 @@ import pytest
 
 from slam2d import config
 from slam2d.datasets.g2o import odometry_mask, read_g2o
-from slam2d.experiment import run_experiment
+from slam2d.runs.run import run_experiment
 from slam2d.viz import (
     ENTITIES,
     EXPLORE_ENTITIES,
@@ -127,7 +127,7 @@ def test_explore_recording_has_each_goal_and_the_frontiers(tmp_path):
 
 
 def test_no_view_imports_nothing_of_rerun(tmp_path):
-    code = ("import sys; from slam2d import config; from slam2d.experiment import run_experiment; "
+    code = ("import sys; from slam2d import config; from slam2d.runs.run import run_experiment; "
             f"run_experiment(config.load(None, ['dataset.max_scans=10', 'output.root={tmp_path}']), quiet=True); "
             "from slam2d.localization.run import LocalizeConfig, run_localize; "
             f"run_localize(LocalizeConfig(map='office', seconds=2, output={{'root': '{tmp_path}'}})); "

@@ -61,7 +61,7 @@ class ExplorationRun:
 def run_explore(cfg: ExploreConfig, viz: str | Path | None = None) -> Path:
     """Run ``cfg``'s exploration; return the results folder. ``viz``: ``"viewer"`` or ``FILE.rrd``, the
     robot, goals, map and frontiers streamed to rerun (:class:`slam2d.viz.ExploreView`)."""
-    from slam2d.experiment import _jsonable, live_view, results_folder
+    from slam2d.runs.results import jsonable, live_view, results_folder
 
     cfg = resolved(cfg)
     with results_folder(cfg.output.root, cfg.name) as (work, published):
@@ -70,7 +70,7 @@ def run_explore(cfg: ExploreConfig, viz: str | Path | None = None) -> Path:
         with live_view(viz, cfg.name, "explore", cfg.mapping) as view:
             run = explore(cfg, view=view)
         _write(work, cfg, run)
-        (work / "metrics.json").write_text(json.dumps(_jsonable(run.metrics), indent=2))
+        (work / "metrics.json").write_text(json.dumps(jsonable(run.metrics), indent=2))
         m = run.metrics
         log.info("%s: coverage %.1f %% in %.0f s, %.1f m (%.0f s wall)", m["stop_reason"], 100 * m["coverage"],
                  m["time"], m["distance"], m["wall_s"])  # fmt: skip

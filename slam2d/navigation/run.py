@@ -38,7 +38,7 @@ class NavigateConfig(ExperimentConfig):
 
 def run_navigate(cfg: ExperimentConfig) -> Path:
     """Run ``cfg``'s navigation; return the results folder."""
-    from slam2d.experiment import results_folder
+    from slam2d.runs.results import results_folder
 
     goal = cfg.navigation.goal
     if goal is None:  # before any folder is made
@@ -52,7 +52,7 @@ def run_navigate(cfg: ExperimentConfig) -> Path:
 
 
 def _navigate_into(cfg: ExperimentConfig, out: Path) -> dict[str, Any]:
-    from slam2d.experiment import _jsonable
+    from slam2d.runs.results import jsonable
 
     (out / "config.yaml").write_text(config_mod.dump(cfg))
     run = simulate(cfg)
@@ -60,7 +60,7 @@ def _navigate_into(cfg: ExperimentConfig, out: Path) -> dict[str, Any]:
     if cfg.output.figures:
         _figures(out, run.world, run.result, run.estimate, run.grid, np.asarray(cfg.navigation.goal, float),
                  run.recorder, cfg.navigation.animation)  # fmt: skip
-    (out / "metrics.json").write_text(json.dumps(_jsonable(run.metrics), indent=2))
+    (out / "metrics.json").write_text(json.dumps(jsonable(run.metrics), indent=2))
     return run.metrics
 
 

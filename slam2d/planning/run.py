@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d.errors import InputError
-from slam2d.experiment import json_text
+from slam2d.runs.results import json_text
 from slam2d.planning.astar import AStar, PlanResult, path_length
 from slam2d.planning.grid import PlanningGrid, load_grid
 from slam2d.planning.smoothing import shortcut
@@ -194,7 +194,7 @@ def run_plan(cfg) -> Path:
     (NoPathError when there is none, leaving no folder); ``queries`` > 0: :func:`plan_queries`."""
     from slam2d import config as config_mod
     from slam2d.datasets.registry import resolve_data_path
-    from slam2d.experiment import results_folder
+    from slam2d.runs.results import results_folder
 
     p = cfg.planning
     if cfg.map is None:

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d.errors import InputError
-from slam2d.experiment import json_text
+from slam2d.runs.results import json_text
 
 __all__ = [
     "run_segment", "segment_map", "segment_free", "METHODS", "find_ground_truth", "load_map", "save_labels_png",
@@ -120,7 +120,7 @@ def run_segment(cfg) -> Path:
     ``cfg.output.root`` (resolved config, labels, figures, metrics, log); return the folder."""
     from slam2d import config as config_mod
     from slam2d.datasets.registry import resolve_data_path
-    from slam2d.experiment import results_folder
+    from slam2d.runs.results import results_folder
 
     if cfg.map is None:
         raise InputError("map", "no map given (map: FILE in the config, or slam2d segment MAP)")
@@ -168,7 +168,7 @@ def segment_map(map_path, method="spectral", similarity="visibility", out_dir=No
         save_rooms_png(labels, m["free"], graph, m["resolution"], m["origin"], m["row0_top"], out / "rooms.png",
                        title=title)
     metrics = dict(map=str(map_path), furnished=map_path.stem.endswith(FURNISHED_SUFFIX), method=method, **run,
-                   rooms=graph.number_of_nodes(), portals=graph.number_of_edges(), params=_jsonable(params))
+                   rooms=graph.number_of_nodes(), portals=graph.number_of_edges(), params=_params_jsonable(params))
     metrics.update(_score(image_labels, ground_truth, map_path))
     (out / "metrics.json").write_text(json_text(metrics))
     return dict(metrics, out_dir=str(out))
@@ -197,7 +197,7 @@ def _default_out_dir(map_path: Path, method: str) -> Path:
     return out
 
 
-def _jsonable(params: dict) -> dict:
+def _params_jsonable(params: dict) -> dict:
     """Parameters with anything JSON cannot hold given as its repr."""
     out = {}
     for k, v in params.items():

@@ -1,0 +1,158 @@
+"""The results folder: the one place that creates, names, fills and publishes run folders.
+
+A results folder is built under a hidden temporary name and renamed into place
+only when everything in it is written, so a failed run leaves no half-written
+folder, and an existing folder is never overwritten. JSON is strict here: NaN
+and infinities are written as null.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import logging
+import resource
+import shutil
+import tempfile
+from contextlib import contextmanager
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+from slam2d.errors import InputError
+from slam2d.runs.signals import check_stop
+
+log = logging.getLogger("slam2d")
+
+
+@contextmanager
+def results_folder(root: str | Path, name: str, key: str = "output.root"):
+    """Yield ``(work, published)``: a hidden temporary folder to fill (its log in
+    ``run.log``) and a list that receives the final path once the block succeeds.
+    On failure the temporary folder is removed, so no half-written folder remains.
+    ``key`` names ``root`` in errors (the config key or the CLI option)."""
+    root = output_root(root, key)
+    work = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=root))
+    published: list[Path] = []
+    try:
+        with log_to(work / "run.log"):
+            yield work, published
+        check_stop()  # a signal whose exception was swallowed still leaves no folder
+        published.append(_publish(work, root, name))
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+
+
+def output_root(root: str | Path, key: str = "output.root") -> Path:
+    """``root`` with ``~`` expanded, created if missing; an InputError if it is a file or cannot be made."""
+    path = Path(root).expanduser()
+    if path.exists() and not path.is_dir():
+        raise InputError(key, f"{path} is a file, not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InputError(key, f"cannot create folder {path} ({err.strerror})") from None
+    return path
+
+
+def _publish(work: Path, root: Path, name: str) -> Path:
+    """Rename the finished temporary folder to ``root/name-YYYYmmdd-HHMMSS[-k]``."""
+    stem = f"{name}-{datetime.now():%Y%m%d-%H%M%S}"
+    for k in itertools.count(1):
+        target = root / (stem if k == 1 else f"{stem}-{k}")
+        try:
+            work.rename(target)  # fails if target exists and is not empty
+            return target
+        except OSError:
+            if not target.exists():
+                raise
+    raise AssertionError("unreachable")
+
+
+def new_folder(parent: Path, stem: str) -> Path:
+    """Create and return ``parent/stem``, or ``stem-2``, ``stem-3``... if taken (atomic: mkdir)."""
+    for k in itertools.count(1):
+        folder = parent / (stem if k == 1 else f"{stem}-{k}")
+        try:
+            folder.mkdir()
+            return folder
+        except FileExistsError:
+            continue
+    raise AssertionError("unreachable")
+
+
+def json_text(obj) -> str:
+    """``obj`` as indented JSON: numpy values as numbers, NaN and infinities as null (JSON has neither)."""
+    return json.dumps(jsonable(obj), indent=2, allow_nan=False)
+
+
+def jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None  # JSON has no NaN or infinity
+    return obj
+
+
+@contextmanager
+def log_to(path: Path):
+    handler = logging.FileHandler(path)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    logger = logging.getLogger("slam2d")
+    logger.addHandler(handler)
+    if logger.level == logging.NOTSET or logger.level > logging.INFO:
+        logger.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        handler.close()
+
+
+@contextmanager
+def live_view(viz: str | Path | None, name: str, kind: str, *args):
+    """Yield None when ``viz`` is None (nothing of rerun is imported), else the view of
+    :func:`slam2d.viz.open_view` for a ``kind`` of run (run, localize, explore) made with ``args``,
+    streaming to ``viz`` (``"viewer"`` or ``FILE.rrd``) and closed after the block."""
+    if viz is None:
+        yield None
+        return
+    from slam2d.viz import open_view  # rerun: an optional extra
+
+    view = open_view(viz, name, kind, *args)
+    try:
+        yield view
+    finally:
+        view.close()
+
+
+@contextmanager
+def progress(source, quiet: bool):
+    """Yield a callable that advances a progress bar by one scan."""
+    if quiet:
+        yield None
+        return
+    try:
+        total = len(source)
+    except (TypeError, NotImplementedError):
+        total = None
+    with Progress(
+        "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn()
+    ) as bar:
+        task = bar.add_task(getattr(source, "name", "scans"), total=total)
+        yield lambda: bar.advance(task)
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory (MB) of this process plus its largest finished child (the frontend worker)."""
+    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss + resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return kb / 1024.0
