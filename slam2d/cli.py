@@ -183,7 +183,7 @@ def segment(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Split a map into rooms: colour image, topological graph, metrics (a config, or the map and flags)."""
-    from slam2d.segmentation.run import run_segment
+    from slam2d.runs.segment import run_segment
 
     with _command(quiet):
         cfg = _command_config("segment", config, set_, {

@@ -1,4 +1,4 @@
-"""Room-segmentation baselines and the segment_map results folder."""
+"""Room-segmentation baselines, segment_map and its results folder."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ from PIL import Image
 
 from slam2d.errors import InputError
 from slam2d.segmentation.baselines import BASELINES, grow_regions, voronoi
-from slam2d.segmentation.run import find_ground_truth, segment_map
+from slam2d.runs.segment import write_segmentation
+from slam2d.segmentation.rooms import find_ground_truth, segment_map
 
 RES = 0.05
 DOOR = slice(51, 69)  # 18 rows: a 0.9 m door
@@ -95,13 +96,15 @@ def _write_plan(tmp_path, stem="plan"):
 def test_segment_map_writes_results(tmp_path):
     plan = _write_plan(tmp_path)
     out = tmp_path / "out"
-    m = segment_map(plan, method="voronoi", out_dir=out)
+    rooms = segment_map(plan, method="voronoi")
+    write_segmentation(rooms, out)
+    m = rooms.metrics
     for name in ("rooms.png", "rooms_graph.json", "labels.png", "metrics.json"):
         assert (out / name).is_file(), name
     saved = json.loads((out / "metrics.json").read_text())
     assert saved["rooms"] == 2 and saved["portals"] == 1 and saved["rooms_gt"] == 2
     assert saved["recall"] > 95 and saved["precision"] > 95
-    assert m["out_dir"] == str(out) and m["recall"] == saved["recall"]
+    assert m["recall"] == saved["recall"]
     labels = np.asarray(Image.open(out / "labels.png"))
     assert labels.shape == (130, 255) and set(np.unique(labels)) == {0, 1, 2}
 
@@ -113,7 +116,9 @@ def test_segment_map_reads_map_server_yaml(tmp_path):
         "image: map.pgm\nresolution: 0.05\norigin: [-1.0, 2.0, 0.0]\nnegate: 0\n"
         "occupied_thresh: 0.65\nfree_thresh: 0.196\n"
     )
-    m = segment_map(tmp_path / "map.yaml", method="morphological", out_dir=tmp_path / "out")
+    rooms = segment_map(tmp_path / "map.yaml", method="morphological")
+    write_segmentation(rooms, tmp_path / "out")
+    m = rooms.metrics
     assert m["rooms"] == 2 and "recall" not in m
     labels = np.asarray(Image.open(tmp_path / "out" / "labels.png"))
     assert np.array_equal(labels > 0, free)  # written in the image's orientation
@@ -138,16 +143,18 @@ def test_find_ground_truth_for_furnished_maps(tmp_path):
 def test_segment_map_rejects_unknown_names(tmp_path):
     plan = _write_plan(tmp_path)
     with pytest.raises(InputError, match="method"):
-        segment_map(plan, method="watershed", out_dir=tmp_path / "a")
+        segment_map(plan, method="watershed")
     with pytest.raises(InputError, match="similarity"):
-        segment_map(plan, method="spectral", similarity="cosine", out_dir=tmp_path / "b")
+        segment_map(plan, method="spectral", similarity="cosine")
     with pytest.raises(InputError, match="not found"):
-        segment_map(tmp_path / "missing.png", method="voronoi", out_dir=tmp_path / "c")
+        segment_map(tmp_path / "missing.png", method="voronoi")
 
 
 def test_segment_map_spectral(tmp_path):
     plan = _write_plan(tmp_path)
-    m = segment_map(plan, method="spectral", similarity="nearest_neighbor", out_dir=tmp_path / "out", k_max=4)
+    rooms = segment_map(plan, method="spectral", similarity="nearest_neighbor", k_max=4)
+    write_segmentation(rooms, tmp_path / "out")
+    m = rooms.metrics
     assert m["similarity"] == "nearest_neighbour" and m["k"] >= 1 and m["rooms"] >= 1
     saved = json.loads((tmp_path / "out" / "metrics.json").read_text())
     assert "silhouette" in saved and saved["params"] == {"k_max": 4}

@@ -42,7 +42,7 @@ def room_labels(grid: PlanningGrid, segmentation=None, seed: int = 0) -> np.ndar
     """Room labels (H, W) aligned with ``grid`` (rows going up): the map segmented as ``slam2d segment``
     would (row 0 the top) by ``segmentation`` (a SegmentationConfig; None: morphological)."""
     from slam2d.segmentation.config import SegmentationConfig
-    from slam2d.segmentation.run import segment_free
+    from slam2d.segmentation.rooms import segment_free
 
     seg = segmentation or SegmentationConfig(method="morphological")
     params = {"seed": seed, **seg.params} if seg.method == "spectral" else seg.params

@@ -12,7 +12,7 @@ SIMILARITY_ALIASES = {"nearest_neighbor": "nearest_neighbour", "knn": "nearest_n
 
 
 class SegmentationConfig(Section):
-    """How a map is split into rooms (:func:`slam2d.segmentation.run.segment_map`)."""
+    """How a map is split into rooms (:func:`slam2d.segmentation.rooms.segment_map`)."""
 
     method: Literal["spectral", "morphological", "distance", "voronoi"] = Field(
         "spectral", description="spectral clustering, or a baseline of slam2d.segmentation.baselines"

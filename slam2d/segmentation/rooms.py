@@ -1,0 +1,174 @@
+"""Split a map file into rooms: the free space of a floor plan or map_server map, a method's labels,
+the region graph and the scores against a ground truth, as one :class:`RoomSegmentation`.
+
+A floor-plan image: free = gray >= 250, 0.05 m/px unless ``resolution`` is given, row 0 the top. A
+map_server map (``map.yaml``): free = occupancy probability < ``free_thresh``, rows up in y.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import networkx as nx
+import numpy as np
+import yaml
+
+from slam2d.errors import InputError
+from slam2d.mapping.topological import region_graph
+from slam2d.segmentation.evaluate import load_floor_plan, load_ground_truth, score
+
+__all__ = ["RoomSegmentation", "segment_map", "segment_free", "METHODS", "find_ground_truth", "load_map"]
+
+METHODS = ("spectral", "morphological", "distance", "voronoi")
+"""Method names :func:`segment_map` accepts."""
+
+
+FURNISHED_SUFFIX = "_furnitures"
+GT_SUFFIX = "_gt_segmentation.png"
+
+
+def load_map(map_path, resolution: float | None = None) -> dict:
+    """Free space of a floor-plan image or a map_server YAML.
+
+    Returns ``dict(free (H, W) bool, resolution m, origin (x, y) m, row0_top)``;
+    ``row0_top`` is False for YAML maps, whose grid rows run up in y (as
+    :class:`slam2d.mapping.occupancy.OccupancyGrid`).
+    """
+    path = Path(map_path)
+    if not path.is_file():
+        raise InputError(path, "map file not found")
+    if path.suffix.lower() in (".yaml", ".yml"):
+        from slam2d.mapping.export import load_map_server  # loads numba: only for map_server maps
+
+        grid = load_map_server(path)
+        free_thresh = float(yaml.safe_load(path.read_text())["free_thresh"])
+        return dict(free=grid.free_mask(free_thresh), resolution=grid.resolution, origin=grid.origin, row0_top=False)
+    free, res = load_floor_plan(path)
+    if resolution is not None:
+        if not resolution > 0:
+            raise InputError("resolution", f"must be > 0 m/px, got {resolution}")
+        res = float(resolution)
+    return dict(free=free, resolution=float(res), origin=(0.0, 0.0), row0_top=True)
+
+
+def find_ground_truth(map_path) -> Path | None:
+    """``<stem>_gt_segmentation.png`` beside the map (the unfurnished stem's for ``*_furnitures``), or None."""
+    path = Path(map_path)
+    stem = path.stem
+    if stem.endswith(FURNISHED_SUFFIX):
+        stem = stem[: -len(FURNISHED_SUFFIX)]
+    gt = path.with_name(stem + GT_SUFFIX)
+    return gt if gt.is_file() else None
+
+
+def segment_free(free, resolution, method, similarity="visibility", params=None) -> tuple[np.ndarray, dict]:
+    """Labels (H, W) int32 of the free space ``free`` (H, W) bool at ``resolution`` m/cell by ``method``
+    (with ``similarity`` for spectral, and the method's ``params``), and run facts (seconds, cpu_seconds;
+    k, silhouette and similarity for spectral)."""
+    cpu0 = time.process_time()
+    run = _run_method(free, resolution, method, similarity, params or {})
+    run["cpu_seconds"] = time.process_time() - cpu0
+    return run.pop("labels"), run
+
+
+def _run_method(free, resolution, method, similarity, params) -> dict:
+    """Labels (H, W) int32 and run facts (seconds; k and silhouette for spectral)."""
+    if method == "spectral":
+        from slam2d.segmentation.similarity import SIMILARITIES
+        from slam2d.segmentation.spectral import segment_spectral
+
+        from slam2d.segmentation.config import SIMILARITY_ALIASES
+
+        similarity = SIMILARITY_ALIASES.get(similarity, similarity)
+        if similarity not in SIMILARITIES:
+            raise InputError("similarity", f"unknown measure {similarity!r}; choose from {sorted(SIMILARITIES)}")
+        res = segment_spectral(free, resolution, similarity=similarity, **params)
+        return dict(labels=np.asarray(res.labels, np.int32), seconds=float(res.seconds), k=int(res.k),
+                    silhouette=float(res.silhouette), similarity=similarity)  # fmt: skip
+    from slam2d.segmentation.baselines import BASELINES
+
+    if method not in BASELINES:
+        raise InputError("method", f"unknown method {method!r}; choose from {list(METHODS)}")
+    t0 = time.perf_counter()
+    try:
+        labels = BASELINES[method](free, resolution, **params)
+    except TypeError as exc:  # an unknown keyword
+        raise InputError("params", f"{method}: {exc}") from None
+    return dict(labels=labels, seconds=time.perf_counter() - t0)
+
+
+@dataclass(frozen=True, eq=False)
+class RoomSegmentation:
+    """Rooms of one map. labels: (H, W) int32 in the map's grid orientation (0 = not a room);
+    image_labels: the same in the image's orientation (row 0 the top); free: (H, W) bool;
+    resolution m/cell; origin (x, y) m; row0_top: whether grid row 0 is the image's top;
+    graph: the region graph; metrics: method, rooms, portals, seconds, scores (what metrics.json holds)."""
+
+    map_path: Path
+    labels: np.ndarray
+    image_labels: np.ndarray
+    free: np.ndarray
+    resolution: float
+    origin: tuple[float, float]
+    row0_top: bool
+    graph: nx.Graph
+    metrics: dict
+
+    @property
+    def title(self) -> str:
+        """The figure's title: map stem, method and similarity measure."""
+        m = self.metrics
+        return f"{self.map_path.stem}: {m['method']}" + (f" ({m['similarity']})" if "similarity" in m else "")
+
+
+def segment_map(map_path, method="spectral", similarity="visibility", *, ground_truth=None, resolution=None,
+                **params) -> RoomSegmentation:
+    """Segment the map at ``map_path`` into rooms.
+
+    method: one of :data:`METHODS`; similarity: the spectral measure (ignored by the baselines);
+    ground_truth: GT image (default: found beside the map, see :func:`find_ground_truth`);
+    resolution: m/px for an image map (default 0.05); params: the method's parameters. The metrics:
+    ``seconds`` (wall) and ``cpu_seconds`` of the segmentation itself, ``furnished`` (the map is a
+    ``*_furnitures`` variant), rooms, portals, and the scores against a ground truth.
+    """
+    map_path = Path(map_path)
+    if method not in METHODS:
+        raise InputError("method", f"unknown method {method!r}; choose from {list(METHODS)}")
+    m = load_map(map_path, resolution)
+    if not m["free"].any():
+        raise InputError(map_path, "no free cell: nothing to segment (check the image, negate and free_thresh)")
+    labels, run = segment_free(m["free"], m["resolution"], method, similarity, params)
+    graph = region_graph(labels, m["resolution"], m["origin"], row0_top=m["row0_top"])
+    image_labels = labels if m["row0_top"] else np.flipud(labels)
+    metrics = dict(map=str(map_path), furnished=map_path.stem.endswith(FURNISHED_SUFFIX), method=method, **run,
+                   rooms=graph.number_of_nodes(), portals=graph.number_of_edges(), params=_params_jsonable(params))
+    metrics.update(_score(image_labels, ground_truth, map_path))
+    return RoomSegmentation(map_path, labels, image_labels, m["free"], m["resolution"], m["origin"], m["row0_top"],
+                            graph, metrics)
+
+
+def _score(image_labels, ground_truth, map_path) -> dict:
+    """Recall, precision, rooms found / in GT against the given or found GT image; {} without one."""
+    gt_path = Path(ground_truth) if ground_truth is not None else find_ground_truth(map_path)
+    if gt_path is None:
+        return {}
+    gt = load_ground_truth(gt_path)
+    if gt.shape != image_labels.shape:
+        raise InputError(gt_path, f"ground truth is {gt.shape[1]}x{gt.shape[0]} px, the map "
+                                  f"{image_labels.shape[1]}x{image_labels.shape[0]}")  # fmt: skip
+    return dict(score(image_labels, gt), ground_truth=str(gt_path))
+
+
+def _params_jsonable(params: dict) -> dict:
+    """Parameters with anything JSON cannot hold given as its repr."""
+    out = {}
+    for k, v in params.items():
+        try:
+            json.dumps(v)
+            out[k] = v
+        except TypeError:
+            out[k] = repr(v)
+    return out
