@@ -221,7 +221,8 @@ def plan(
 ) -> None:
     """Plan a path (A* or hierarchical), smooth it, time it with toppra; write figures. With
     planning.queries > 0: many seeded queries against A* (suboptimality, speed-up)."""
-    from slam2d.planning.run import NoPathError, run_plan
+    from slam2d.planning.query import NoPathError
+    from slam2d.runs.plan import run_plan
 
     with _command(quiet):
         try:

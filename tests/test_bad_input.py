@@ -219,16 +219,16 @@ def test_16_bit_map_image_is_scaled_not_clipped(tmp_path):
 
 
 def test_plan_rejects_bad_labels_and_radius(tmp_path):
-    from slam2d.planning.run import plan_on_map
+    from slam2d.planning.query import plan_on_map
 
     yml = _map(tmp_path)
     junk = tmp_path / "labels.png"
     junk.write_text("not an image")
     with pytest.raises(InputError, match="labels.png: not a readable label image"):
-        plan_on_map(yml, (0.5, 0.5), (1.5, 0.5), "rooms", tmp_path / "out", robot_radius=0.0, labels=junk)
+        plan_on_map(yml, (0.5, 0.5), (1.5, 0.5), "rooms", robot_radius=0.0, labels=junk)
     for radius in (np.nan, np.inf, -0.1):
         with pytest.raises(InputError, match="robot_radius: must be a finite number >= 0"):
-            plan_on_map(yml, (0.5, 0.5), (1.5, 0.5), None, tmp_path / "out", robot_radius=radius)
+            plan_on_map(yml, (0.5, 0.5), (1.5, 0.5), None, robot_radius=radius)
 
 
 # ---------------------------------------------------------------- items 3-4: interrupted runs and sweeps

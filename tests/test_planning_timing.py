@@ -93,7 +93,8 @@ def office(tmp_path, shape=(80, 120)):
 
 @pytest.mark.parametrize("hierarchical", [None, "hpa", "rooms"])
 def test_plan_on_map_writes_figures_and_metrics(tmp_path, hierarchical):
-    from slam2d.planning.run import plan_on_map
+    from slam2d.planning.query import plan_on_map
+    from slam2d.runs.plan import write_plan
 
     plan = office(tmp_path)
     labels = None
@@ -102,7 +103,7 @@ def test_plan_on_map_writes_figures_and_metrics(tmp_path, hierarchical):
         labels[:, :61] = 1
         labels[:, 61:] = 2
     out = tmp_path / f"out_{hierarchical}"
-    m = plan_on_map(plan, (0.5, 0.5), (5.5, 0.5), hierarchical, out, robot_radius=0.15, labels=labels)
+    m = write_plan(plan_on_map(plan, (0.5, 0.5), (5.5, 0.5), hierarchical, robot_radius=0.15, labels=labels), out)
     assert m["found"] and m["reason"] == ""
     for key in ("length_m", "duration_s", "nodes_expanded", "plan_ms", "build_ms", "grid_length_m"):
         assert key in m
@@ -118,36 +119,37 @@ def test_plan_on_map_writes_figures_and_metrics(tmp_path, hierarchical):
 
 
 def test_plan_on_map_failures_are_reported(tmp_path):
-    from slam2d.planning.run import plan_on_map
+    from slam2d.planning.query import plan_on_map
+    from slam2d.runs.plan import write_plan
 
     plan = office(tmp_path)
-    m = plan_on_map(plan, (0.5, 0.5), (0.02, 0.02), None, tmp_path / "blocked")
+    m = write_plan(plan_on_map(plan, (0.5, 0.5), (0.02, 0.02), None), tmp_path / "blocked")
     assert not m["found"] and "goal cell" in m["reason"]
     assert (tmp_path / "blocked" / "metrics.json").exists() and (tmp_path / "blocked" / "path.png").exists()
-    m = plan_on_map(plan, (1.5, 1.5), (4.5, 1.5), None, tmp_path / "fat", robot_radius=0.6)
+    m = plan_on_map(plan, (1.5, 1.5), (4.5, 1.5), None, robot_radius=0.6).metrics
     assert not m["found"] and "unreachable" in m["reason"]  # the 1 m door is closed for a 1.2 m wide robot
     with pytest.raises(InputError, match="hierarchical"):
-        plan_on_map(plan, (0.5, 0.5), (5.5, 0.5), "quadtree", tmp_path / "x")
+        plan_on_map(plan, (0.5, 0.5), (5.5, 0.5), "quadtree")
     with pytest.raises(InputError, match="start"):
-        plan_on_map(plan, (0.5,), (5.5, 0.5), None, tmp_path / "x")
+        plan_on_map(plan, (0.5,), (5.5, 0.5), None)
     with pytest.raises(InputError, match="not found"):
-        plan_on_map(tmp_path / "missing.yaml", (0.5, 0.5), (5.5, 0.5), None, tmp_path / "x")
+        plan_on_map(tmp_path / "missing.yaml", (0.5, 0.5), (5.5, 0.5), None)
 
 
 def test_plan_on_map_rooms_from_segmentation(tmp_path):
-    from slam2d.planning.run import plan_on_map
+    from slam2d.planning.query import plan_on_map
 
     # two 8 m x 6 m rooms: too big together, and each within the room area bounds once the door closes
     plan = office(tmp_path, (120, 320))
-    m = plan_on_map(plan, (0.5, 0.5), (15.5, 0.5), "rooms", tmp_path / "seg", robot_radius=0.15)
+    m = plan_on_map(plan, (0.5, 0.5), (15.5, 0.5), "rooms", robot_radius=0.15).metrics
     assert m["found"] and m["rooms"] == 2 and m["length_m"] > 15.0
     with pytest.raises(InputError, match="labels"):
-        plan_on_map(office(tmp_path), (0.5, 0.5), (5.5, 0.5), "rooms", tmp_path / "x", labels=np.zeros((3, 3), int))
+        plan_on_map(office(tmp_path), (0.5, 0.5), (5.5, 0.5), "rooms", labels=np.zeros((3, 3), int))
 
 
 def test_plan_on_movingai_map(tmp_path, data_file):
-    from slam2d.planning.run import plan_on_map
+    from slam2d.planning.query import plan_on_map
 
-    m = plan_on_map(data_file("movingai/arena.map"), (1.5, 11.5), (47.5, 44.5), "hpa", tmp_path / "arena",
-                    robot_radius=0.0, cluster_size=10)  # fmt: skip
+    m = plan_on_map(data_file("movingai/arena.map"), (1.5, 11.5), (47.5, 44.5), "hpa", robot_radius=0.0,
+                    cluster_size=10).metrics
     assert m["found"] and m["grid_length_m"] >= 40.0 and m["length_m"] <= m["grid_length_m"]

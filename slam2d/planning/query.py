@@ -1,30 +1,45 @@
-"""Plan on a map file: grid path, shortcut, time-optimal trajectory, figures and metrics.
-
-``plan_on_map`` is the library side of ``slam2d plan MAP --start x,y --goal x,y``.
-It writes into ``out_dir``: ``path.png`` (the map with the grid path, the
-shortcut polyline and the trajectory), ``velocity.png`` (speed, yaw rate and
-acceleration over time), ``trajectory.csv`` (t, x, y, vx, vy, speed, omega)
-and ``metrics.json``; it returns the metrics as a dict.
-"""
+"""Plan on a map file: grid path, shortcut, time-optimal trajectory (:func:`plan_on_map`), and many
+seeded queries against A* (:func:`plan_queries`). ``slam2d plan`` writes their results."""
 
 from __future__ import annotations
 
 import time
+import zlib
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
+from scipy import ndimage
 
 from slam2d.errors import InputError
-from slam2d.runs.results import json_text
-from slam2d.planning.astar import AStar, PlanResult, path_length
+from slam2d.planning.astar import AStar, PlanResult, check_path, path_length
 from slam2d.planning.grid import PlanningGrid, load_grid
 from slam2d.planning.smoothing import shortcut
-from slam2d.planning.timing import TimedPath, TrajectoryLimits, plot_profile, time_parametrize
+from slam2d.planning.timing import TimedPath, TrajectoryLimits, time_parametrize
+from slam2d.segmentation.config import SegmentationConfig
+from slam2d.segmentation.rooms import segment_free
 
-__all__ = ["plan_on_map", "plan_queries", "make_planner", "run_plan", "room_labels", "NoPathError", "PLANNERS"]
+__all__ = ["MapPlan", "plan_on_map", "plan_queries", "make_planner", "room_labels", "NoPathError", "PLANNERS"]
 
 PLANNERS = ("hpa", "rooms")
 """Values of ``hierarchical``: HPA* over square clusters, or the room-graph planner."""
+
+
+@dataclass(frozen=True, eq=False)
+class MapPlan:
+    """One query planned on a map: the map's grid, the grid inflated by the robot radius (``free``),
+    the grid search's result, the shortcut ``waypoints`` (N, 2) m and the ``timed`` trajectory (both
+    None without a path), the start and goal (x, y) m, and the metrics."""
+
+    grid: PlanningGrid
+    free: PlanningGrid
+    result: PlanResult
+    waypoints: np.ndarray | None
+    timed: TimedPath | None
+    start: np.ndarray
+    goal: np.ndarray
+    metrics: dict
 
 
 def _point(value, name: str) -> np.ndarray:
@@ -41,9 +56,6 @@ class NoPathError(Exception):
 def room_labels(grid: PlanningGrid, segmentation=None, seed: int = 0) -> np.ndarray:
     """Room labels (H, W) aligned with ``grid`` (rows going up): the map segmented as ``slam2d segment``
     would (row 0 the top) by ``segmentation`` (a SegmentationConfig; None: morphological)."""
-    from slam2d.segmentation.config import SegmentationConfig
-    from slam2d.segmentation.rooms import segment_free
-
     seg = segmentation or SegmentationConfig(method="morphological")
     params = {"seed": seed, **seg.params} if seg.method == "spectral" else seg.params
     labels, _ = segment_free(np.flipud(grid.free), grid.resolution, seg.method, seg.similarity, params)
@@ -73,8 +85,6 @@ def _read_labels(path: Path) -> np.ndarray:
     try:
         if path.suffix.lower() != ".png":
             return np.load(path, allow_pickle=False)
-        from PIL import Image
-
         with Image.open(path) as im:
             return np.flipud(np.asarray(im).astype(np.int32))
     except Exception as err:  # PIL and numpy raise many types for a file that is not what it says
@@ -105,7 +115,6 @@ def plan_on_map(
     start,
     goal,
     hierarchical: str | None = None,
-    out_dir="results/plan",
     robot_radius: float = 0.2,
     limits: TrajectoryLimits | None = None,
     cluster_size: int = 16,
@@ -113,18 +122,16 @@ def plan_on_map(
     resolution: float | None = None,
     segmentation=None,
     seed: int = 0,
-    figures: bool = True,
-) -> dict:
-    """Plan from ``start`` to ``goal`` (x, y) m on a map and write figures and metrics.
+) -> MapPlan:
+    """Plan from ``start`` to ``goal`` (x, y) m on a map: grid path, shortcut, time-optimal trajectory.
 
     ``map_path``: map_server ``.yaml``, Moving AI ``.map`` or a floor-plan
     image (``resolution`` m/px, default 0.05). Obstacles are inflated by
     ``robot_radius`` m. ``hierarchical``: None (A*), ``"hpa"`` or ``"rooms"``
     (``labels``: a region image aligned with the map's rows going up, or
     None for the map's segmentation by ``segmentation``, a SegmentationConfig, default
-    morphological, run on the map before inflation; ``seed`` for spectral). ``figures``:
-    write path.png and velocity.png. Returns the metrics dict
-    (``found`` False with a ``reason`` when there is no path).
+    morphological, run on the map before inflation; ``seed`` for spectral). The metrics say
+    ``found`` False with a ``reason`` when there is no path.
     """
     t_all = time.perf_counter()
     limits = limits or TrajectoryLimits()
@@ -133,8 +140,6 @@ def plan_on_map(
         raise InputError("robot_radius", f"must be a finite number >= 0 m, got {robot_radius}")
     grid = load_grid(map_path, resolution=resolution)
     free = grid.inflated(robot_radius)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     if hierarchical == "rooms":
         labels = _labels(labels, grid, segmentation, seed)  # segment the map itself, not the inflated free space
@@ -174,49 +179,8 @@ def plan_on_map(
             max_yaw_rate_rps=float(np.abs(timed.omega).max()),
             spline_deviation_m=timed.max_deviation,
         )
-        _write_trajectory(out / "trajectory.csv", timed)
-        if figures:
-            plot_profile(timed, out / "velocity.png")
-    if figures:
-        _plot_path(grid, free, result, waypoints, timed, start, goal, out / "path.png", metrics["planner"])
     metrics["total_ms"] = 1e3 * (time.perf_counter() - t_all)
-    names = {"metrics": "metrics.json", **({"path": "path.png"} if figures else {})}
-    if timed is not None:
-        names.update(trajectory="trajectory.csv", **({"velocity": "velocity.png"} if figures else {}))
-    metrics["files"] = {k: f for k, f in names.items()}
-    (out / "metrics.json").write_text(json_text(metrics))
-    return metrics
-
-
-def run_plan(cfg) -> Path:
-    """Run a :class:`~slam2d.planning.config.PlanConfig` into a new results folder under
-    ``cfg.output.root``; return the folder. One query (start, goal): the path, its timing and figures
-    (NoPathError when there is none, leaving no folder); ``queries`` > 0: :func:`plan_queries`."""
-    from slam2d import config as config_mod
-    from slam2d.datasets.registry import resolve_data_path
-    from slam2d.runs.results import results_folder
-
-    p = cfg.planning
-    if cfg.map is None:
-        raise InputError("map", "no map given (map: FILE in the config, or slam2d plan MAP)")
-    if p.queries == 0 and p.start is None:
-        raise InputError("planning.start", "give start and goal (--start x,y --goal x,y), or planning.queries > 0")
-    map_path = resolve_data_path(cfg.map, key="map")
-    labels = resolve_data_path(p.labels, key="planning.labels") if p.labels else None
-    hierarchy = None if p.hierarchy == "none" else p.hierarchy
-    name = cfg.name or f"plan-{map_path.stem}" + (f"-{hierarchy}" if hierarchy else "")
-    with results_folder(cfg.output.root, name) as (work, published):
-        (work / "config.yaml").write_text(config_mod.dump(cfg))
-        if p.queries:
-            metrics = plan_queries(map_path, cfg, labels)
-            (work / "metrics.json").write_text(json_text(metrics))
-        else:
-            metrics = plan_on_map(map_path, p.start, p.goal, hierarchy, work, p.robot_radius, p.limits,
-                                  p.cluster_size, labels, cfg.resolution, cfg.segmentation, cfg.seed,
-                                  cfg.output.figures)  # fmt: skip
-            if not metrics["found"]:
-                raise NoPathError(metrics.get("reason") or "unknown")
-    return published[0]
+    return MapPlan(grid, free, result, waypoints, timed, start, goal, metrics)
 
 
 def plan_queries(map_path, cfg, labels=None) -> dict:
@@ -225,8 +189,6 @@ def plan_queries(map_path, cfg, labels=None) -> dict:
     found one), suboptimality % of the planner's path length over A*'s (mean, max), speed-up (median
     of A* CPU time / the planner's, per query), CPU ms per query (medians), rooms, build and
     segmentation seconds."""
-    from slam2d.planning.astar import check_path
-
     p = cfg.planning
     hierarchy = None if p.hierarchy == "none" else p.hierarchy
     grid = load_grid(map_path, resolution=cfg.resolution)
@@ -270,10 +232,6 @@ def sample_queries(grid: PlanningGrid, astar: AStar, n: int, min_dist_m: float, 
     """Up to ``n`` (start, goal) cell pairs that A* connects, preferably >= ``min_dist_m`` apart, drawn
     from the largest 8-connected free component; the seed is mixed with ``name`` (the map), so each map
     keeps its queries in any subset of maps. Too few far pairs: the longest near ones fill up."""
-    import zlib
-
-    from scipy import ndimage
-
     rng = np.random.default_rng([seed, zlib.crc32(name.encode())])
     comp, k = ndimage.label(grid.free, structure=np.ones((3, 3)))
     if k == 0:
@@ -299,41 +257,3 @@ def _cpu_timed(fn, *args):
     t0 = time.process_time()
     out = fn(*args)
     return out, time.process_time() - t0
-
-
-def _write_trajectory(path: Path, timed: TimedPath) -> None:
-    data = np.column_stack([timed.t, timed.xy, timed.velocity, timed.speed, timed.omega])
-    header = "t_s,x_m,y_m,vx_mps,vy_mps,speed_mps,omega_rps"
-    np.savetxt(path, data, delimiter=",", fmt="%.6f", header=header, comments="")
-
-
-def _plot_path(grid, free, result: PlanResult, waypoints, timed, start, goal, path: Path, planner: str) -> None:
-    """The map (black blocked, grey inflation margin, white free) with the paths and end points."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    x0, x1, y0, y1 = grid.extent
-    aspect = (y1 - y0) / max(x1 - x0, 1e-9)
-    fig = Figure(figsize=(8.0, float(np.clip(8.0 * aspect, 3.0, 16.0))), dpi=150)
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
-    shade = np.where(free.free, 1.0, np.where(grid.free, 0.75, 0.0))
-    ax.imshow(shade, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", extent=grid.extent, interpolation="nearest")
-    if result.found:
-        cells = grid.cell_to_world(result.path)
-        ax.plot(cells[:, 0], cells[:, 1], color="tab:orange", linewidth=0.8, label=f"grid path ({planner})")
-        ax.plot(waypoints[:, 0], waypoints[:, 1], "o-", color="tab:blue", markersize=2.5, linewidth=1.0,
-                label="shortcut")  # fmt: skip
-        ax.plot(timed.xy[:, 0], timed.xy[:, 1], color="tab:green", linewidth=1.0, label="trajectory")
-    ax.plot(*start, "s", color="tab:green", markersize=6, label="start")
-    ax.plot(*goal, "*", color="tab:red", markersize=9, label="goal")
-    ax.legend(loc="best", fontsize="small")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_aspect("equal")
-    if result.found:
-        title = f"{result.length_m:.2f} m, {result.expanded} nodes, {1e3 * result.seconds:.1f} ms"
-    else:
-        title = result.reason
-    ax.set_title(title, fontsize="small")
-    fig.savefig(path, bbox_inches="tight")
