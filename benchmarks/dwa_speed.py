@@ -43,7 +43,7 @@ def record(pairs: int, people: int) -> list[tuple]:
 
     from slam2d import config
     from slam2d.navigation import dwa
-    from slam2d.navigation.run import simulate
+    from slam2d.runs.navigate import simulate
 
     calls, command = [], dwa.DynamicWindow.command
 

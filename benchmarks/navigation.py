@@ -3,7 +3,7 @@
 Usage: .venv/bin/python benchmarks/navigation.py [--worlds office rooms] [--pairs N] [--planners dwa fsm]
        [--people 0 5] [--slam on off] [--seed S] [--set KEY=VALUE ...] [--only WORLD:SEED ...] [--workers N]
 
-Each run is `slam2d navigate` without the results folder (``slam2d.navigation.run.simulate``):
+Each run is `slam2d navigate` without the results folder (``slam2d.runs.navigate.simulate``):
 the simulated robot drives from a random free start to a random free goal at least
 4 m away (seeded), on online SLAM's pose and grid (``--slam on``) or on the true pose
 and the world's map (``off``). Worlds: the office, and the ten room maps of
@@ -28,7 +28,7 @@ from scipy import ndimage
 
 from slam2d import config
 from slam2d.navigation import world_grid
-from slam2d.navigation.run import simulate
+from slam2d.runs.navigate import simulate
 from slam2d.planning.grid import inflate
 from slam2d.sim.robot import RobotConfig
 from slam2d.sim.world import load_world

@@ -370,7 +370,7 @@ def navigate(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Drive the simulated robot to a goal (online SLAM on by default); print the results folder."""
-    from slam2d.navigation.run import NavigateConfig, run_navigate
+    from slam2d.runs.navigate import NavigateConfig, run_navigate
 
     with _command(quiet):
         extra = [f"navigation.goal=[{goal}]"] if goal else []

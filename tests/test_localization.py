@@ -364,7 +364,7 @@ def test_localize_command_writes_a_results_folder_and_none_on_bad_input(tmp_path
 
 def test_navigation_drives_on_the_mcl_pose():
     from slam2d import config as config_mod
-    from slam2d.navigation.run import simulate
+    from slam2d.runs.navigate import simulate
 
     cfg = config_mod.load(None, ["navigation.slam=false", "navigation.localization=mcl", "navigation.goal=[10, 4.2]",
                                  "navigation.animation=false"])  # fmt: skip

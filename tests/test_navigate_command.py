@@ -9,7 +9,7 @@ import pytest
 
 from slam2d import config
 from slam2d.errors import InputError
-from slam2d.navigation.run import run_navigate
+from slam2d.runs.navigate import run_navigate
 
 
 def navigate(tmp_path, *overrides):

@@ -29,6 +29,7 @@ __all__ = [
     "ROBOT_RADIUS",
     "World",
     "office_route",
+    "route_start",
     "load_world",
     "check_route",
     "route_poses",
@@ -169,3 +170,12 @@ class SimulatorSource(ScanSource):
             truth = self.ground_truth_poses[i : i + batch]
             for k, r in enumerate(laser.read(self.world, truth), start=i):
                 yield laser.scan(r, self.stamps[k], self.odometry_poses[k], self.ground_truth_poses[k], k)
+
+
+def route_start(world: str) -> np.ndarray:
+    """The start (x, y, heading) of the simulator's scripted route in ``world`` (only the office has one)."""
+    if world != "office":
+        raise InputError("navigation.start", f"needed for the world '{world}' (x, y, heading)")
+    route = office_route()
+    d = route[1] - route[0]
+    return np.array([*route[0], np.arctan2(d[1], d[0])])

@@ -93,7 +93,7 @@ class _Loop:
     """State of one exploration run: robot, SLAM, explorer, the current goal and its navigator."""
 
     def __init__(self, cfg: ExploreConfig):
-        from slam2d.navigation.run import _navigator_options
+        from slam2d.navigation.navigator import navigator_config
         from slam2d.sim import Robot
         from slam2d.sim.robot import RobotConfig
         from slam2d.sim.world import load_world
@@ -110,7 +110,7 @@ class _Loop:
             raise InputError("exploration.bounds", f"the start ({start[0]:.2f}, {start[1]:.2f}) is outside the polygon")
         self.robot = Robot(self.world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), seed=cfg.seed)
         # a goal the map comes to block is inaccessible at once: the explorer picks another
-        self.options = _navigator_options({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
+        self.options = navigator_config({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
                                           True, "exploration.options")  # fmt: skip
         self.ignored = ignored_cells(self.world.unmapped, self.truth_frame, self.truth_free.shape, self.ecfg.bounds)
         # the robot's centre goes where the navigator plans: radius + inflation margin from walls
@@ -503,9 +503,9 @@ def seeded_start(world, name: str, free: np.ndarray, frame, seed: int) -> np.nda
     START_CLEARANCE from walls in the largest open component that does not touch the map's edge
     (the building, not the area around it), heading seeded too."""
     if name == "office":
-        from slam2d.navigation.run import _route_start
+        from slam2d.datasets.simulator import route_start
 
-        return _route_start("office")
+        return route_start("office")
     clear = ndimage.distance_transform_edt(free) * frame.resolution > START_CLEARANCE
     labels, n = ndimage.label(clear)
     if n == 0:

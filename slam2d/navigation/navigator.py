@@ -23,14 +23,15 @@ from __future__ import annotations
 
 import time as _time
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, ValidationError
 from scipy import ndimage
 
 from slam2d import geometry
 from slam2d.config import Section
+from slam2d.errors import InputError
 from slam2d.navigation.common import Command, approach_speed, in_robot_frame, point_along
 from slam2d.navigation.dwa import DwaConfig, DynamicWindow
 from slam2d.navigation.fsm import AvoidanceStateMachine, FsmConfig
@@ -45,6 +46,7 @@ __all__ = [
     "NavigationResult",
     "run_navigation",
     "make_local_planner",
+    "navigator_config",
     "ACTIVE",
     "REACHED",
     "UNREACHABLE",
@@ -589,3 +591,15 @@ def _result(nav: Navigator, start, traj, commands, stamps, collisions, min_clear
         trajectory=traj, commands=commands, stamps=stamps, paths=nav.paths, planner_hz=hz,
         steps=len(commands), events=nav.events,
     )  # fmt: skip
+
+
+def navigator_config(options: dict[str, Any], slam: bool, section: str = "navigation.options"):
+    """The NavigatorConfig of ``options`` from the config's ``section`` (named in an error); ``slam``: the map
+    is being built (unknown cells plan as free unless the options say otherwise)."""
+    merged = {"unknown_free": slam, **options}  # a map being built is mostly unknown: plan through it
+    try:
+        return NavigatorConfig.model_validate(merged)
+    except ValidationError as err:
+        e = err.errors()[0]
+        key = ".".join(str(p) for p in e["loc"])
+        raise InputError(section, f"'{key}': {e['msg']}") from None

@@ -17,7 +17,7 @@ COMMANDS = {
     "run": ("slam2d.config:ExperimentConfig", "slam2d.runs.run:run_experiment"),
     "segment": ("slam2d.segmentation.config:SegmentConfig", "slam2d.runs.segment:run_segment"),
     "plan": ("slam2d.planning.config:PlanConfig", "slam2d.runs.plan:run_plan"),
-    "navigate": ("slam2d.navigation.run:NavigateConfig", "slam2d.navigation.run:run_navigate"),
+    "navigate": ("slam2d.runs.navigate:NavigateConfig", "slam2d.runs.navigate:run_navigate"),
     "explore": ("slam2d.exploration.config:ExploreConfig", "slam2d.exploration.run:run_explore"),
     "localize": ("slam2d.localization.config:LocalizeConfig", "slam2d.localization.run:run_localize"),
 }

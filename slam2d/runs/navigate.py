@@ -23,7 +23,10 @@ import numpy as np
 
 from slam2d import config as config_mod
 from slam2d.config import ExperimentConfig
+from slam2d.datasets.simulator import route_start
 from slam2d.errors import InputError
+from slam2d.navigation.navigator import navigator_config
+from slam2d.runs.results import jsonable, results_folder
 
 log = logging.getLogger(__name__)
 
@@ -38,8 +41,6 @@ class NavigateConfig(ExperimentConfig):
 
 def run_navigate(cfg: ExperimentConfig) -> Path:
     """Run ``cfg``'s navigation; return the results folder."""
-    from slam2d.runs.results import results_folder
-
     goal = cfg.navigation.goal
     if goal is None:  # before any folder is made
         raise InputError("navigation.goal", "a goal is needed: --goal x,y or navigation.goal in the config")
@@ -52,8 +53,6 @@ def run_navigate(cfg: ExperimentConfig) -> Path:
 
 
 def _navigate_into(cfg: ExperimentConfig, out: Path) -> dict[str, Any]:
-    from slam2d.runs.results import jsonable
-
     (out / "config.yaml").write_text(config_mod.dump(cfg))
     run = simulate(cfg)
     _write_trajectories(out, run.result, run.estimate)
@@ -92,9 +91,9 @@ def simulate(cfg: ExperimentConfig) -> NavigationRun:
     if nav.slam and nav.localization != "none":
         raise InputError("navigation.localization", "localises on the world's map: needs navigation.slam: false")
     world = load_world(sim.world, sim.resolution)
-    start = np.asarray(nav.start if nav.start is not None else _route_start(sim.world), float)
+    start = np.asarray(nav.start if nav.start is not None else route_start(sim.world), float)
     goal = np.asarray(nav.goal, float)
-    options = _navigator_options(nav.options, nav.slam)
+    options = navigator_config(nav.options, nav.slam)
     rng = np.random.default_rng(cfg.seed)
     keep = (np.array([start[:2], goal[:2]]), np.array([1.0, 1.0]))
     people = scatter_wanderers(world, nav.people, rng, speed=nav.people_speed, keep_clear=keep)
@@ -160,31 +159,6 @@ def _mcl_source(nav, world, start, robot, seed: int):
     from slam2d.localization import KnownMap, MclPoseSource
 
     return MclPoseSource(KnownMap.from_world(world), start, range_max=robot.cfg.laser.range_max, seed=seed)
-
-
-def _route_start(world: str) -> np.ndarray:
-    if world != "office":
-        raise InputError("navigation.start", f"needed for the world '{world}' (x, y, heading)")
-    from slam2d.datasets.simulator import office_route
-
-    route = office_route()
-    d = route[1] - route[0]
-    return np.array([*route[0], np.arctan2(d[1], d[0])])
-
-
-def _navigator_options(options: dict[str, Any], slam: bool, section: str = "navigation.options"):
-    """The NavigatorConfig of ``options`` from the config's ``section`` (named in an error)."""
-    from pydantic import ValidationError
-
-    from slam2d.navigation import NavigatorConfig
-
-    merged = {"unknown_free": slam, **options}  # a map being built is mostly unknown: plan through it
-    try:
-        return NavigatorConfig.model_validate(merged)
-    except ValidationError as err:
-        e = err.errors()[0]
-        key = ".".join(str(p) for p in e["loc"])
-        raise InputError(section, f"'{key}': {e['msg']}") from None
 
 
 def _pose_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, float]:
