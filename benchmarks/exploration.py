@@ -5,7 +5,7 @@ Usage: nice .venv/bin/python benchmarks/exploration.py [--worlds office rooms] [
        [--furniture both|with|without] [--seeds N] [--first-seed K] [--strategies ...] [--workers W] [--max-time S]
        [--log FILE] [--tables LOG [LOG ...] [--figure PNG]]
 
-Each run is ``slam2d explore`` without the results folder (``slam2d.exploration.run.explore``). Worlds:
+Each run is ``slam2d explore`` without the results folder (``slam2d.exploration.loop.explore``). Worlds:
 the office, and the room plans of ``$SLAM2D_DATA/rooms/`` (0.05 m/px; ``--rooms`` picks some by name,
 ``--furniture`` the furnished and / or unfurnished plans). The seed picks the start (a free place 0.5 m
 from walls inside the building) and the noise; every strategy starts from the same place for a seed.
@@ -50,7 +50,7 @@ def worlds(names: list[str], rooms: list[str], furniture: str) -> list[str]:
 
 def one_run(world: str, strategy: str, seed: int, max_time: float) -> dict:
     from slam2d.exploration import config
-    from slam2d.exploration.run import explore
+    from slam2d.exploration.loop import explore
 
     cfg = config.load(None, {"dataset.simulator.world": world, "seed": seed, "exploration.strategy": strategy,
                              "exploration.max_time": max_time, "exploration.animation": False})  # fmt: skip

@@ -24,7 +24,7 @@ def unexplored(run, cfg, margin: float):
     world's cells, the two coverages, and the frontier cell counts (with / without the wall rule)."""
     from slam2d.exploration.frontiers import frontier_mask
     from slam2d.exploration.gridops import GridView
-    from slam2d.exploration.run import reachable_free, truth_map
+    from slam2d.exploration.coverage import reachable_free, truth_map
     from slam2d.sim.robot import RobotConfig
 
     free, frame = truth_map(run.world)
@@ -54,7 +54,7 @@ def main() -> None:
     import matplotlib.pyplot as plt
 
     from slam2d.exploration import config
-    from slam2d.exploration.run import explore, resolved
+    from slam2d.exploration.loop import explore, resolved
     from slam2d.navigation import NavigatorConfig
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -22,7 +22,7 @@ ONE_RUN = """
 import json, sys, time
 sys.path.insert(0, sys.argv[1])
 from slam2d.exploration import config
-from slam2d.exploration.run import explore
+from slam2d.exploration.loop import explore
 cfg = config.load(None, {"dataset.simulator.world": sys.argv[2], "seed": 0, "exploration.strategy": sys.argv[3],
                          "exploration.max_time": float(sys.argv[4]), "exploration.animation": False})
 t = time.perf_counter(); m = explore(cfg).metrics; wall = time.perf_counter() - t

@@ -107,7 +107,7 @@ def ablate(
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Run every variant of a sweep in parallel; write one table (Markdown + CSV)."""
-    from slam2d.runs.sweep import run_sweep, SweepStopped
+    from slam2d.runs.sweep import SweepStopped, run_sweep
 
     with _command(quiet, "no sweep folder written"):
         try:
@@ -389,7 +389,7 @@ def explore(
 ) -> None:
     """Explore the simulated world with SLAM in the loop until no goal is left; print the results folder."""
     from slam2d.exploration import config as explore_config
-    from slam2d.exploration.run import run_explore
+    from slam2d.runs.explore import run_explore
 
     with _command(quiet):
         target = _viz_target(viz, viz_save)
@@ -410,7 +410,7 @@ def localize(
     quiet: bool = QUIET_OPT, viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT,
 ) -> None:
     """Monte Carlo localisation on a known map: estimate vs truth, errors, particle clouds, metrics."""
-    from slam2d.localization.run import run_localize
+    from slam2d.runs.localize import run_localize
 
     with _command(quiet):
         target = _viz_target(viz, viz_save)

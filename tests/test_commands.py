@@ -217,7 +217,7 @@ def test_localize_sweep_after_a_localisation_in_the_same_process(tmp_path):
     """The sweep's workers do not inherit the OpenMP state of numba's parallel kernels run here first
     (a forked worker running them again aborted, and the sweep reported itself stopped)."""
     from slam2d.localization.config import LocalizeConfig
-    from slam2d.localization.run import run_localize
+    from slam2d.runs.localize import run_localize
 
     plan = _write_plan(tmp_path)
     run_localize(LocalizeConfig(map=str(plan), localization={"mode": "tracking", "seconds": 2},

@@ -33,7 +33,7 @@ from slam2d.exploration.gridops import (
     unknown_in_sight,
 )
 from slam2d.exploration.hybrid import FINAL, MARKED, HybridMap
-from slam2d.exploration.run import path_repetition
+from slam2d.exploration.coverage import path_repetition
 from slam2d.sim.world import World
 
 ANGLES = np.linspace(-np.pi, np.pi, 360, endpoint=False)
@@ -408,7 +408,7 @@ def two_rooms_png(tmp_path):
 
 @pytest.mark.parametrize("strategy", ["nearest_frontier", "utility"])
 def test_exploring_two_rooms_terminates_with_full_coverage(tmp_path, strategy, caplog):
-    from slam2d.exploration.run import run_explore
+    from slam2d.runs.explore import run_explore
 
     world = two_rooms_png(tmp_path)
     cfg = explore_config.load(None, {
@@ -446,7 +446,7 @@ def test_a_bounded_exploration_stays_in_its_polygon_and_counts_coverage_inside_i
     """Bounds around room A of the two rooms: the laser sees into room B through the door, but no goal
     (frontier, candidate or view of a pocket) lies outside the polygon, the robot stays in room A, and
     the coverage and the map's IoU are counted inside the polygon."""
-    from slam2d.exploration.run import run_explore
+    from slam2d.runs.explore import run_explore
 
     world = two_rooms_png(tmp_path)
     box = [[0.3, 0.3], [4.3, 0.3], [4.3, 3.7], [0.3, 3.7]]
@@ -466,7 +466,7 @@ def test_a_bounded_exploration_stays_in_its_polygon_and_counts_coverage_inside_i
 
 
 def test_bounds_must_be_a_polygon_around_the_start(tmp_path):
-    from slam2d.exploration.run import run_explore
+    from slam2d.runs.explore import run_explore
 
     for bad, what in (([[0, 0], [1, 0]], "at least 3"), ([[0, 0], [1, 0], [2, 0]], "no area")):
         with pytest.raises(InputError, match=what):
@@ -483,7 +483,7 @@ def test_the_area_to_explore_leaves_out_what_a_plan_leaves_unknown(tmp_path):
     area the explorer must map."""
     from PIL import Image
 
-    from slam2d.exploration.run import reachable_free, truth_map
+    from slam2d.exploration.coverage import reachable_free, truth_map
     from slam2d.sim.world import load_world
 
     img = np.zeros((80, 120), dtype=np.uint8)
@@ -504,7 +504,7 @@ def test_the_area_to_explore_leaves_out_what_a_plan_leaves_unknown(tmp_path):
     assert not (asked & band).any() and (asked == (seen & ~band)).all()
 
     from slam2d.config import MappingConfig
-    from slam2d.exploration.run import Coverage
+    from slam2d.exploration.coverage import Coverage
     from slam2d.mapping.occupancy import OccupancyGrid
 
     mapped = OccupancyGrid(np.where(seen, -3.0, 0.0), frame.resolution, frame.origin)  # free where the laser saw
@@ -513,7 +513,7 @@ def test_the_area_to_explore_leaves_out_what_a_plan_leaves_unknown(tmp_path):
 
 
 def test_bad_explore_input_leaves_no_folder(tmp_path):
-    from slam2d.exploration.run import run_explore
+    from slam2d.runs.explore import run_explore
 
     with pytest.raises(InputError, match="world PNG not found"):
         run_explore(explore_config.load(None, {"output.root": str(tmp_path), "dataset.simulator.world": "nope.png"}))
@@ -563,7 +563,7 @@ def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped()
     inside; from the large room, or once the ways out are used up, there is none."""
     from types import SimpleNamespace
 
-    from slam2d.exploration.run import MAX_RETRACES, _way_out
+    from slam2d.exploration.loop import MAX_RETRACES, _way_out
 
     state = np.full((60, 100), FREE, dtype=np.int8)  # 5 m x 3 m at 5 cm
     state[[0, -1], :] = state[:, [0, -1]] = OCCUPIED
@@ -594,7 +594,7 @@ def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped()
 
 def test_pocket_cells_are_hidden_unknown_cells_walls_close_small_gaps_and_escape_turns_to_open_space():
     from slam2d.exploration.explorer import pocket_state
-    from slam2d.exploration.run import _open_heading
+    from slam2d.exploration.loop import _open_heading
 
     state = np.full((40, 40), UNKNOWN, dtype=np.int8)
     state[5:35, 5:35] = FREE
@@ -652,7 +652,7 @@ def desk_room_png(tmp_path):
 
 
 def test_exploring_a_room_with_a_desk_near_a_wall_sees_behind_the_desk(tmp_path):
-    from slam2d.exploration.run import explore
+    from slam2d.exploration.loop import explore
 
     cfg = explore_config.load(None, {
         "dataset.simulator.world": str(desk_room_png(tmp_path)), "seed": 1, "exploration.strategy": "nearest_frontier",

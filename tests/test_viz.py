@@ -17,13 +17,7 @@ import pytest
 from slam2d import config
 from slam2d.datasets.g2o import odometry_mask, read_g2o
 from slam2d.runs.run import run_experiment
-from slam2d.viz import (
-    ENTITIES,
-    EXPLORE_ENTITIES,
-    MAP_EVERY,
-    PARTICLE_ENTITIES,
-    VIEW_PARTICLES,
-)
+from slam2d.viz import ENTITIES, EXPLORE_ENTITIES, MAP_EVERY, PARTICLE_ENTITIES, VIEW_PARTICLES
 
 try:
     from rerun.chunk import RrdReader
@@ -85,7 +79,7 @@ def test_recording_ends_with_the_runs_loops_and_trajectory(recorded):
 
 def test_localize_recording_has_the_particles_of_each_update(tmp_path):
     from slam2d.localization.config import LocalizeConfig
-    from slam2d.localization.run import run_localize
+    from slam2d.runs.localize import run_localize
 
     cfg = LocalizeConfig(map="office", seconds=8, output={"root": str(tmp_path), "figures": False})
     folder = run_localize(cfg, viz=tmp_path / "loc.rrd")
@@ -108,7 +102,7 @@ def test_explore_recording_has_each_goal_and_the_frontiers(tmp_path):
     from test_exploration import two_rooms_png
 
     from slam2d.exploration import config as explore_config
-    from slam2d.exploration.run import run_explore
+    from slam2d.runs.explore import run_explore
 
     cfg = explore_config.load(None, {
         "output.root": str(tmp_path / "out"), "dataset.simulator.world": str(two_rooms_png(tmp_path)), "seed": 1,
@@ -129,7 +123,7 @@ def test_explore_recording_has_each_goal_and_the_frontiers(tmp_path):
 def test_no_view_imports_nothing_of_rerun(tmp_path):
     code = ("import sys; from slam2d import config; from slam2d.runs.run import run_experiment; "
             f"run_experiment(config.load(None, ['dataset.max_scans=10', 'output.root={tmp_path}']), quiet=True); "
-            "from slam2d.localization.run import LocalizeConfig, run_localize; "
+            "from slam2d.runs.localize import LocalizeConfig, run_localize; "
             f"run_localize(LocalizeConfig(map='office', seconds=2, output={{'root': '{tmp_path}'}})); "
             "assert not [m for m in sys.modules if m.startswith(('rerun', 'slam2d.viz'))], 'rerun imported'")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)

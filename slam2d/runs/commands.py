@@ -18,8 +18,8 @@ COMMANDS = {
     "segment": ("slam2d.segmentation.config:SegmentConfig", "slam2d.runs.segment:run_segment"),
     "plan": ("slam2d.planning.config:PlanConfig", "slam2d.runs.plan:run_plan"),
     "navigate": ("slam2d.runs.navigate:NavigateConfig", "slam2d.runs.navigate:run_navigate"),
-    "explore": ("slam2d.exploration.config:ExploreConfig", "slam2d.exploration.run:run_explore"),
-    "localize": ("slam2d.localization.config:LocalizeConfig", "slam2d.localization.run:run_localize"),
+    "explore": ("slam2d.exploration.config:ExploreConfig", "slam2d.runs.explore:run_explore"),
+    "localize": ("slam2d.localization.config:LocalizeConfig", "slam2d.runs.localize:run_localize"),
 }
 """Commands whose configs ``slam2d ablate`` sweeps: (config model, runner taking the config)."""
 

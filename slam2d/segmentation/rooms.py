@@ -77,10 +77,9 @@ def segment_free(free, resolution, method, similarity="visibility", params=None)
 def _run_method(free, resolution, method, similarity, params) -> dict:
     """Labels (H, W) int32 and run facts (seconds; k and silhouette for spectral)."""
     if method == "spectral":
+        from slam2d.segmentation.config import SIMILARITY_ALIASES
         from slam2d.segmentation.similarity import SIMILARITIES
         from slam2d.segmentation.spectral import segment_spectral
-
-        from slam2d.segmentation.config import SIMILARITY_ALIASES
 
         similarity = SIMILARITY_ALIASES.get(similarity, similarity)
         if similarity not in SIMILARITIES:

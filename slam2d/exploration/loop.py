@@ -1,43 +1,47 @@
-"""``slam2d explore``: autonomous exploration with SLAM in the loop — a config in, a results folder out.
+"""Autonomous exploration with SLAM in the loop (:func:`explore`; ``slam2d explore`` writes its results).
 
 The simulated robot starts in ``dataset.simulator.world`` knowing nothing. Online SLAM
 (the ICP frontend and pose graph of ``slam2d run``, fed one scan at a time) gives the
 pose and the grid; the explorer picks a goal on them (``exploration.strategy``) and a
 :class:`~slam2d.navigation.Navigator` drives there, until no goal is left or a limit is
-reached. The true pose is used only to score the run. The folder holds the resolved
-config, the final map (PGM + YAML, PNG with the path and the hybrid graph), the hybrid
-map (``hybrid.json``), the true and estimated trajectories, coverage against time and
-distance (``coverage.csv``, ``coverage.png``), ``explore.gif`` and ``metrics.json``.
+reached. The true pose is used only to score the run (:mod:`slam2d.exploration.coverage`).
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
-from slam2d import config as config_mod
 from slam2d import geometry
 from slam2d.errors import InputError
+from slam2d.evaluation.trajectory import ate
 from slam2d.exploration.config import ExploreConfig
+from slam2d.exploration.coverage import (
+    Coverage,
+    at_coverage,
+    ignored_cells,
+    path_repetition,
+    reachable_free,
+    seeded_start,
+    truth_map,
+)
 from slam2d.exploration.explorer import Explorer, Goal
-from slam2d.exploration.gridops import GridView, LiveClearance, cells_inside_polygon, geodesic, inside_polygon
+from slam2d.exploration.gridops import GridView, LiveClearance, geodesic, inside_polygon
+from slam2d.navigation import Navigator
+from slam2d.navigation.common import Command
+from slam2d.navigation.navigator import ACTIVE, REACHED, clearance, navigator_config
+from slam2d.sim import Robot
+from slam2d.sim.robot import RobotConfig
+from slam2d.sim.world import load_world
+from slam2d.slam import OnlineSlam
 
 log = logging.getLogger(__name__)
 
-GIF_FRAMES = 80
 WARMUP = 2.0  # s the robot stands still at the start while the grid's first cells become free
-START_CLEARANCE = 0.5  # m from walls for a seeded start
-VIEW_SPACING = 0.25  # m between the places the reachable area is seen from
-REPEAT_RADIUS = 0.5  # m: path within this of earlier path is repeated
-REPEAT_GAP = 2.0  # m of travel before a piece of path counts as "earlier"
-SAMPLE_STEP = 0.1  # m between path samples for the repetition metric
 POCKET_REACHED = 0.1  # m: a view of a pocket is reached closer than other goals (it may be the only one)
 POCKET_DWELL = 1.0  # s standing at a view of a pocket (a log-odds cell needs a few scans to turn free)
 
@@ -58,25 +62,6 @@ class ExplorationRun:
     metrics: dict = field(default_factory=dict)
 
 
-def run_explore(cfg: ExploreConfig, viz: str | Path | None = None) -> Path:
-    """Run ``cfg``'s exploration; return the results folder. ``viz``: ``"viewer"`` or ``FILE.rrd``, the
-    robot, goals, map and frontiers streamed to rerun (:class:`slam2d.viz.ExploreView`)."""
-    from slam2d.runs.results import jsonable, live_view, results_folder
-
-    cfg = resolved(cfg)
-    with results_folder(cfg.output.root, cfg.name) as (work, published):
-        log.info("slam2d explore '%s' (%s) -> %s", cfg.name, cfg.exploration.strategy, cfg.output.root)
-        (work / "config.yaml").write_text(config_mod.dump(cfg))
-        with live_view(viz, cfg.name, "explore", cfg.mapping) as view:
-            run = explore(cfg, view=view)
-        _write(work, cfg, run)
-        (work / "metrics.json").write_text(json.dumps(jsonable(run.metrics), indent=2))
-        m = run.metrics
-        log.info("%s: coverage %.1f %% in %.0f s, %.1f m (%.0f s wall)", m["stop_reason"], 100 * m["coverage"],
-                 m["time"], m["distance"], m["wall_s"])  # fmt: skip
-    return published[0]
-
-
 def resolved(cfg: ExploreConfig) -> ExploreConfig:
     """``cfg`` with ``mapping.max_range`` at the laser's range limit when unset: a simulated laser's
     no-return is open space up to the limit, which A-type candidates stand on."""
@@ -93,12 +78,6 @@ class _Loop:
     """State of one exploration run: robot, SLAM, explorer, the current goal and its navigator."""
 
     def __init__(self, cfg: ExploreConfig):
-        from slam2d.navigation.navigator import navigator_config
-        from slam2d.sim import Robot
-        from slam2d.sim.robot import RobotConfig
-        from slam2d.sim.world import load_world
-        from slam2d.slam import OnlineSlam
-
         self.cfg, self.ecfg, sim = cfg, cfg.exploration, cfg.dataset.simulator
         self.world = load_world(sim.world, sim.resolution)
         self.truth_free, self.truth_frame = truth_map(self.world)
@@ -141,8 +120,6 @@ class _Loop:
         return self.clearance.attach(GridView.of(self.slam.grid, m.free_thresh, m.occupied_thresh))
 
     def set_goal(self, goal: Goal | None, now: float) -> None:
-        from slam2d.navigation import Navigator
-
         self.goal, self.dwell = goal, None
         if goal is None:
             self.nav = None
@@ -157,8 +134,6 @@ class _Loop:
             self.goals[-1]["options"] = goal.options
 
     def next_leg(self, now: float) -> None:
-        from slam2d.navigation import Navigator
-
         self._count(self.nav)
         self.legs.pop(0)
         self.nav = Navigator(self.legs[0], self.robot.cfg, self.options)
@@ -194,8 +169,6 @@ class _Loop:
 def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
     """One exploration run of ``cfg`` (no files written); ``progress(now, coverage)`` is told every second;
     ``view`` (a :class:`slam2d.viz.ExploreView`) logs every control step."""
-    from slam2d.navigation.navigator import ACTIVE, REACHED, clearance
-
     t_wall = time.perf_counter()
     cfg = resolved(cfg)
     loop, ecfg = _Loop(cfg), cfg.exploration
@@ -310,8 +283,6 @@ ESCAPE_TIME = 8.0  # s at most
 def _escape(loop: _Loop, step, now: float):
     """Out of a spot where the local planner finds no way (the disc nearly touching walls): turn on the
     spot (a disc always can) to the heading with the longest free sweep, then drive ESCAPE_DISTANCE."""
-    from slam2d.navigation.common import Command
-
     heading, start, since = loop.escape
     since = now if since is None else since
     loop.escape = heading, start, since
@@ -401,8 +372,6 @@ def _heading_error(heading: float, pose) -> float:
 
 def _towards(err: float, v: float, state: str):
     """Drive at ``v`` m/s, turning at twice the heading error ``err`` (rad), at most 1 rad/s."""
-    from slam2d.navigation.common import Command
-
     return Command(v, float(np.clip(2.0 * err, -1.0, 1.0)), False, state)
 
 
@@ -449,147 +418,11 @@ class _Lazy:
         return getattr(self._view, name)
 
 
-# --------------------------------------------------------------------------- ground truth and scores
-
-
-def truth_map(world, resolution: float = 0.05):
-    """The world's free mask (H, W) and its grid frame (a PlanningGrid)."""
-    from slam2d.navigation.maps import world_grid
-
-    grid = world_grid(world, resolution)
-    return grid.free, grid
-
-
-def reachable_free(free: np.ndarray, frame, start_xy, radius: float = 0.25, max_range: float = 12.0,
-                   unmapped: np.ndarray | None = None) -> np.ndarray:
-    """The area an explorer can be asked to map: free cells that the laser (``max_range`` m) sees from
-    some place the robot's centre can reach from the start (the free cells farther than ``radius`` m
-    from walls, connected to the start's cell — the robot's radius plus the navigator's inflation
-    margin in a run), sampled every VIEW_SPACING m; none of the ``unmapped`` cells (a PNG plan's
-    unknown grey: wall interiors and the outside, seen through pinholes in its walls)."""
-    from slam2d.exploration.gridops import visible_from
-
-    res = frame.resolution
-    room = ndimage.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1] * res > radius
-    labels, _ = ndimage.label(room, np.ones((3, 3), int))
-    cell = frame.world_to_cell(np.asarray(start_xy, float))
-    if not frame.in_bounds(cell) or not free[cell[0], cell[1]]:
-        raise InputError("exploration.start", "the start is not in the world's free space")
-    if labels[cell[0], cell[1]] == 0:  # a start closer to a wall than that: the nearest place with room
-        rows, cols = np.nonzero(labels)
-        d = np.hypot(rows - cell[0], cols - cell[1])
-        if len(d) == 0 or d.min() * res > 2 * radius:
-            raise InputError("exploration.start", "the start is not in the world's free space")
-        cell = np.array([rows[np.argmin(d)], cols[np.argmin(d)]])
-    robot = labels == labels[cell[0], cell[1]]
-    k = max(1, round(VIEW_SPACING / res))
-    rows, cols = np.nonzero(robot[::k, ::k])
-    origins = np.column_stack([cols * k + 0.5, rows * k + 0.5])
-    area = visible_from(free, res, origins, max_range) | robot
-    return area if unmapped is None else area & ~unmapped
-
-
-def ignored_cells(unmapped: np.ndarray | None, frame, shape, bounds) -> np.ndarray | None:
-    """The world's cells (H, W) bool that no coverage or IoU counts: the plan's ``unmapped`` ones and those
-    outside the bounding polygon ``bounds`` (K, 2) m; None when there are none."""
-    if bounds is None:
-        return unmapped
-    outside = ~cells_inside_polygon(shape, frame.cell_to_world, bounds)
-    return outside if unmapped is None else outside | unmapped
-
-
-def seeded_start(world, name: str, free: np.ndarray, frame, seed: int) -> np.ndarray:
-    """A start pose: the office route's start for the office; else a seeded cell at least
-    START_CLEARANCE from walls in the largest open component that does not touch the map's edge
-    (the building, not the area around it), heading seeded too."""
-    if name == "office":
-        from slam2d.datasets.simulator import route_start
-
-        return route_start("office")
-    clear = ndimage.distance_transform_edt(free) * frame.resolution > START_CLEARANCE
-    labels, n = ndimage.label(clear)
-    if n == 0:
-        raise InputError("dataset.simulator.world", f"{name}: no free place {START_CLEARANCE} m from every wall")
-    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-    sizes = np.bincount(labels.ravel(), minlength=n + 1)
-    sizes[0] = 0
-    inner = sizes.copy()
-    inner[edge] = 0
-    pick = int(np.argmax(inner)) if inner.max() > 0 else int(np.argmax(sizes))
-    rows, cols = np.nonzero(labels == pick)
-    rng = np.random.default_rng(seed)
-    k = int(rng.integers(len(rows)))
-    xy = frame.cell_to_world(np.array([rows[k], cols[k]]))
-    return np.array([xy[0], xy[1], rng.uniform(-np.pi, np.pi)])
-
-
-class Coverage:
-    """Explored fraction of the reachable free area: a reachable true-free cell counts as explored
-    when the SLAM grid knows (free or occupied) a cell within one cell of it. ``unmapped`` (H, W): the
-    cells the plan leaves unknown and those outside the bounds (None: none), about which the map's IoU
-    says nothing."""
-
-    def __init__(self, reachable: np.ndarray, frame, mapping, unmapped: np.ndarray | None = None):
-        rows, cols = np.nonzero(reachable)
-        self.points = frame.cell_to_world(np.column_stack([rows, cols]))
-        self.reachable, self.frame, self.mapping, self.unmapped = reachable, frame, mapping, unmapped
-
-    def __call__(self, grid) -> float:
-        known = grid.free_mask(self.mapping.free_thresh) | grid.occupied_mask(self.mapping.occupied_thresh)
-        known = ndimage.binary_dilation(known, np.ones((3, 3), bool))
-        return float(_lookup(grid, known, self.points).mean()) if len(self.points) else 1.0
-
-    def iou(self, grid) -> float:
-        """IoU of SLAM's free cells and the reachable true free space, on the world's cells the plan knows
-        (SLAM's free cells where the plan is unknown grey, e.g. the outside seen through a door, are neither)."""
-        h, w = self.reachable.shape
-        rows, cols = np.indices((h, w))
-        centres = self.frame.cell_to_world(np.column_stack([rows.ravel(), cols.ravel()]))
-        free = _lookup(grid, grid.free_mask(self.mapping.free_thresh), centres).reshape(h, w)
-        if self.unmapped is not None:
-            free &= ~self.unmapped
-        union = (free | self.reachable).sum()
-        return float((free & self.reachable).sum() / union) if union else 1.0
-
-
-def _lookup(grid, mask: np.ndarray, points) -> np.ndarray:
-    cells = grid.world_to_cell(points)
-    ok = grid.in_bounds(cells)
-    out = np.zeros(len(points), dtype=bool)
-    out[ok] = mask[cells[ok, 0], cells[ok, 1]]
-    return out
-
-
-def path_repetition(xy: np.ndarray) -> float:
-    """Fraction of the path (resampled every SAMPLE_STEP m) within REPEAT_RADIUS of path driven more than
-    REPEAT_GAP m earlier."""
-    from scipy.spatial import cKDTree
-
-    seg = np.hypot(*np.diff(xy, axis=0).T)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    if s[-1] < REPEAT_GAP:
-        return 0.0
-    at = np.arange(0.0, s[-1], SAMPLE_STEP)
-    pts = np.column_stack([np.interp(at, s, xy[:, 0]), np.interp(at, s, xy[:, 1])])
-    near = cKDTree(pts).query_ball_point(pts, REPEAT_RADIUS)
-    gap = round(REPEAT_GAP / SAMPLE_STEP)
-    repeated = [bool(js) and min(js) < i - gap for i, js in enumerate(near)]
-    return float(np.mean(repeated))
-
-
-def _at_coverage(curve: np.ndarray, level: float) -> tuple[float, float]:
-    """(time s, distance m) when coverage first reached ``level``; nan if never."""
-    k = np.nonzero(curve[:, 2] >= level)[0]
-    return (float(curve[k[0], 0]), float(curve[k[0], 1])) if len(k) else (float("nan"), float("nan"))
-
-
 def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, collisions: int, min_clear: float,
              wall: float) -> dict:  # fmt: skip
-    from slam2d.evaluation.trajectory import ate
-
     curve, ex = run.curve, run.explorer
-    t90, d90 = _at_coverage(curve, 0.90)
-    t99, d99 = _at_coverage(curve, 0.99)
+    t90, d90 = at_coverage(curve, 0.90)
+    t99, d99 = at_coverage(curve, 0.99)
     dec = np.array(ex.decision_seconds) * 1000 if ex.decision_seconds else np.array([np.nan])
     sim_time = float(curve[-1, 0])
     outcomes = [g["outcome"] for g in run.goals]
@@ -615,9 +448,6 @@ def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, colli
     }  # fmt: skip
 
 
-# --------------------------------------------------------------------------- files
-
-
 def _snapshot(loop: _Loop, n_poses: int) -> dict:
     """The map (downsampled ×2, uint8 grey) and the counts needed to draw one animation frame."""
     grid = loop.slam.grid
@@ -625,83 +455,3 @@ def _snapshot(loop: _Loop, n_poses: int) -> dict:
     return {"image": (255 * (1.0 - p)).astype(np.uint8), "extent": grid.extent, "n": n_poses,
             "nodes": loop.explorer.hybrid.positions().copy(),
             "goal": None if loop.goal is None else loop.goal.position.copy()}  # fmt: skip
-
-
-def _write(out: Path, cfg: ExploreConfig, run: ExplorationRun) -> None:
-    from slam2d.evaluation.trajectory import write_tum
-    from slam2d.mapping.export import save_map_server
-    from slam2d.types import Trajectory
-
-    save_map_server(run.grid, out / "map", cfg.mapping)
-    write_tum(out / "trajectory_true.tum", Trajectory(run.stamps, run.truth))
-    write_tum(out / "trajectory.tum", Trajectory(run.stamps, run.estimate))
-    run.explorer.hybrid.save(out / "hybrid.json")
-    (out / "goals.json").write_text(json.dumps(run.goals, indent=1))
-    np.savetxt(out / "coverage.csv", run.curve, delimiter=",", header="time_s,distance_m,coverage", comments="",
-               fmt="%.4f")  # fmt: skip
-    if cfg.output.figures:
-        _figures(out, run)
-        if cfg.exploration.animation and run.snapshots:
-            _animation(out, run)
-
-
-def _figures(out: Path, run: ExplorationRun) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    m = run.metrics
-    fig, ax = plt.subplots(figsize=(9, 6))
-    x0, x1, y0, y1 = run.grid.extent
-    ax.imshow(1.0 - run.grid.probability(), cmap="gray", origin="lower", extent=(x0, x1, y0, y1), vmin=0, vmax=1)
-    ax.plot(*run.truth[:, :2].T, color="tab:blue", lw=0.9, label="path (true)")
-    run.explorer.hybrid.draw(ax)
-    ax.plot(*run.truth[0, :2], "g^", ms=9, label="start")
-    ax.set_aspect("equal")
-    ax.set_title(f"{m['world']} · {m['strategy']}: coverage {100 * m['coverage']:.1f} %, {m['distance']:.0f} m, "
-                 f"{m['time']:.0f} s, IoU {m['map_iou']:.3f}", fontsize=9)  # fmt: skip
-    ax.legend(loc="upper right", fontsize=7)
-    fig.savefig(out / "map.png", dpi=130, bbox_inches="tight")
-    plt.close(fig)
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.2), sharey=True)
-    a1.plot(run.curve[:, 0], 100 * run.curve[:, 2])
-    a1.set_xlabel("time (s)")
-    a1.set_ylabel("coverage (%)")
-    a2.plot(run.curve[:, 1], 100 * run.curve[:, 2])
-    a2.set_xlabel("distance (m)")
-    for a in (a1, a2):
-        a.axhline(99, color="0.6", lw=0.7, ls="--")
-        a.grid(alpha=0.3)
-    fig.savefig(out / "coverage.png", dpi=120, bbox_inches="tight")
-    plt.close(fig)
-
-
-def _animation(out: Path, run: ExplorationRun) -> None:
-    """explore.gif: the map being built, the path, the nodes and the goal."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.animation import FuncAnimation, PillowWriter
-
-    snaps = run.snapshots
-    frames = np.unique(np.linspace(0, len(snaps) - 1, min(GIF_FRAMES, len(snaps))).astype(int))
-    fig, ax = plt.subplots(figsize=(6, 4.5))
-    x0, x1, y0, y1 = run.grid.extent
-
-    def draw(k):
-        s = snaps[k]
-        ax.clear()
-        ax.imshow(s["image"], cmap="gray", origin="lower", extent=s["extent"], vmin=0, vmax=255)
-        ax.plot(*run.truth[: s["n"], :2].T, color="tab:blue", lw=0.9)
-        ax.plot(*s["nodes"].T, ".", color="tab:purple", ms=3)
-        if s["goal"] is not None:
-            ax.plot(*s["goal"], "r*", ms=9)
-        ax.set_xlim(x0, x1)
-        ax.set_ylim(y0, y1)
-        ax.set_aspect("equal")
-        ax.set_title(f"t = {run.stamps[s['n'] - 1] - run.stamps[0]:.0f} s", fontsize=9)
-
-    FuncAnimation(fig, draw, frames=frames, blit=False).save(out / "explore.gif", writer=PillowWriter(fps=8))
-    plt.close(fig)

@@ -25,6 +25,7 @@ from slam2d.errors import InputError
 from slam2d.localization.config import LocalizeConfig
 from slam2d.localization.maps import KnownMap
 from slam2d.localization.scenario import Stream, Track
+from slam2d.runs.results import json_text, live_view, results_folder
 
 log = logging.getLogger(__name__)
 
@@ -37,8 +38,6 @@ def run_localize(cfg: LocalizeConfig, viz: str | Path | None = None) -> Path:
     """Localise on ``cfg.map`` with the scans of ``cfg.dataset`` (None: the simulated robot) into a new
     results folder under ``cfg.output.root``; return it. ``viz``: ``"viewer"`` or ``FILE.rrd``, the
     particles streamed to rerun (:class:`slam2d.viz.ParticleView`)."""
-    from slam2d.runs.results import live_view, results_folder
-
     cfg.filter_config()  # the mcl keys are checked before any work
     map_path = _map_path(cfg.map)
     known = KnownMap.load(map_path, cfg.resolution or KNOWN_MAP_RESOLUTION)
@@ -75,7 +74,6 @@ def localize(known: KnownMap, cfg: LocalizeConfig, out: Path, map_path: Path | N
              dataset=None, view=None) -> dict[str, Any]:  # fmt: skip
     """One run into the folder ``out`` (``view``: a live view of the filter, or None); returns the metrics."""
     from slam2d import config as config_mod
-    from slam2d.runs.results import json_text
     from slam2d.localization.mcl import ParticleFilter
     from slam2d.localization.scenario import replay
 
