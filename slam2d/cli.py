@@ -5,6 +5,7 @@ Heavy imports happen inside the commands so that ``slam2d --help`` is instant.
 
 from __future__ import annotations
 
+import json
 import logging
 from contextlib import contextmanager
 from pathlib import Path
@@ -19,7 +20,6 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, help="2D laser SLA
 CONFIG_ARG = typer.Argument(None, help="experiment YAML; omitted: the built-in simulator default")
 SET_OPT = typer.Option([], "--set", "-s", help="override a config key, e.g. --set frontend.name=odometry")
 QUIET_OPT = typer.Option(False, "--quiet", "-q", help="no progress bars, warnings and errors only")
-OUT_OPT = typer.Option(Path("results"), "--out", "-o", help="results folders are created under this")
 PLUGIN_OPT = typer.Option([], "--plugin", "-p", help="Python file or module to import first (its frontends)")
 
 
@@ -83,17 +83,52 @@ def _viz_target(viz: bool, viz_save: Optional[Path]):
     return viz_save or ("viewer" if viz else None)
 
 
+CONFIG_OPT = typer.Option(None, "--config", "-c", help="the command's YAML config (slam2d dump-config --command ...)")
+OUT_SET_OPT = typer.Option(None, "--out", "-o", help="results folders are created under this (output.root)")
+
+
+def _config_file(positional: Optional[Path], option: Optional[Path]) -> Optional[Path]:
+    """The config file given positionally or with ``-c`` (not both)."""
+    if positional is not None and option is not None:
+        raise InputError("--config", f"give the config once: {positional} or -c {option}")
+    return positional if positional is not None else option
+
+
+def _command_config(command: str, config: Optional[Path], set_: list[str], flags: dict, plugins: list[str] = ()):
+    """The config of ``command`` from ``config`` (or defaults), ``--set`` overrides, then the short
+    flags given (``flags``: dotted key -> value or None), then ``--plugin`` files or modules."""
+    from slam2d import config as config_mod
+    from slam2d.runs.commands import command_model
+    from slam2d.runs.results import output_root
+
+    if flags.get("output.root") is not None:
+        output_root(flags["output.root"], "--out")  # its error names the option
+    overrides = dict(map(config_mod.parse_override, set_))
+    overrides.update({k: str(v) if isinstance(v, Path) else v for k, v in flags.items() if v is not None})
+    cfg = config_mod.load(config, overrides, command_model(command))
+    if plugins:
+        cfg.plugins = [*cfg.plugins, *(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugins)]
+    return cfg
+
+
+def _echo_metrics(folder: Path, keys: tuple[str, ...], digits: int = 4) -> None:
+    metrics = json.loads((folder / "metrics.json").read_text())
+    typer.echo(" ".join(f"{k}={metrics[k]:.{digits}g}" if isinstance(metrics[k], float) else f"{k}={metrics[k]}"
+                        for k in keys if metrics.get(k) is not None))  # fmt: skip
+
+
 @app.command()
 def run(
-    config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT,
-    quiet: bool = QUIET_OPT, viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT,
+    config: Optional[Path] = CONFIG_ARG, config_opt: Optional[Path] = CONFIG_OPT, set_: list[str] = SET_OPT,
+    root: Optional[Path] = OUT_SET_OPT, plugin: list[str] = PLUGIN_OPT, quiet: bool = QUIET_OPT,
+    viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT,
 ) -> None:
     """Run one experiment; print the results folder."""
     from slam2d.runs.run import run_experiment
 
     with _command(quiet):
         target = _viz_target(viz, viz_save)
-        cfg = _load(config, set_, plugin)
+        cfg = _command_config("run", _config_file(config, config_opt), set_, {"output.root": root}, plugin)
         folder = run_experiment(cfg, quiet=quiet, viz=target)
     typer.echo(f"results: {folder}")
 
@@ -126,46 +161,21 @@ def ablate(
 
 @app.command("dump-config")
 def dump_config(
-    config: Optional[Path] = CONFIG_ARG, set_: list[str] = SET_OPT, plugin: list[str] = PLUGIN_OPT,
-    command: str = typer.Option("run", "--command",
-                                help="whose config: run, segment, plan, navigate, explore or localize"),
+    config: Optional[Path] = CONFIG_ARG, config_opt: Optional[Path] = CONFIG_OPT, set_: list[str] = SET_OPT,
+    plugin: list[str] = PLUGIN_OPT,
+    command: str = typer.Option("run", "--command", help="whose config: run, segment, plan, map, optimize, "
+                                "navigate, explore or localize"),
 ) -> None:
     """Print the fully resolved config (defaults included) as YAML."""
     from slam2d import config as config_mod
     from slam2d.runs.commands import command_model, resolved
 
     try:
-        model = command_model(command, "--command")
-        cfg = _load(config, set_, plugin, model)
+        command_model(command, "--command")
+        cfg = _command_config(command, _config_file(config, config_opt), set_, {}, plugin)
         typer.echo(config_mod.dump(resolved(cfg)), nl=False)
     except InputError as err:
         _fail(err)
-
-
-CONFIG_OPT = typer.Option(None, "--config", "-c", help="the command's YAML config (slam2d dump-config --command ...)")
-OUT_SET_OPT = typer.Option(None, "--out", "-o", help="results folders are created under this (output.root)")
-
-
-def _command_config(command: str, config: Optional[Path], set_: list[str], flags: dict):
-    """The config of ``command`` from ``config`` (or defaults), ``--set`` overrides, then the short
-    flags given (``flags``: dotted key -> value or None)."""
-    from slam2d import config as config_mod
-    from slam2d.runs.commands import command_model
-    from slam2d.runs.results import output_root
-
-    if flags.get("output.root") is not None:
-        output_root(flags["output.root"], "--out")  # its error names the option
-    overrides = dict(map(config_mod.parse_override, set_))
-    overrides.update({k: str(v) if isinstance(v, Path) else v for k, v in flags.items() if v is not None})
-    return config_mod.load(config, overrides, command_model(command))
-
-
-def _echo_metrics(folder: Path, keys: tuple[str, ...]) -> None:
-    import json
-
-    metrics = json.loads((folder / "metrics.json").read_text())
-    typer.echo(" ".join(f"{k}={metrics[k]:.4g}" if isinstance(metrics[k], float) else f"{k}={metrics[k]}"
-                        for k in keys if metrics.get(k) is not None))  # fmt: skip
 
 
 @app.command()
@@ -241,32 +251,34 @@ def plan(
 
 @app.command("map")
 def map_layers(
-    map_path: Path = typer.Argument(..., help="map.yaml (map_server), or a floor-plan image (0.05 m/px)"),
-    layers: str = typer.Option("sparse,quadtree,lines,mesh", help="comma-separated: sparse, quadtree, lines, mesh"),
+    map_path: Optional[Path] = typer.Argument(None, help="map.yaml (map_server), or a floor-plan image (0.05 m/px) "
+                                              "(the config's map)"),
+    config: Optional[Path] = CONFIG_OPT,
+    layers: Optional[str] = typer.Option(None, help="comma-separated: sparse, quadtree, lines, mesh (default: all)"),
     wall_height: Optional[float] = typer.Option(None, help="wall height of the mesh, m (default 2.5)"),
-    root: Path = OUT_OPT,
+    set_: list[str] = SET_OPT,
+    root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Make mapping layers (sparse, quadtree, line map, wall mesh) of an existing map."""
-    from slam2d.runs.results import results_folder
+    from slam2d.runs.map import run_map
 
     with _command(quiet):
-        chosen = _layer_names(layers)
         if wall_height is not None and not wall_height > 0:
             raise InputError("--wall-height", f"must be > 0 m, got {wall_height}")
-        from slam2d.config import MappingConfig
-        from slam2d.mapping.layers import load_grid, write_layers
-
-        grid = load_grid(map_path)
-        with results_folder(root, f"map-{map_path.stem}", "--out") as (work, published):
-            stats = write_layers(grid, work, MappingConfig(layers=chosen), wall_height=wall_height)
+        cfg = _command_config("map", config, set_, {
+            "map": map_path, "layers": _layer_names(layers), "wall_height": wall_height, "output.root": root})
+        folder = run_map(cfg)
+    stats = json.loads((folder / "metrics.json").read_text())
     typer.echo(" ".join(f"{k}={v['bytes']}B" for k, v in stats.items() if "bytes" in v))
-    typer.echo(f"results: {published[0]}")
+    typer.echo(f"results: {folder}")
 
 
-def _layer_names(text: str) -> list[str]:
+def _layer_names(text: str | None) -> list[str] | None:
     from slam2d.mapping.layers import LAYERS
 
+    if text is None:
+        return None
     names = [n.strip() for n in text.split(",") if n.strip()]
     unknown = [n for n in names if n not in LAYERS]
     if unknown or not names:
@@ -276,125 +288,73 @@ def _layer_names(text: str) -> list[str]:
 
 @app.command()
 def optimize(
-    graph_path: Path = typer.Argument(..., help="2D pose graph, g2o or TORO"),
+    graph_path: Optional[Path] = typer.Argument(None, help="2D pose graph, g2o or TORO (the config's graph)"),
+    config: Optional[Path] = CONFIG_OPT,
     init: Optional[str] = typer.Option(None, help="chordal, spanning_tree or file (default: chordal; "
                                        "spanning_tree under an M-estimator; both under GNC, the lower cost kept)"),
-    robust: str = typer.Option("none", help="none, huber, cauchy, dcs, gnc (TLS), gnc_tls, gnc_gm or pc_dcs "
-                               "(pairwise-consistency screen, then DCS: for false loop closures)"),
-    robust_param: float = typer.Option(1.0, help="M-estimator width, whitened units (sigmas); Phi of dcs, pc_dcs"),
-    outliers: int = typer.Option(0, help="false loop closures to inject before optimising"),
-    outlier_kind: str = typer.Option("random", help="random, local or group (clusters of 10)"),
-    seed: int = typer.Option(0, help="seed of the outlier injection"),
+    robust: Optional[str] = typer.Option(None, help="none, huber, cauchy, dcs, gnc (TLS), gnc_tls, gnc_gm or "
+                                         "pc_dcs (pairwise-consistency screen, then DCS: for false loop closures)"),
+    robust_param: Optional[float] = typer.Option(None, help="M-estimator width, whitened units (sigmas); Phi of "
+                                                 "dcs, pc_dcs (default 1)"),
+    outliers: Optional[int] = typer.Option(None, help="false loop closures to inject before optimising"),
+    outlier_kind: Optional[str] = typer.Option(None, help="random, local or group (clusters of 10)"),
+    seed: Optional[int] = typer.Option(None, help="seed of the outlier injection"),
     reference: Optional[Path] = typer.Option(None, help="g2o whose poses are the reference for the RMSE"),
-    verify: bool = typer.Option(True, help="also optimise from two other starts and check they agree"),
-    root: Path = OUT_OPT,
+    verify: Optional[bool] = typer.Option(None, "--verify/--no-verify",
+                                          help="also optimise from two other starts and check they agree (default)"),
+    set_: list[str] = SET_OPT,
+    root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Optimise a pose graph in one batch: optimised g2o, overlay figure, metrics."""
+    from slam2d.runs.optimize import run_optimize
+
     with _command(quiet):
-        from slam2d.runs.results import results_folder
-
-        with results_folder(root, f"optimize-{graph_path.stem}", "--out") as (work, published):
-            metrics = _optimize_into(work, graph_path, init, robust, robust_param, outliers, outlier_kind,
-                                     seed, reference, verify)
-    keys = ("gtsam_error", "iterations", "seconds", "verified", "certified", "loops_rejected", "precision",
-            "recall", "rmse_to_reference")
-    typer.echo(" ".join(f"{k}={metrics[k]:.6g}" if isinstance(metrics[k], float) else f"{k}={metrics[k]}"
-                        for k in keys if k in metrics))
-    typer.echo(f"results: {published[0]}")
-
-
-def _optimize_into(work: Path, graph_path, init, robust, robust_param, outliers, outlier_kind, seed,
-                   reference, verify) -> dict:
-    """Read, inject, solve and write config.yaml, graph.g2o, loops.csv, overlay.png, metrics.json to ``work``."""
-    import json
-
-    import numpy as np
-    import yaml
-
-    from slam2d.backend import pose_graph as pgm
-    from slam2d.datasets import g2o
-
-    graph = g2o.read_g2o(graph_path)
-    injected = np.zeros(len(graph.i), bool)
-    if outliers:
-        graph, injected = g2o.inject_outliers(graph, outliers, outlier_kind, seed)
-    ref = pgm.reference_poses(graph, g2o.read_g2o(reference)) if reference else None
-    result = pgm.solve_g2o(graph, robust, robust_param, init, verify)
-    options = {"graph": str(graph_path), "init": result.init, "robust": robust, "robust_param": robust_param,
-               "outliers": outliers, "outlier_kind": outlier_kind, "seed": seed,
-               "reference": str(reference) if reference else None, "verify": verify}
-    (work / "config.yaml").write_text(yaml.safe_dump(options, sort_keys=False))
-    g2o.write_g2o(work / "graph.g2o", g2o.PoseGraphFile(graph.ids, result.poses, graph.i, graph.j,
-                                                         graph.measurements, graph.information))
-    rows = ["i,j,loop,injected,inlier"] + [
-        f"{a},{b},{int(lp)},{int(x)},{int(k)}" for a, b, lp, x, k in
-        zip(graph.i.tolist(), graph.j.tolist(), (~g2o.odometry_mask(graph)).tolist(), injected.tolist(),
-            result.inlier.tolist())]
-    (work / "edges.csv").write_text("\n".join(rows) + "\n")
-    metrics = pgm.g2o_metrics(graph, result, injected if outliers else None, ref)
-    (work / "metrics.json").write_text(json.dumps(metrics, indent=2, default=float) + "\n")
-    _overlay_figure(work / "overlay.png", graph, result, ref)
-    return metrics
-
-
-def _overlay_figure(path: Path, graph, result, reference) -> None:
-    """Start (grey), optimised (blue), reference (green) trajectories and rejected loops (red)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(8, 8))
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
-    rows = {k: n for n, k in enumerate(graph.ids.tolist())}
-    for a, b in zip(graph.i[~result.inlier].tolist(), graph.j[~result.inlier].tolist()):
-        p, q = result.poses[rows[a]], result.poses[rows[b]]
-        ax.plot([p[0], q[0]], [p[1], q[1]], color="tab:red", lw=0.3, alpha=0.5)
-    ax.plot(graph.poses[:, 0], graph.poses[:, 1], color="0.7", lw=0.6, label="file start")
-    if reference is not None:
-        ax.plot(reference[:, 0], reference[:, 1], color="tab:green", lw=1.5, label="reference")
-    ax.plot(result.poses[:, 0], result.poses[:, 1], color="tab:blue", lw=0.8, label=f"optimised ({result.init})")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.legend(loc="best")
-    fig.savefig(path, dpi=120, bbox_inches="tight")
+        cfg = _command_config("optimize", config, set_, {
+            "graph": graph_path, "init": init, "robust": robust, "robust_param": robust_param,
+            "outliers": outliers, "outlier_kind": outlier_kind, "seed": seed, "reference": reference,
+            "verify": verify, "output.root": root})
+        folder = run_optimize(cfg)
+    _echo_metrics(folder, ("gtsam_error", "iterations", "seconds", "verified", "certified", "loops_rejected",
+                           "precision", "recall", "rmse_to_reference"), digits=6)
+    typer.echo(f"results: {folder}")
 
 
 @app.command()
 def navigate(
-    config: Optional[Path] = CONFIG_ARG,
+    config: Optional[Path] = CONFIG_ARG, config_opt: Optional[Path] = CONFIG_OPT,
     goal: Optional[str] = typer.Option(None, help="x,y[,heading] in m (rad); overrides navigation.goal"),
-    set_: list[str] = SET_OPT,
-    plugin: list[str] = PLUGIN_OPT,
+    set_: list[str] = SET_OPT, root: Optional[Path] = OUT_SET_OPT, plugin: list[str] = PLUGIN_OPT,
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Drive the simulated robot to a goal (online SLAM on by default); print the results folder."""
-    from slam2d.runs.navigate import NavigateConfig, run_navigate
+    from slam2d.runs.navigate import run_navigate
 
     with _command(quiet):
         extra = [f"navigation.goal=[{goal}]"] if goal else []
-        folder = run_navigate(_load(config, [*set_, *extra], plugin, NavigateConfig))
+        cfg = _command_config("navigate", _config_file(config, config_opt), [*set_, *extra], {"output.root": root},
+                              plugin)
+        folder = run_navigate(cfg)
     typer.echo(f"results: {folder}")
 
 
 @app.command()
 def explore(
-    config: Optional[Path] = CONFIG_ARG,
+    config: Optional[Path] = CONFIG_ARG, config_opt: Optional[Path] = CONFIG_OPT,
     strategy: Optional[str] = typer.Option(
         None, help="nearest_frontier, explore_lite, nearest_candidate, farthest_candidate or utility"
     ),
-    set_: list[str] = SET_OPT,
+    set_: list[str] = SET_OPT, root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT, viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT,
 ) -> None:
     """Explore the simulated world with SLAM in the loop until no goal is left; print the results folder."""
-    from slam2d.exploration import config as explore_config
     from slam2d.runs.explore import run_explore
 
     with _command(quiet):
         target = _viz_target(viz, viz_save)
-        extra = [f"exploration.strategy={strategy}"] if strategy else []
-        folder = run_explore(explore_config.load(config, [*set_, *extra]), target)
+        cfg = _command_config("explore", _config_file(config, config_opt), set_, {
+            "exploration.strategy": strategy, "output.root": root})
+        folder = run_explore(cfg, target)
     typer.echo(f"results: {folder}")
 
 
@@ -417,17 +377,6 @@ def localize(
         cfg = _command_config("localize", config, set_, {"map": map_path, "dataset": dataset, "output.root": root})
         folder = run_localize(cfg, target)
     typer.echo(f"results: {folder}")
-
-
-def _load(config, set_: list[str], plugins: list[str], model=None):
-    """The config file (or defaults) with ``--set`` overrides and ``--plugin`` files or modules added;
-    ``model``: the command's config model (default ExperimentConfig)."""
-    from slam2d import config as config_mod
-
-    cfg = config_mod.load(config, set_, model)
-    if plugins:
-        cfg.plugins = [*cfg.plugins, *(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugins)]
-    return cfg
 
 
 @app.command()

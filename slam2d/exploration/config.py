@@ -6,7 +6,7 @@ import math
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, ValidationError, field_validator
+from pydantic import Field, field_validator
 
 from slam2d import config as config_mod
 from slam2d.config import ExperimentConfig, Section
@@ -87,11 +87,4 @@ class ExploreConfig(ExperimentConfig):
 
 def load(path: str | Path | None = None, overrides: list[str] | dict[str, Any] = ()) -> ExploreConfig:
     """The explore config in ``path`` (defaults when None) with ``overrides`` (``a.b=value`` or a dict)."""
-    data = config_mod.load_dict(path) if path else {}
-    items = overrides.items() if isinstance(overrides, dict) else map(config_mod.parse_override, overrides)
-    for key, value in items:
-        config_mod.set_key(data, key, value)
-    try:
-        return ExploreConfig.model_validate(data)
-    except ValidationError as err:
-        raise config_mod._format_error(err, str(path) if path else "config") from None
+    return config_mod.load(path, overrides, ExploreConfig)

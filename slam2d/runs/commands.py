@@ -20,6 +20,8 @@ COMMANDS = {
     "navigate": ("slam2d.runs.navigate:NavigateConfig", "slam2d.runs.navigate:run_navigate"),
     "explore": ("slam2d.exploration.config:ExploreConfig", "slam2d.runs.explore:run_explore"),
     "localize": ("slam2d.localization.config:LocalizeConfig", "slam2d.runs.localize:run_localize"),
+    "map": ("slam2d.runs.map:MapConfig", "slam2d.runs.map:run_map"),
+    "optimize": ("slam2d.runs.optimize:OptimizeConfig", "slam2d.runs.optimize:run_optimize"),
 }
 """Commands whose configs ``slam2d ablate`` sweeps: (config model, runner taking the config)."""
 

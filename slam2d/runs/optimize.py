@@ -1,0 +1,99 @@
+"""``slam2d optimize``: one batch optimisation of a pose graph file (g2o or TORO), written as a results
+folder: ``config.yaml``, the optimised ``graph.g2o``, ``edges.csv`` (each edge: loop, injected, kept as
+an inlier), ``overlay.png`` and ``metrics.json``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from pydantic import Field, field_validator
+
+from slam2d import config as config_mod
+from slam2d.backend import pose_graph as pgm
+from slam2d.config import OutputConfig, Section, folder_name
+from slam2d.datasets import g2o
+from slam2d.datasets.registry import resolve_data_path
+from slam2d.errors import InputError
+from slam2d.runs.results import json_text, results_folder
+
+__all__ = ["OptimizeConfig", "run_optimize"]
+
+
+class OptimizeConfig(Section):
+    """``slam2d optimize``: the graph file, the robust cost and start, false loops to inject, a reference."""
+
+    name: str | None = Field(None, description="results folder name (default: optimize-<graph stem>)")
+    seed: int = Field(0, ge=0, lt=2**63, description="seed of the outlier injection")
+    graph: str | None = Field(None, description="2D pose graph, g2o or TORO (relative: here, then SLAM2D_DATA)")
+    init: str | None = Field(None, description="chordal, spanning_tree or file (default: chordal; spanning_tree "
+                             "under an M-estimator; both under GNC, the lower cost kept)")
+    robust: str = Field("none", description="none, huber, cauchy, dcs, gnc (TLS), gnc_tls, gnc_gm or pc_dcs "
+                        "(pairwise-consistency screen, then DCS: for false loop closures)")
+    robust_param: float = Field(1.0, description="M-estimator width, whitened units (sigmas); Phi of dcs, pc_dcs")
+    outliers: int = Field(0, ge=0, description="false loop closures to inject before optimising")
+    outlier_kind: Literal["random", "local", "group"] = Field("random", description="group: clusters of 10")
+    reference: str | None = Field(None, description="g2o whose poses are the reference for the RMSE")
+    verify: bool = Field(True, description="also optimise from two other starts and check they agree")
+    output: OutputConfig = OutputConfig()
+
+    @field_validator("name")
+    @classmethod
+    def _folder_name(cls, name: str | None) -> str | None:
+        return None if name is None else folder_name(name)
+
+
+def run_optimize(cfg: OptimizeConfig, quiet: bool = False) -> Path:
+    """Optimise ``cfg.graph`` into a new results folder under ``cfg.output.root``; return the folder."""
+    if cfg.graph is None:
+        raise InputError("graph", "no pose graph given (graph: FILE in the config, or slam2d optimize GRAPH)")
+    graph_path = resolve_data_path(cfg.graph, key="graph")
+    reference = resolve_data_path(cfg.reference, key="reference") if cfg.reference else None
+    with results_folder(cfg.output.root, cfg.name or f"optimize-{graph_path.stem}") as (work, published):
+        _optimize_into(work, cfg, graph_path, reference)
+    return published[0]
+
+
+def _optimize_into(work: Path, cfg: OptimizeConfig, graph_path: Path, reference: Path | None) -> dict:
+    """Read, inject, solve and write config.yaml, graph.g2o, edges.csv, overlay.png, metrics.json to ``work``."""
+    graph = g2o.read_g2o(graph_path)
+    injected = np.zeros(len(graph.i), bool)
+    if cfg.outliers:
+        graph, injected = g2o.inject_outliers(graph, cfg.outliers, cfg.outlier_kind, cfg.seed)
+    ref = pgm.reference_poses(graph, g2o.read_g2o(reference)) if reference else None
+    result = pgm.solve_g2o(graph, cfg.robust, cfg.robust_param, cfg.init, cfg.verify)
+    (work / "config.yaml").write_text(config_mod.dump(cfg.model_copy(update={"init": result.init})))
+    g2o.write_g2o(work / "graph.g2o", g2o.PoseGraphFile(graph.ids, result.poses, graph.i, graph.j,
+                                                         graph.measurements, graph.information))
+    rows = ["i,j,loop,injected,inlier"] + [
+        f"{a},{b},{int(lp)},{int(x)},{int(k)}" for a, b, lp, x, k in
+        zip(graph.i.tolist(), graph.j.tolist(), (~g2o.odometry_mask(graph)).tolist(), injected.tolist(),
+            result.inlier.tolist())]
+    (work / "edges.csv").write_text("\n".join(rows) + "\n")
+    metrics = pgm.g2o_metrics(graph, result, injected if cfg.outliers else None, ref)
+    (work / "metrics.json").write_text(json_text(metrics) + "\n")
+    _overlay_figure(work / "overlay.png", graph, result, ref)
+    return metrics
+
+
+def _overlay_figure(path: Path, graph, result, reference) -> None:
+    """Start (grey), optimised (blue), reference (green) trajectories and rejected loops (red)."""
+    fig = Figure(figsize=(8, 8))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    rows = {k: n for n, k in enumerate(graph.ids.tolist())}
+    for a, b in zip(graph.i[~result.inlier].tolist(), graph.j[~result.inlier].tolist()):
+        p, q = result.poses[rows[a]], result.poses[rows[b]]
+        ax.plot([p[0], q[0]], [p[1], q[1]], color="tab:red", lw=0.3, alpha=0.5)
+    ax.plot(graph.poses[:, 0], graph.poses[:, 1], color="0.7", lw=0.6, label="file start")
+    if reference is not None:
+        ax.plot(reference[:, 0], reference[:, 1], color="tab:green", lw=1.5, label="reference")
+    ax.plot(result.poses[:, 0], result.poses[:, 1], color="tab:blue", lw=0.8, label=f"optimised ({result.init})")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="best")
+    fig.savefig(path, dpi=120, bbox_inches="tight")
