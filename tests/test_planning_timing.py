@@ -153,3 +153,18 @@ def test_plan_on_movingai_map(tmp_path, data_file):
     m = plan_on_map(data_file("movingai/arena.map"), (1.5, 11.5), (47.5, 44.5), "hpa", robot_radius=0.0,
                     cluster_size=10).metrics
     assert m["found"] and m["grid_length_m"] >= 40.0 and m["length_m"] <= m["grid_length_m"]
+
+
+def test_room_labels_in_the_other_row_convention_are_rejected(tmp_path):
+    from PIL import Image
+
+    from slam2d.planning.query import plan_on_map
+
+    img = np.zeros((40, 60), np.uint8)  # 0.05 m/px: the image's upper half solid, two rooms below
+    img[20:39, 1:59] = 255
+    Image.fromarray(img).save(tmp_path / "half.png")
+    rooms = np.where(img == 255, np.where(np.arange(60) < 30, 1, 2), 0).astype(np.int32)  # row 0 the top
+    with pytest.raises(InputError, match="labels: the room labels fit the map only upside down"):
+        plan_on_map(tmp_path / "half.png", (0.5, 0.5), (2.5, 0.5), "rooms", robot_radius=0.0, labels=rooms)
+    m = plan_on_map(tmp_path / "half.png", (0.5, 0.5), (2.5, 0.5), "rooms", robot_radius=0.0, labels=rooms[::-1])
+    assert m.metrics["found"] and m.metrics["rooms"] == 2

@@ -77,7 +77,22 @@ def _labels(labels, grid: PlanningGrid, segmentation=None, seed: int = 0) -> np.
     labels = np.asarray(labels)
     if labels.shape != shape:
         raise InputError("labels", f"shape {labels.shape} differs from the map {shape}")
+    _check_orientation(labels, grid, "labels")
     return labels
+
+
+def _check_orientation(labels: np.ndarray, grid: PlanningGrid, name: str) -> None:
+    """InputError when ``labels`` fit the map only upside down: more than a fifth of their rooms' cells
+    blocked, and under half as many once flipped (a label image read in the other row convention)."""
+    def blocked(lab):
+        rooms = lab > 0
+        return float((rooms & ~grid.free).sum() / max(rooms.sum(), 1))
+
+    as_given, flipped = blocked(labels), blocked(labels[::-1])
+    if as_given > 0.2 and flipped < 0.5 * as_given:
+        raise InputError(name, f"the room labels fit the map only upside down ({100 * as_given:.0f} % of their "
+                         f"cells blocked, {100 * flipped:.0f} % flipped): grid rows go up in y, a labels.png has "
+                         "row 0 at the top")
 
 
 def _read_labels(path: Path) -> np.ndarray:
