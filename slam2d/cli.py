@@ -139,14 +139,24 @@ def ablate(
     workers: Optional[int] = typer.Option(None, "--workers", "-j", help="parallel processes (default: sweep's)"),
     executor: str = typer.Option("local", help="local (processes) or ray"),
     resume: Optional[Path] = typer.Option(None, help="folder of a stopped sweep: run only its missing variants"),
+    set_: list[str] = typer.Option([], "--set", "-s", help="override a key of the base config, e.g. --set seed=1"),
+    grid: list[str] = typer.Option([], "--grid", "-g", help="a grid axis, e.g. --grid frontend.name=icp,lines"),
+    dry_run: bool = typer.Option(False, "--dry-run", help="check every variant and list them; run nothing"),
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Run every variant of a sweep in parallel; write one table (Markdown + CSV)."""
-    from slam2d.runs.sweep import SweepStopped, run_sweep
+    from slam2d.runs.sweep import SweepStopped, read_sweep, run_sweep
 
     with _command(quiet, "no sweep folder written"):
+        if dry_run:
+            checked = read_sweep(sweep, set_, grid)
+            for v in checked.variants:
+                typer.echo(f"{v.name}: " + ", ".join(f"{k}={val}" for k, val in v.overrides.items()))
+            typer.echo(f"{len(checked.variants)} variants checked; nothing run")
+            return
         try:
-            folder, rows = run_sweep(sweep, workers=workers, executor=executor, quiet=quiet, resume=resume)
+            folder, rows = run_sweep(sweep, workers=workers, executor=executor, quiet=quiet, resume=resume,
+                                     overrides=set_, grid=grid)
         except SweepStopped as stop:
             _stopped(f"{stop.finished} of {stop.total} variants finished in {stop.folder}; "
                      f"resume with: slam2d ablate {sweep} --resume {stop.folder}")

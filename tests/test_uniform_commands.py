@@ -73,3 +73,19 @@ def test_optimize_writes_strict_json(tmp_path, data_file):
     (folder,) = tmp_path.glob("optimize-intel-*")
     text = (folder / "metrics.json").read_text()
     json.loads(text, parse_constant=lambda c: pytest.fail(f"{c} in metrics.json"))
+
+
+def test_ablate_takes_set_and_grid_and_dry_runs(tmp_path):
+    sweep = tmp_path / "s.yaml"
+    sweep.write_text(yaml.safe_dump({"config": {"dataset": {"max_scans": 5}}, "grid": {"seed": [0, 1]}}))
+    out = CliRunner().invoke(app, ["ablate", str(sweep), "--dry-run", "--grid", "frontend.name=odometry,icp",
+                                   "--set", f"output.root={tmp_path / 'res'}"])
+    assert out.exit_code == 0, out.output
+    assert "4 variants checked; nothing run" in out.output and "name=odometry" in out.output
+    assert not (tmp_path / "res").exists()
+    bad = CliRunner().invoke(app, ["ablate", str(sweep), "--dry-run", "--grid", "frontend.name=odometry,nope"])
+    assert bad.exit_code == 2 and "unknown frontend 'nope'" in bad.output
+    both = tmp_path / "both.yaml"
+    both.write_text(yaml.safe_dump({"base": "s.yaml", "config": {}, "grid": {"seed": [0]}}))
+    out = CliRunner().invoke(app, ["ablate", str(both), "--dry-run"])
+    assert out.exit_code == 2 and "'base' (a file) or 'config' (inline), not both" in out.output

@@ -14,9 +14,12 @@ from pathlib import Path
 import numpy as np
 
 from slam2d import config as config_mod
+from slam2d.evaluation.trajectory import write_tum
 from slam2d.exploration.config import ExploreConfig
 from slam2d.exploration.loop import ExplorationRun, explore, resolved
+from slam2d.mapping.export import save_map_server
 from slam2d.runs.results import jsonable, live_view, results_folder
+from slam2d.types import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -41,10 +44,6 @@ def run_explore(cfg: ExploreConfig, viz: str | Path | None = None) -> Path:
 
 
 def _write(out: Path, cfg: ExploreConfig, run: ExplorationRun) -> None:
-    from slam2d.evaluation.trajectory import write_tum
-    from slam2d.mapping.export import save_map_server
-    from slam2d.types import Trajectory
-
     save_map_server(run.grid, out / "map", cfg.mapping)
     write_tum(out / "trajectory_true.tum", Trajectory(run.stamps, run.truth))
     write_tum(out / "trajectory.tum", Trajectory(run.stamps, run.estimate))

@@ -20,12 +20,18 @@ from typing import Any
 
 import numpy as np
 
+from slam2d import config as config_mod
 from slam2d import geometry
+from slam2d.datasets.registry import open_dataset, resolve_data_path
 from slam2d.errors import InputError
+from slam2d.evaluation.trajectory import read_tum, write_tum
 from slam2d.localization.config import LocalizeConfig
 from slam2d.localization.maps import KnownMap
-from slam2d.localization.scenario import Stream, Track
+from slam2d.localization.mcl import ParticleFilter
+from slam2d.localization.scenario import PERIOD, Stream, Track, converged_at, false_convergence, replay, wander
 from slam2d.runs.results import json_text, live_view, results_folder
+from slam2d.sim.world import load_world
+from slam2d.types import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +59,6 @@ def run_localize(cfg: LocalizeConfig, viz: str | Path | None = None) -> Path:
 
 def _map_path(name: str | None) -> Path:
     """The map file ``name`` names (here or under SLAM2D_DATA), or ``office``."""
-    from slam2d.datasets.registry import resolve_data_path
 
     if name is None:
         raise InputError("map", "no map given (map: FILE in the config, or slam2d localize MAP)")
@@ -64,8 +69,6 @@ def _dataset(path: str | None):
     """The experiment config whose dataset section is the scan log, or None (the simulator)."""
     if path is None:
         return None
-    from slam2d import config as config_mod
-    from slam2d.datasets.registry import resolve_data_path
 
     return config_mod.load(resolve_data_path(path, key="dataset"))
 
@@ -73,9 +76,6 @@ def _dataset(path: str | None):
 def localize(known: KnownMap, cfg: LocalizeConfig, out: Path, map_path: Path | None = None,
              dataset=None, view=None) -> dict[str, Any]:  # fmt: skip
     """One run into the folder ``out`` (``view``: a live view of the filter, or None); returns the metrics."""
-    from slam2d import config as config_mod
-    from slam2d.localization.mcl import ParticleFilter
-    from slam2d.localization.scenario import replay
 
     loc, mcl = cfg.localization, cfg.filter_config()
     resolved = cfg.model_copy(update={"localization": loc.model_copy(update={"mcl": mcl.model_dump()})})
@@ -104,8 +104,6 @@ def localize(known: KnownMap, cfg: LocalizeConfig, out: Path, map_path: Path | N
 
 
 def _sim_stream(known: KnownMap, cfg: LocalizeConfig, map_path: Path | None) -> tuple[Stream, str]:
-    from slam2d.localization.scenario import wander
-    from slam2d.sim.world import load_world
 
     world_name = cfg.localization.world
     if world_name is None:
@@ -122,8 +120,6 @@ def _sim_stream(known: KnownMap, cfg: LocalizeConfig, map_path: Path | None) -> 
 def log_stream(dataset, cfg: LocalizeConfig, map_path: Path | None) -> tuple[Stream, str]:
     """The scans of ``dataset`` (an ExperimentConfig), the reference interpolated at their stamps
     (NaN outside it or without one) and the odometry's travelled distance."""
-    from slam2d.datasets.registry import open_dataset
-    from slam2d.evaluation.trajectory import read_tum
 
     loc = cfg.localization
     source = open_dataset(dataset.dataset.model_copy(update={"max_scans": loc.max_scans or
@@ -151,7 +147,6 @@ def log_stream(dataset, cfg: LocalizeConfig, map_path: Path | None) -> tuple[Str
 
 def metrics_of(stream: Stream, track: Track, pf) -> dict[str, Any]:
     """Errors (over the run and after convergence), convergence and recovery, particles and timing."""
-    from slam2d.localization.scenario import PERIOD, converged_at, false_convergence
 
     stamps = stream.stamps - stream.stamps[0]
     ok = np.isfinite(track.position_error)
@@ -192,8 +187,6 @@ def _rms(x: np.ndarray) -> float:
 
 
 def _write_results(out: Path, stream: Stream, track: Track, metrics: dict, known: KnownMap, cfg) -> None:
-    from slam2d.evaluation.trajectory import write_tum
-    from slam2d.types import Trajectory
 
     stamps = stream.stamps
     write_tum(out / "trajectory.tum", Trajectory(stamps, track.estimates))
@@ -212,7 +205,6 @@ def _write_results(out: Path, stream: Stream, track: Track, metrics: dict, known
 def _snapshot_choice(stream: Stream, track: Track, cfg) -> dict[str, int]:
     """Scan index of each particle-cloud figure: the config's times, or the first update, converging,
     converged and after each kidnap (the nearest kept snapshot)."""
-    from slam2d.localization.scenario import converged_at
 
     kept = np.array(sorted(track.snapshots))
     if len(kept) == 0:

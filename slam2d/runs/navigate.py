@@ -25,8 +25,17 @@ from slam2d import config as config_mod
 from slam2d.config import ExperimentConfig
 from slam2d.datasets.simulator import route_start
 from slam2d.errors import InputError
+from slam2d.evaluation.trajectory import write_tum
+from slam2d.localization import KnownMap, MclPoseSource
+from slam2d.navigation import Navigator, run_navigation, world_grid
 from slam2d.navigation.navigator import navigator_config
 from slam2d.runs.results import jsonable, results_folder
+from slam2d.sim import Robot
+from slam2d.sim.obstacles import scatter_wanderers
+from slam2d.sim.robot import RobotConfig
+from slam2d.sim.world import load_world
+from slam2d.slam import OnlineSlam
+from slam2d.types import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +46,6 @@ GIF_FPS = 10
 class NavigateConfig(ExperimentConfig):
     """An experiment config run by ``slam2d navigate``: its ``navigation`` section drives the robot
     (the type tells a sweep which command runs its variants)."""
-
 
 def run_navigate(cfg: ExperimentConfig) -> Path:
     """Run ``cfg``'s navigation; return the results folder."""
@@ -78,11 +86,6 @@ class NavigationRun:
 
 def simulate(cfg: ExperimentConfig) -> NavigationRun:
     """One closed-loop run of ``cfg`` (no files written)."""
-    from slam2d.navigation import Navigator, run_navigation, world_grid
-    from slam2d.sim import Robot
-    from slam2d.sim.obstacles import scatter_wanderers
-    from slam2d.sim.robot import RobotConfig
-    from slam2d.sim.world import load_world
 
     t0 = time.perf_counter()
     nav, sim = cfg.navigation, cfg.dataset.simulator
@@ -102,7 +105,6 @@ def simulate(cfg: ExperimentConfig) -> NavigationRun:
     record = _Recorder(robot)
     online = None
     if nav.slam:
-        from slam2d.slam import OnlineSlam
 
         online = OnlineSlam(cfg)
         map_grid, pose_source = record.wrap(online), lambda step: online.pose
@@ -156,7 +158,6 @@ def _mcl_source(nav, world, start, robot, seed: int):
     """The pose from Monte Carlo localisation in the world's map (``navigation.localization: mcl``), or None."""
     if nav.localization != "mcl":
         return None
-    from slam2d.localization import KnownMap, MclPoseSource
 
     return MclPoseSource(KnownMap.from_world(world), start, range_max=robot.cfg.laser.range_max, seed=seed)
 
@@ -169,8 +170,6 @@ def _pose_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, float]:
 
 
 def _write_trajectories(out: Path, result, estimate: np.ndarray) -> None:
-    from slam2d.evaluation.trajectory import write_tum
-    from slam2d.types import Trajectory
 
     write_tum(out / "trajectory_true.tum", Trajectory(result.stamps, result.trajectory))
     n = min(len(estimate), len(result.stamps))

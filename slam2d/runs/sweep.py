@@ -59,7 +59,7 @@ class Sweep:
 SWEEP_KEYS = ("name", "command", "base", "config", "grid", "variants", "workers", "summary")
 
 
-def read_sweep(path: str | Path) -> Sweep:
+def read_sweep(path: str | Path, overrides: list[str] = (), grid: list[str] = ()) -> Sweep:
     """Read a sweep file and check every variant's config before any runs.
 
     Keys: ``command`` (a key of :data:`COMMANDS`; default run); ``base`` (config path relative to
@@ -67,6 +67,8 @@ def read_sweep(path: str | Path) -> Sweep:
     value}}]) and/or ``grid`` ({dotted key: [values]}, Cartesian product), both given: every
     variant with every grid point; ``workers`` (default 2); ``summary`` (rows grouped by the
     columns ``by``, with ``mean``/``median``/``sum``/``min``/``max`` of the columns listed).
+    ``overrides`` (``key=value``, as ``--set``) change the base config; ``grid`` (``key=a,b,c``) adds
+    a grid axis (or replaces the file's axis of that key).
     """
 
     path = Path(path)
@@ -74,8 +76,14 @@ def read_sweep(path: str | Path) -> Sweep:
     unknown = set(sweep) - set(SWEEP_KEYS)
     if unknown:
         raise InputError(path, f"unknown sweep key '{sorted(unknown)[0]}'")
+    if "base" in sweep and "config" in sweep:
+        raise InputError(path, "give the base config as 'base' (a file) or 'config' (inline), not both")
     model = command_model(sweep.get("command", "run"), f"{path}: command")
     base = _sweep_base(sweep, path)
+    for key, value in map(config_mod.parse_override, overrides):
+        config_mod.set_key(base, key, value)
+    if grid:
+        sweep["grid"] = {**(sweep.get("grid") or {}), **dict(map(grid_axis, grid))}
     variants = _expand(sweep, path)
     if not variants:
         raise InputError(path, "a sweep needs 'grid' or 'variants'")
@@ -89,6 +97,16 @@ def read_sweep(path: str | Path) -> Sweep:
         raise InputError(f"{path}: workers", f"expected a positive integer, got {config_mod.short_repr(workers)}")
     summary = check_summary(sweep["summary"], f"{path}: summary") if "summary" in sweep else None
     return Sweep(base, variants, workers, model, summary)
+
+
+def grid_axis(text: str) -> tuple[str, list[Any]]:
+    """``'key=a,b,c'`` as the key and its YAML-parsed values (``--grid``)."""
+    key, _ = config_mod.parse_override(text)
+    raw = text.split("=", 1)[1]
+    values = [config_mod.parse_override(f"{key}={v}")[1] for v in raw.split(",")]
+    if not raw.strip() or not values:
+        raise InputError(f"--grid {text}", "expected KEY=A,B,..., e.g. frontend.name=icp,lines")
+    return key, values
 
 
 def load_sweep(path: str | Path) -> tuple[dict[str, Any], list[Variant], int]:
@@ -194,7 +212,7 @@ EXECUTORS = ("local", "ray")
 
 
 def run_sweep(path: str | Path, workers: int | None = None, executor: str = "local", quiet: bool = False,
-              resume: str | Path | None = None):
+              resume: str | Path | None = None, overrides: list[str] = (), grid: list[str] = ()):
     """Run every variant of a sweep file; write table.md/.csv; return (folder, rows).
 
     ``resume``: the folder of a stopped sweep of the same file; only variants
@@ -204,7 +222,7 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
     """
     if executor not in EXECUTORS:
         raise InputError("--executor", f"unknown executor '{executor}' ({', '.join(EXECUTORS)})")
-    sweep = read_sweep(path)
+    sweep = read_sweep(path, overrides, grid)
     base, variants = sweep.base, sweep.variants
     if executor == "ray":
         _connect_ray()  # before the sweep folder: an unreachable cluster leaves none
