@@ -5,7 +5,7 @@ Usage: .venv/bin/python benchmarks/exploration_faces.py BEFORE_RUN AFTER_RUN [--
        [--out docs/img/explore_faces.png]
 
 BEFORE_RUN and AFTER_RUN are results folders of ``slam2d explore`` (``coverage.csv``, ``map.yaml``,
-``metrics.json``, ``trajectory_true.tum``), e.g. the same world and seed on the code before the rule (a
+``metrics.json``, ``ground_truth.tum``), e.g. the same world and seed on the code before the rule (a
 worktree of an older commit) and on the current code. The frontier cells are those of ``frontier_mask``
 on the map of ``--map`` (default BEFORE_RUN; e.g. the run before, stopped when it reached 99 %): with ``depth`` 0 (every free cell with an unknown 4-neighbour and no occupied cell
 within 2 cells) and with the robot's width (the explorer's).
@@ -52,7 +52,7 @@ def main() -> None:
     img[view.state == 0] = 1.0
     img[view.state == 1] = 0.0
     ax_map.imshow(img, origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest")
-    path = np.loadtxt(shown / "trajectory_true.tum")
+    path = np.loadtxt(shown / "ground_truth.tum")
     ax_map.plot(path[:, 1], path[:, 2], lw=0.3, c="tab:blue", alpha=0.6, label="path")
     for mask, colour, label in ((plain & ~deep, "red", "frontier cells with no opening (dropped)"),
                                 (deep, "lime", "frontier cells kept")):  # fmt: skip

@@ -461,7 +461,7 @@ def test_a_bounded_exploration_stays_in_its_polygon_and_counts_coverage_inside_i
     assert m["reachable_area_m2"] < 4.0 * 3.0 and m["map_iou"] > 0.85  # room A alone
     goals = np.array([g["position"] for g in json.loads((folder / "goals.json").read_text())]).reshape(-1, 2)
     assert (goals[:, 0] < 4.3).all()  # room A is seen from the start: often no goal at all
-    path = np.loadtxt(folder / "trajectory_true.tum")
+    path = np.loadtxt(folder / "ground_truth.tum")
     assert path[:, 1].max() < 4.3
 
 

@@ -347,7 +347,7 @@ def test_localize_command_writes_a_results_folder_and_none_on_bad_input(tmp_path
     assert ok.exit_code == 0, ok.output
     (folder,) = (tmp_path / "ok").iterdir()
     names = {p.name for p in folder.iterdir()}
-    assert {"config.yaml", "metrics.json", "trajectory.tum", "trajectory_true.tum", "error.csv",
+    assert {"config.yaml", "metrics.json", "trajectory.tum", "ground_truth.tum", "error.csv",
             "error_particles.png", "cloud_first_update.png", "cloud_kidnap1_after_1s.png"} <= names
     import json
 

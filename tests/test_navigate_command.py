@@ -25,9 +25,9 @@ def test_slam_in_the_loop_reaches_the_goal_and_writes_the_run(tmp_path):
     assert m["goal_error"] <= 0.05  # the true pose at the stop
     assert m["pose_rmse"] < 0.05  # the pose the navigator drove on was SLAM's, close to the truth
     assert 0.9 < m["length_ratio"] < 1.3
-    for name in ("config.yaml", "trajectory.tum", "trajectory_true.tum", "map.png", "velocity.png", "run.gif"):
+    for name in ("config.yaml", "trajectory.tum", "ground_truth.tum", "map.png", "velocity.png", "run.gif"):
         assert (folder / name).stat().st_size > 0, name
-    true = np.loadtxt(folder / "trajectory_true.tum")
+    true = np.loadtxt(folder / "ground_truth.tum")
     est = np.loadtxt(folder / "trajectory.tum")
     assert len(true) == len(est) + 1 or len(true) == len(est)
 

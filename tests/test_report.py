@@ -87,7 +87,7 @@ def test_report_of_a_stopped_sweep_keeps_unfinished_rows(tmp_path):
     (tmp_path / "runs" / "a-20250101-000000" / "labels.png").write_bytes(b"")
     rows = [{"variant": "a", "ate.rmse": 0.5, "error": "", "folder": "runs/a-20250101-000000"},
             {"variant": "b<c", "error": "not run (sweep stopped)", "folder": ""}]
-    page = write_report(tmp_path, rows).read_text()
+    page = write_report(tmp_path, rows, ("variant", "ate.rmse")).read_text()
     assert _order(page) == ["a", "b&lt;c"]
     assert "labels.png" not in page and "not run (sweep stopped)" in page
     assert 'data-num="0.5"' in page

@@ -93,7 +93,7 @@ def test_localize_recording_has_the_particles_of_each_update(tmp_path):
     assert len(first) == VIEW_PARTICLES  # global localisation: 20 000 particles, an even subset logged
     spread = np.ptp(first, axis=0)
     last = np.array(_last(batches["world/particles"], "Points2D:positions"))
-    truth = np.loadtxt(folder / "trajectory_true.tum")[-1, 1:3]
+    truth = np.loadtxt(folder / "ground_truth.tum")[-1, 1:3]
     assert spread.min() > 5.0  # spread over the office at first ...
     assert np.median(np.hypot(*(last - truth).T)) < 0.5  # ... gathered at the true pose in the end
 

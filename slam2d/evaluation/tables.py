@@ -9,47 +9,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-# Metrics shown in tables, in this order, when present; everything else numeric follows.
-PREFERRED = [
-    "relations.trans_abs_mean",
-    "relations.trans_abs_std",
-    "relations.rot_abs_mean",
-    "relations.rot_abs_std",
-    "odometry_relations.trans_abs_mean",
-    "ate.rmse",
-    "odometry_ate.rmse",
-    "rpe.trans_rmse",
-    "rpe.rot_rmse_deg",
-    "cpu_ms_per_scan",
-    "slam.loop closures kept",
-    "slam.loop closures rejected",
-    "frontend_fallbacks",
-    "scans",
-    "runtime_s",
-    "peak_rss_mb",
-    # slam2d segment
-    "recall",
-    "precision",
-    "rooms_found",
-    "rooms_gt",
-    "rooms",
-    "k",
-    "seconds",
-    "cpu_seconds",
-    # slam2d plan
-    "found",
-    "length_m",
-    "duration_s",
-    "plan_ms",
-    "nodes_expanded",
-    "queries",
-    "failures",
-    "mean_subopt_pct",
-    "max_subopt_pct",
-    "median_speedup",
-    "segmentation_s",
-]
-
 AGGREGATES = {"mean": statistics.fmean, "median": statistics.median, "sum": sum, "min": min, "max": max}
 """Aggregates of a sweep summary, applied to a column's numbers within a group."""
 
@@ -67,12 +26,13 @@ def flatten_metrics(metrics: dict[str, Any], prefix: str = "") -> dict[str, Any]
 
 
 def columns_of(rows: Sequence[dict[str, Any]], leading: Sequence[str] = ("variant",), full: bool = True) -> list[str]:
-    """Column order: ``leading``, preferred metrics, (if ``full``) every other key, then error/folder."""
+    """Column order: ``leading`` (the variant, its keys and the command's main metrics), (if ``full``) every
+    other key, then error/folder."""
     seen: list[str] = []
     for row in rows:
         seen.extend(k for k in row if k not in seen)
     tail = [c for c in ("error", "folder") if any(r.get(c) for r in rows)]
-    cols = [c for c in leading if c in seen] + [c for c in PREFERRED if c in seen]
+    cols = [c for c in dict.fromkeys(leading) if c in seen]
     if full:
         cols += sorted(c for c in seen if c not in cols and c not in ("error", "folder"))
     return cols + tail

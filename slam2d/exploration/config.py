@@ -82,6 +82,8 @@ class ExplorationConfig(Section):
 class ExploreConfig(ExperimentConfig):
     """An experiment config with the ``exploration`` section."""
 
+    name: str = Field("explore", description="results folder name: no '/' or '\\', no leading '.'")
+
     exploration: ExplorationConfig = ExplorationConfig()
 
 

@@ -23,6 +23,7 @@ from slam2d.types import Trajectory
 
 log = logging.getLogger(__name__)
 
+
 GIF_FRAMES = 80
 
 
@@ -45,7 +46,7 @@ def run_explore(cfg: ExploreConfig, viz: str | Path | None = None) -> Path:
 
 def _write(out: Path, cfg: ExploreConfig, run: ExplorationRun) -> None:
     save_map_server(run.grid, out / "map", cfg.mapping)
-    write_tum(out / "trajectory_true.tum", Trajectory(run.stamps, run.truth))
+    write_tum(out / "ground_truth.tum", Trajectory(run.stamps, run.truth))
     write_tum(out / "trajectory.tum", Trajectory(run.stamps, run.estimate))
     run.explorer.hybrid.save(out / "hybrid.json")
     (out / "goals.json").write_text(json.dumps(run.goals, indent=1))

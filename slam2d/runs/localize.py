@@ -37,6 +37,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["localize", "log_stream", "metrics_of", "run_localize"]
 
+
 KNOWN_MAP_RESOLUTION = 0.05  # m per pixel of a floor-plan image unless `resolution` says otherwise
 
 
@@ -192,7 +193,7 @@ def _write_results(out: Path, stream: Stream, track: Track, metrics: dict, known
     write_tum(out / "trajectory.tum", Trajectory(stamps, track.estimates))
     has = np.isfinite(stream.truth).all(axis=1)
     if has.any():
-        write_tum(out / ("trajectory_true.tum" if metrics["reference"] == "truth" else "reference.tum"),
+        write_tum(out / ("ground_truth.tum" if metrics["reference"] == "truth" else "reference.tum"),
                   Trajectory(stamps[has], stream.truth[has]))  # fmt: skip
     rows = np.column_stack([stamps - stamps[0], track.position_error, np.degrees(track.heading_error),
                             track.particles, track.share])  # fmt: skip

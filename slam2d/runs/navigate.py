@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pydantic import Field
 
 from slam2d import config as config_mod
 from slam2d.config import ExperimentConfig
@@ -39,6 +40,7 @@ from slam2d.types import Trajectory
 
 log = logging.getLogger(__name__)
 
+
 GIF_FRAMES = 120  # frames of the animation at most
 GIF_FPS = 10
 
@@ -46,6 +48,9 @@ GIF_FPS = 10
 class NavigateConfig(ExperimentConfig):
     """An experiment config run by ``slam2d navigate``: its ``navigation`` section drives the robot
     (the type tells a sweep which command runs its variants)."""
+
+    name: str = Field("navigate", description="results folder name: no '/' or '\\', no leading '.'")
+
 
 def run_navigate(cfg: ExperimentConfig) -> Path:
     """Run ``cfg``'s navigation; return the results folder."""
@@ -171,7 +176,7 @@ def _pose_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, float]:
 
 def _write_trajectories(out: Path, result, estimate: np.ndarray) -> None:
 
-    write_tum(out / "trajectory_true.tum", Trajectory(result.stamps, result.trajectory))
+    write_tum(out / "ground_truth.tum", Trajectory(result.stamps, result.trajectory))
     n = min(len(estimate), len(result.stamps))
     write_tum(out / "trajectory.tum", Trajectory(result.stamps[:n], estimate[:n]))
 

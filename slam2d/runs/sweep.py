@@ -30,7 +30,7 @@ from slam2d.evaluation.report import write_report
 from slam2d.evaluation.tables import check_summary, flatten_metrics, summarize, write_table
 from slam2d.plugins import resolve
 from slam2d.runs import signals
-from slam2d.runs.commands import command_model, resolved, run_command
+from slam2d.runs.commands import command_of, resolved, run_command
 from slam2d.runs.results import new_folder, output_root
 
 log = logging.getLogger("slam2d")
@@ -47,13 +47,15 @@ class Variant:
 @dataclass(frozen=True)
 class Sweep:
     """A sweep file read and checked: the base config dict, its variants, workers, the command's
-    config model, and the summary spec ({"by": [columns], aggregate: [columns]}, or None)."""
+    config model, the summary spec ({"by": [columns], aggregate: [columns]}, or None) and the
+    command's main metrics (the table's first columns after the variant's keys)."""
 
     base: dict[str, Any]
     variants: list[Variant]
     workers: int
     model: type
     summary: dict[str, list[str]] | None = None
+    main_metrics: tuple[str, ...] = ()
 
 
 SWEEP_KEYS = ("name", "command", "base", "config", "grid", "variants", "workers", "summary")
@@ -78,7 +80,8 @@ def read_sweep(path: str | Path, overrides: list[str] = (), grid: list[str] = ()
         raise InputError(path, f"unknown sweep key '{sorted(unknown)[0]}'")
     if "base" in sweep and "config" in sweep:
         raise InputError(path, "give the base config as 'base' (a file) or 'config' (inline), not both")
-    model = command_model(sweep.get("command", "run"), f"{path}: command")
+    command = command_of(sweep.get("command", "run"), f"{path}: command")
+    model = command.config_model()
     base = _sweep_base(sweep, path)
     for key, value in map(config_mod.parse_override, overrides):
         config_mod.set_key(base, key, value)
@@ -96,7 +99,7 @@ def read_sweep(path: str | Path, overrides: list[str] = (), grid: list[str] = ()
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise InputError(f"{path}: workers", f"expected a positive integer, got {config_mod.short_repr(workers)}")
     summary = check_summary(sweep["summary"], f"{path}: summary") if "summary" in sweep else None
-    return Sweep(base, variants, workers, model, summary)
+    return Sweep(base, variants, workers, model, summary, command.main_metrics)
 
 
 def grid_axis(text: str) -> tuple[str, list[Any]]:
@@ -238,9 +241,9 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
     except BaseException as err:
         if not (isinstance(err, KeyboardInterrupt) or signals.stopped()):
             raise
-        _write_sweep_table(root, variants, outcomes, sweep.summary)
+        _write_sweep_table(root, variants, outcomes, sweep.summary, sweep.main_metrics)
         raise SweepStopped(root, sum(o is not None and not o[2] for o in outcomes), len(variants)) from None
-    return root, _write_sweep_table(root, variants, outcomes, sweep.summary)
+    return root, _write_sweep_table(root, variants, outcomes, sweep.summary, sweep.main_metrics)
 
 
 def _sweep_folder(path, base: dict[str, Any], resume, model=None) -> Path:
@@ -271,7 +274,8 @@ def _finished(runs: Path, name: str) -> tuple[str, dict[str, Any], None] | None:
     return None
 
 
-def _write_sweep_table(root: Path, variants: list[Variant], outcomes: list, summary=None) -> list[dict[str, Any]]:
+def _write_sweep_table(root: Path, variants: list[Variant], outcomes: list, summary=None,
+                       main_metrics: tuple[str, ...] = ()) -> list[dict[str, Any]]:
     """Write table.md/.csv/.tex, summary.md/.csv/.tex (with a summary spec) and report.html: one row
     per variant (unfinished ones say so); return the rows."""
     rows = []
@@ -283,7 +287,7 @@ def _write_sweep_table(root: Path, variants: list[Variant], outcomes: list, summ
         row["error"] = error or ""
         row["folder"] = str(Path(folder).relative_to(root)) if folder else ""
         rows.append(row)
-    leading = ["variant", *dict.fromkeys(k for v in variants for k in v.overrides)]
+    leading = list(dict.fromkeys(["variant", *(k for v in variants for k in v.overrides), *main_metrics]))
     write_table(rows, root / "table", leading=leading)
     grouped = None
     if summary:
