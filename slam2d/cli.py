@@ -175,6 +175,7 @@ def dump_config(
     plugin: list[str] = PLUGIN_OPT,
     command: str = typer.Option("run", "--command", help="whose config: run, segment, plan, map, optimize, "
                                 "navigate, explore or localize"),
+    describe: bool = typer.Option(False, "--describe", help="each key's description as a comment"),
 ) -> None:
     """Print the fully resolved config (defaults included) as YAML."""
     from slam2d import config as config_mod
@@ -183,7 +184,7 @@ def dump_config(
     try:
         command_model(command, "--command")
         cfg = _command_config(command, _config_file(config, config_opt), set_, {}, plugin)
-        typer.echo(config_mod.dump(resolved(cfg)), nl=False)
+        typer.echo(config_mod.dump(resolved(cfg), describe), nl=False)
     except InputError as err:
         _fail(err)
 

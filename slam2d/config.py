@@ -6,6 +6,7 @@ CLI's ``--set a.b=c``; values are parsed as YAML (``--set mapping.resolution=0.1
 
 from __future__ import annotations
 
+import json
 import reprlib
 from pathlib import Path
 from typing import Any, Literal
@@ -331,6 +332,21 @@ def load(path: str | Path | None = None, overrides: list[str] | dict[str, Any] =
     return cfg
 
 
-def dump(cfg: BaseModel) -> str:
-    """The fully resolved config as YAML."""
-    return yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False)
+def dump(cfg: BaseModel, describe: bool = False) -> str:
+    """The fully resolved config as YAML; ``describe``: each key with its description as a comment."""
+    if not describe:
+        return yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False)
+    return "\n".join(_described(cfg, 0)) + "\n"
+
+
+def _described(cfg: BaseModel, depth: int) -> list[str]:
+    """YAML lines of ``cfg``: sections nested, values in flow style (JSON), descriptions as comments."""
+    lines, values, pad = [], cfg.model_dump(mode="json"), "  " * depth
+    for name, field in type(cfg).model_fields.items():
+        note = f"  # {' '.join(field.description.split())}" if field.description else ""
+        section = getattr(cfg, name)
+        if isinstance(section, BaseModel):
+            lines += [f"{pad}{name}:{note}", *_described(section, depth + 1)]
+        else:
+            lines.append(f"{pad}{name}: {json.dumps(values[name], ensure_ascii=False)}{note}")
+    return lines

@@ -25,6 +25,10 @@ def test_every_command_takes_the_same_options_and_dumps_its_config(command):
     dumped = runner.invoke(app, ["dump-config", "--command", command, "--set", "output.root=elsewhere"])
     assert dumped.exit_code == 0, dumped.output
     assert yaml.safe_load(dumped.output)["output"]["root"] == "elsewhere"
+    described = runner.invoke(app, ["dump-config", "--command", command, "--set", "output.root=elsewhere",
+                                     "--describe"])
+    assert described.exit_code == 0 and yaml.safe_load(described.output) == yaml.safe_load(dumped.output)
+    assert "  # results folders are created under this directory" in described.output
     unknown = runner.invoke(app, ["dump-config", "--command", command, "--set", "no_such_key=1"])
     assert unknown.exit_code == 2 and "unknown key 'no_such_key'" in unknown.output
 
