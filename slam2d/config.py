@@ -6,20 +6,27 @@ CLI's ``--set a.b=c``; values are parsed as YAML (``--set mapping.resolution=0.1
 
 from __future__ import annotations
 
-import reprlib
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from slam2d.errors import InputError, read_text
+from slam2d.errors import InputError, read_text, short_repr  # noqa: F401 (short_repr: for config users)
+from slam2d.plugins import load_plugins, resolve
+from slam2d.registry import Choice, check_choices, validation_error
 
 
 class Section(BaseModel):
-    """Base of all config sections: unknown keys are rejected."""
+    """Base of all config sections: unknown keys are rejected, and so are options an implementation
+    the section names does not take (:class:`slam2d.registry.Choice`)."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    @model_validator(mode="after")
+    def _options_fit(self):
+        check_choices(self)
+        return self
 
 
 class LaserModel(Section):
@@ -75,7 +82,9 @@ class DatasetConfig(Section):
 
 
 class FrontendConfig(Section):
-    name: str = Field("icp", description="registered frontend name (slam2d frontends lists them)")
+    name: Annotated[str, Choice("frontends", options="options", lazy=True)] = Field(
+        "icp", description="registered frontend name (slam2d frontends lists them); checked when the run starts, "
+        "after the plugins of --plugin")
     options: dict[str, Any] = Field(
         default_factory=dict, description="the frontend's own parameters, checked against its Config model"
     )
@@ -187,7 +196,7 @@ class ExperimentConfig(Section):
     seed: int = Field(0, ge=0, lt=2**63, description="one seed for every random choice")
     parallel: bool = Field(True, description="reader and frontend in a worker process ahead of the back end")
     plugins: list[str] = Field(
-        default_factory=list, description="Python files or modules imported first (frontends they register)"
+        default_factory=list, description="Python files or modules imported first (implementations they register)"
     )
     dataset: DatasetConfig = DatasetConfig()
     frontend: FrontendConfig = FrontendConfig()
@@ -216,6 +225,9 @@ class CommandConfig(Section):
 
     name: str | None = Field(None, description="results folder name (default: the command, map and method)")
     seed: int = Field(0, ge=0, lt=2**63, description="one seed for every random choice")
+    plugins: list[str] = Field(
+        default_factory=list, description="Python files or modules imported first (implementations they register)"
+    )
     map: str | None = Field(None, description="map file (map.yaml, floor-plan PNG, Moving AI .map)")
     resolution: float | None = Field(None, gt=0, description="m per pixel of an image map (default 0.05)")
     output: OutputConfig = OutputConfig()
@@ -226,23 +238,9 @@ class CommandConfig(Section):
         return None if name is None else folder_name(name)
 
 
-def short_repr(value: Any, limit: int = 80) -> str:
-    """``repr(value)`` cut to ``limit`` characters, so that an error stays one short line.
-
-    Nested and long containers are abbreviated before they are printed (a YAML alias bomb is not expanded).
-    """
-    shorter = reprlib.Repr()
-    shorter.maxlevel, shorter.maxstring, shorter.maxother = 3, limit, limit
-    text = shorter.repr(value)
-    return text if len(text) <= limit else f"{text[:limit - 3]}..."
-
-
-def _format_error(err: ValidationError, source: str) -> InputError:
-    e = err.errors()[0]
-    key = ".".join(str(p) for p in e["loc"]) or "<root>"
-    if e["type"] == "extra_forbidden":
-        return InputError(source, f"unknown key '{key}'")
-    return InputError(source, f"key '{key}': {e['msg']} (got {short_repr(e.get('input'))})")
+def _format_error(err: ValidationError, source: str, model: type[BaseModel] | None = None) -> InputError:
+    """The first error of ``err`` in validating a config read from ``source`` (the one formatter, in the registry)."""
+    return validation_error(err, source=source, model=model)
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -271,11 +269,16 @@ def read_yaml(path: Path) -> Any:
 
 
 def validate(data: dict[str, Any], source: str = "config", model: type[BaseModel] | None = None):
-    """Build a ``model`` (default ExperimentConfig) from a plain dict, with one-line errors."""
+    """Build a ``model`` (default ExperimentConfig) from a plain dict, with one-line errors. The plugins
+    it lists are imported first, so that the names they register are known to its checks."""
+    model = model or ExperimentConfig
+    plugins = data.get("plugins") if isinstance(data, dict) and "plugins" in model.model_fields else None
+    if isinstance(plugins, list) and all(isinstance(p, str) for p in plugins):
+        load_plugins(plugins)
     try:
-        return (model or ExperimentConfig).model_validate(data or {})
+        return model.model_validate(data or {})
     except ValidationError as err:
-        raise _format_error(err, source) from None
+        raise _format_error(err, source, model) from None
 
 
 def load_dict(path: str | Path) -> dict[str, Any]:
@@ -323,12 +326,9 @@ def load(path: str | Path | None = None, overrides: list[str] | dict[str, Any] =
     items = overrides.items() if isinstance(overrides, dict) else map(parse_override, overrides)
     for key, value in items:
         set_key(data, key, value)
-    cfg = validate(data, str(path) if path else "config", model)
-    if path and getattr(cfg, "plugins", None):
-        from slam2d.plugins import resolve
-
-        cfg.plugins = [resolve(p, Path(path).parent) for p in cfg.plugins]
-    return cfg
+    if path and isinstance(data.get("plugins"), list):  # relative plugin files: beside the config
+        data["plugins"] = [resolve(p, Path(path).parent) if isinstance(p, str) else p for p in data["plugins"]]
+    return validate(data, str(path) if path else "config", model)
 
 
 def dump(cfg: BaseModel) -> str:
