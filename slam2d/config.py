@@ -69,7 +69,8 @@ class SimulatorConfig(Section):
 
 
 class DatasetConfig(Section):
-    kind: Literal["simulator", "rosbag", "carmen"] = "simulator"
+    kind: Annotated[str, Choice("datasets")] = Field(
+        "simulator", description="the reader: simulator, rosbag, carmen (or one a plugin registers)")
     path: str | None = Field(None, description="log file; relative paths resolve against SLAM2D_DATA")
     scan_topic: str | None = Field(None, description="rosbag LaserScan topic (default: the only one, or /scan)")
     odom_topic: str | None = Field(None, description="rosbag Odometry topic (default: the only one, or /odom)")
