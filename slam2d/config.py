@@ -122,8 +122,9 @@ class LoopClosureConfig(Section):
 
 
 class BackendConfig(Section):
-    name: Literal["none", "pose_graph"] = Field(
-        "pose_graph", description="'pose_graph' optimises with GTSAM; 'none' chains the frontend's deltas"
+    name: Annotated[str, Choice("backends")] = Field(
+        "pose_graph", description="'pose_graph' optimises with GTSAM; 'none' chains the frontend's deltas "
+        "(or a plugin's back end)"
     )
     keyframe_distance: float = Field(0.2, ge=0, description="m travelled before a new keyframe")
     keyframe_angle_deg: float = Field(10.0, ge=0, description="rotation before a new keyframe")
