@@ -201,7 +201,9 @@ class Registry:
         return self.entry(name).takes
 
     def unknown_message(self, name) -> str:
-        return f"unknown {self.what} {short_repr(name)} (available: {', '.join(self.names())})"
+        """"unknown WHAT 'name' (available: ...)": the names, then the aliases with what they stand for."""
+        aliases = [f"{a} (= {n})" for a, n in self.aliases.items()]
+        return f"unknown {self.what} {short_repr(name)} (available: {', '.join([*self.names(), *aliases])})"
 
     def unknown(self, name, key: str | None = None) -> InputError:
         """The error of a name no implementation has, listing the available ones."""
