@@ -179,9 +179,10 @@ class NavigationConfig(Section):
     goal: tuple[float, float] | tuple[float, float, float] | None = Field(
         None, description="x, y (m)[, heading (rad)]; --goal x,y on the command line"
     )
-    planner: Literal["dwa", "fsm"] = Field("dwa", description="local planner: dynamic window or the 2016 state machine")
+    planner: Annotated[str, Choice("local_planners")] = Field(
+        "dwa", description="local planner: dwa (dynamic window) or fsm (the 2016 state machine)")
     slam: bool = Field(True, description="pose and map from online SLAM; false: the true pose and the world's map")
-    localization: Literal["none", "mcl"] = Field(
+    localization: Annotated[str, Choice("localizers", also=("none",))] = Field(
         "none", description="without slam: 'mcl' drives on Monte Carlo localisation in the world's map "
         "(tracking from a rough start pose, slam2d.localization) instead of the true pose"
     )
