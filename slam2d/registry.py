@@ -252,9 +252,9 @@ class Registry:
     # -- listing
 
     def describe(self, name) -> str:
-        """The first line of the implementation's docstring ("" without one)."""
+        """The first paragraph of the implementation's docstring on one line ("" without one)."""
         doc = inspect.getdoc(self.get(name)) or ""
-        return doc.splitlines()[0] if doc else ""
+        return " ".join(doc.split("\n\n")[0].split())
 
     def catalog(self) -> dict[str, str]:
         """Name -> one-line description of every implementation (a module that cannot be imported says so)."""
