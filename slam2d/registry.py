@@ -44,6 +44,7 @@ ROLES = {
     "backends": "slam2d.backend.base",
     "global_planners": "slam2d.planning.base",
     "local_planners": "slam2d.navigation.base",
+    "recovery_behaviours": "slam2d.navigation.base",
     "exploration_strategies": "slam2d.exploration.base",
     "similarity_measures": "slam2d.segmentation.base",
     "segmentation_methods": "slam2d.segmentation.base",
