@@ -146,7 +146,7 @@ class MappingConfig(Section):
     every_nth_scan: int = Field(1, gt=0, description="integrate every n-th scan")
     occupied_thresh: float = Field(0.65, gt=0, lt=1)
     free_thresh: float = Field(0.196, gt=0, lt=1, description="below occupied_thresh")
-    layers: list[Literal["grid", "sparse", "quadtree", "lines", "mesh"]] = Field(
+    layers: list[Annotated[str, Choice("map_layers")]] = Field(
         default_factory=lambda: ["grid"],
         description="layers written to the results folder (the grid always; see slam2d.mapping.layers)",
     )
