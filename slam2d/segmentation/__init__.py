@@ -21,6 +21,8 @@ _EXPORTS = {
     "SEGMENTATION_METHODS": "base",
     "SIMILARITY_MEASURES": "base",
     "segment": "base",
+    "register_method": "base",
+    "register_similarity": "base",
     "load_floor_plan": "evaluate",
     "load_ground_truth": "evaluate",
     "score": "evaluate",
