@@ -19,14 +19,10 @@ class Strategy(Protocol):
         ...
 
 
-EXPLORATION_STRATEGIES = Registry("exploration_strategies", "strategy", key="exploration.strategy",
-                                  options_key="exploration.strategy_options", builtins={
-                                      "nearest_frontier": "slam2d.exploration.strategies",
-                                      "explore_lite": "slam2d.exploration.strategies",
-                                      "nearest_candidate": "slam2d.exploration.strategies",
-                                      "farthest_candidate": "slam2d.exploration.strategies",
-                                      "utility": "slam2d.exploration.strategies",
-                                  })  # fmt: skip
+EXPLORATION_STRATEGIES = Registry(
+    "exploration_strategies", "strategy", key="exploration.strategy", options_key="exploration.strategy_options",
+    builtins=dict.fromkeys(("nearest_frontier", "explore_lite", "nearest_candidate", "farthest_candidate", "utility"),
+                           "slam2d.exploration.strategies"))
 """The exploration strategies by name; ``create(name, options)`` is one (its options: ``strategy_options``)."""
 
 

@@ -21,8 +21,11 @@ class ExploreLite:
 
     def choose(self, explorer, pose, view, distance):
         cfg, res = explorer.cfg, view.resolution
-        return explorer.frontier_goal(pose, view, distance,
-                                      lambda f: cfg.potential_scale * f.min_distance * res - cfg.gain_scale * f.size * res)
+
+        def cost(f):
+            return cfg.potential_scale * f.min_distance * res - cfg.gain_scale * f.size * res
+
+        return explorer.frontier_goal(pose, view, distance, cost)
 
 
 class _Candidate:

@@ -35,11 +35,8 @@ LOCALIZERS = Registry("localizers", "localiser", key="navigation.localization",
 """The localisers by name: ``create(name, None, known, start, range_max=..., seed=...)`` localises on the
 :class:`slam2d.localization.maps.KnownMap` ``known`` from the rough pose ``start`` (3,)."""
 
-MCL_PRESETS = Registry("mcl_presets", "preset", key="localization.preset", builtins={
-    "slam2d": "slam2d.localization.config",
-    "amcl": "slam2d.localization.config",
-    "amcl_recovery": "slam2d.localization.config",
-})
+MCL_PRESETS = Registry("mcl_presets", "preset", key="localization.preset",
+                       builtins=dict.fromkeys(("slam2d", "amcl", "amcl_recovery"), "slam2d.localization.config"))
 """The parameter presets of Monte Carlo localisation by name: ``create(name)`` is the MclConfig."""
 
 

@@ -17,13 +17,8 @@ class MapLayer(Protocol):
         ...
 
 
-MAP_LAYERS = Registry("map_layers", "layer", key="mapping.layers", builtins={
-    "grid": "slam2d.mapping.layers",
-    "sparse": "slam2d.mapping.layers",
-    "quadtree": "slam2d.mapping.layers",
-    "lines": "slam2d.mapping.layers",
-    "mesh": "slam2d.mapping.layers",
-})
+MAP_LAYERS = Registry("map_layers", "layer", key="mapping.layers", builtins=dict.fromkeys(
+    ("grid", "sparse", "quadtree", "lines", "mesh"), "slam2d.mapping.layers"))
 """The map layers by name: ``create(name, None, maps, folder)`` writes one."""
 
 

@@ -38,11 +38,9 @@ class RecoveryBehaviour(Protocol):
         ...
 
 
-LOCAL_PLANNERS = Registry("local_planners", "local planner", key="navigation.planner",
-                          options_key="navigation.options", builtins={
-                              "dwa": "slam2d.navigation.dwa",
-                              "fsm": "slam2d.navigation.fsm",
-                          })  # fmt: skip
+LOCAL_PLANNERS = Registry(
+    "local_planners", "local planner", key="navigation.planner", options_key="navigation.options",
+    builtins={"dwa": "slam2d.navigation.dwa", "fsm": "slam2d.navigation.fsm"})
 """The local planners by name: ``create(name, options, robot)`` (a :class:`slam2d.sim.robot.RobotConfig`)."""
 
 RECOVERY_BEHAVIOURS = Registry("recovery_behaviours", "recovery behaviour", key="navigation.options.recovery",

@@ -7,8 +7,8 @@ from typing import Annotated
 from pydantic import Field, model_validator
 
 from slam2d.config import CommandConfig, Section
-from slam2d.registry import Choice
 from slam2d.planning.timing import TrajectoryLimits
+from slam2d.registry import Choice
 from slam2d.segmentation.config import SegmentationConfig
 
 

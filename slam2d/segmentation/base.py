@@ -29,22 +29,17 @@ class SegmentationMethod(Protocol):
         ...
 
 
-SIMILARITY_MEASURES = Registry("similarity_measures", "measure", key="segmentation.similarity",
-                               options_key="similarity_params", builtins={
-                                   "hausdorff": "slam2d.segmentation.similarity",
-                                   "nearest_neighbour": "slam2d.segmentation.similarity",
-                                   "feature_points": "slam2d.segmentation.similarity",
-                                   "visibility": "slam2d.segmentation.similarity",
-                               }, aliases={"nearest_neighbor": "nearest_neighbour", "knn": "nearest_neighbour"})  # fmt: skip
+SIMILARITY_MEASURES = Registry(
+    "similarity_measures", "measure", key="segmentation.similarity", options_key="similarity_params",
+    builtins=dict.fromkeys(("hausdorff", "nearest_neighbour", "feature_points", "visibility"),
+                           "slam2d.segmentation.similarity"),
+    aliases={"nearest_neighbor": "nearest_neighbour", "knn": "nearest_neighbour"})
 """The similarity measures by name: ``create(name, options, obs)`` is the similarity of ``obs``."""
 
-SEGMENTATION_METHODS = Registry("segmentation_methods", "method", key="segmentation.method",
-                                options_key="segmentation.params", builtins={
-                                    "spectral": "slam2d.segmentation.spectral",
-                                    "morphological": "slam2d.segmentation.baselines",
-                                    "distance": "slam2d.segmentation.baselines",
-                                    "voronoi": "slam2d.segmentation.baselines",
-                                })  # fmt: skip
+SEGMENTATION_METHODS = Registry(
+    "segmentation_methods", "method", key="segmentation.method", options_key="segmentation.params",
+    builtins={"spectral": "slam2d.segmentation.spectral",
+              **dict.fromkeys(("morphological", "distance", "voronoi"), "slam2d.segmentation.baselines")})
 """The segmentation methods by name: ``create(name, options, free, resolution, similarity=..., seed=...)`` runs
 one; a method that compares observations takes the measure's name (``similarity``) and the run's ``seed``."""
 

@@ -119,7 +119,8 @@ class SpectralConfig(Section):
 SpectralOptions = create_model(
     "SpectralOptions", __base__=Section, __doc__="The options of the ``spectral`` method (``segmentation.params``): "
     "SpectralConfig's but the measure (``segmentation.similarity``); the seed defaults to the run's.",
-    **{name: (f.annotation, f) for name, f in SpectralConfig.model_fields.items() if name not in ("similarity", "seed")},
+    **{name: (f.annotation, f) for name, f in SpectralConfig.model_fields.items()
+       if name not in ("similarity", "seed")},
     seed=(int | None, Field(None, description="k-means seed; None: the run's seed")),
 )
 
