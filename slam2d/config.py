@@ -84,8 +84,8 @@ class DatasetConfig(Section):
 
 class FrontendConfig(Section):
     name: Annotated[str, Choice("frontends", options="options", lazy=True)] = Field(
-        "icp", description="registered frontend name (slam2d frontends lists them); checked when the run starts, "
-        "after the plugins of --plugin")
+        "icp", description="registered frontend name (slam2d frontends lists them); checked when the run starts "
+        "(a --plugin module may register it)")
     options: dict[str, Any] = Field(
         default_factory=dict, description="the frontend's own parameters, checked against its Config model"
     )
