@@ -98,16 +98,19 @@ def _command_config(command: str, config: Optional[Path], set_: list[str], flags
     """The config of ``command`` from ``config`` (or defaults), ``--set`` overrides, then the short
     flags given (``flags``: dotted key -> value or None), then ``--plugin`` files or modules."""
     from slam2d import config as config_mod
+    from slam2d.plugins import load_plugins
     from slam2d.runs.commands import command_model
     from slam2d.runs.results import output_root
 
     if flags.get("output.root") is not None:
         output_root(flags["output.root"], "--out")  # its error names the option
+    plugins = [str(Path(p).resolve()) if p.endswith(".py") else p for p in plugins]
+    load_plugins(plugins)  # before the config: a name a plugin registers is then known when it is checked
     overrides = dict(map(config_mod.parse_override, set_))
     overrides.update({k: str(v) if isinstance(v, Path) else v for k, v in flags.items() if v is not None})
     cfg = config_mod.load(config, overrides, command_model(command))
     if plugins:
-        cfg.plugins = [*cfg.plugins, *(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugins)]
+        cfg.plugins = [*cfg.plugins, *plugins]
     return cfg
 
 
@@ -388,6 +391,28 @@ def localize(
         cfg = _command_config("localize", config, set_, {"map": map_path, "dataset": dataset, "output.root": root})
         folder = run_localize(cfg, target)
     typer.echo(f"results: {folder}")
+
+
+@app.command()
+def plugins(
+    role: Optional[str] = typer.Argument(None, help="one role (e.g. exploration_strategies); default: every role"),
+    plugin: list[str] = PLUGIN_OPT,
+) -> None:
+    """List every swappable part by role: its names and what each is (with those of --plugin files)."""
+    from slam2d import registry
+    from slam2d.plugins import load_plugins
+
+    try:
+        load_plugins(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin)
+        roles = registry.roles()
+        if role is not None and role not in roles:
+            raise InputError("role", f"unknown role '{role}' (available: {', '.join(roles)})")
+        for name in [role] if role else roles:
+            typer.echo(f"{name}:")
+            for entry, about in registry.role(name).catalog().items():
+                typer.echo(f"  {entry:<22} {about}")
+    except InputError as err:
+        _fail(err)
 
 
 @app.command()

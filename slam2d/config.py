@@ -7,20 +7,27 @@ CLI's ``--set a.b=c``; values are parsed as YAML (``--set mapping.resolution=0.1
 from __future__ import annotations
 
 import json
-import reprlib
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from slam2d.errors import InputError, read_text
+from slam2d.errors import InputError, read_text, short_repr  # noqa: F401 (short_repr: for config users)
+from slam2d.plugins import load_plugins, resolve
+from slam2d.registry import Choice, check_choices, validation_error
 
 
 class Section(BaseModel):
-    """Base of all config sections: unknown keys are rejected."""
+    """Base of all config sections: unknown keys are rejected, and so are options an implementation
+    the section names does not take (:class:`slam2d.registry.Choice`)."""
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    @model_validator(mode="after")
+    def _options_fit(self):
+        check_choices(self)
+        return self
 
 
 class LaserModel(Section):
@@ -63,7 +70,8 @@ class SimulatorConfig(Section):
 
 
 class DatasetConfig(Section):
-    kind: Literal["simulator", "rosbag", "carmen"] = "simulator"
+    kind: Annotated[str, Choice("datasets")] = Field(
+        "simulator", description="the reader: simulator, rosbag, carmen (or one a plugin registers)")
     path: str | None = Field(None, description="log file; relative paths resolve against SLAM2D_DATA")
     scan_topic: str | None = Field(None, description="rosbag LaserScan topic (default: the only one, or /scan)")
     odom_topic: str | None = Field(None, description="rosbag Odometry topic (default: the only one, or /odom)")
@@ -76,7 +84,9 @@ class DatasetConfig(Section):
 
 
 class FrontendConfig(Section):
-    name: str = Field("icp", description="registered frontend name (slam2d frontends lists them)")
+    name: Annotated[str, Choice("frontends", options="options", lazy=True)] = Field(
+        "icp", description="registered frontend name (slam2d frontends lists them); checked when the run starts "
+        "(a --plugin module may register it)")
     options: dict[str, Any] = Field(
         default_factory=dict, description="the frontend's own parameters, checked against its Config model"
     )
@@ -113,8 +123,9 @@ class LoopClosureConfig(Section):
 
 
 class BackendConfig(Section):
-    name: Literal["none", "pose_graph"] = Field(
-        "pose_graph", description="'pose_graph' optimises with GTSAM; 'none' chains the frontend's deltas"
+    name: Annotated[str, Choice("backends")] = Field(
+        "pose_graph", description="'pose_graph' optimises with GTSAM; 'none' chains the frontend's deltas "
+        "(or a plugin's back end)"
     )
     keyframe_distance: float = Field(0.2, ge=0, description="m travelled before a new keyframe")
     keyframe_angle_deg: float = Field(10.0, ge=0, description="rotation before a new keyframe")
@@ -136,7 +147,7 @@ class MappingConfig(Section):
     every_nth_scan: int = Field(1, gt=0, description="integrate every n-th scan")
     occupied_thresh: float = Field(0.65, gt=0, lt=1)
     free_thresh: float = Field(0.196, gt=0, lt=1, description="below occupied_thresh")
-    layers: list[Literal["grid", "sparse", "quadtree", "lines", "mesh"]] = Field(
+    layers: list[Annotated[str, Choice("map_layers")]] = Field(
         default_factory=lambda: ["grid"],
         description="layers written to the results folder (the grid always; see slam2d.mapping.layers)",
     )
@@ -169,9 +180,10 @@ class NavigationConfig(Section):
     goal: tuple[float, float] | tuple[float, float, float] | None = Field(
         None, description="x, y (m)[, heading (rad)]; --goal x,y on the command line"
     )
-    planner: Literal["dwa", "fsm"] = Field("dwa", description="local planner: dynamic window or the 2016 state machine")
+    planner: Annotated[str, Choice("local_planners")] = Field(
+        "dwa", description="local planner: dwa (dynamic window) or fsm (the 2016 state machine)")
     slam: bool = Field(True, description="pose and map from online SLAM; false: the true pose and the world's map")
-    localization: Literal["none", "mcl"] = Field(
+    localization: Annotated[str, Choice("localizers", also=("none",))] = Field(
         "none", description="without slam: 'mcl' drives on Monte Carlo localisation in the world's map "
         "(tracking from a rough start pose, slam2d.localization) instead of the true pose"
     )
@@ -188,7 +200,7 @@ class ExperimentConfig(Section):
     seed: int = Field(0, ge=0, lt=2**63, description="one seed for every random choice")
     parallel: bool = Field(True, description="reader and frontend in a worker process ahead of the back end")
     plugins: list[str] = Field(
-        default_factory=list, description="Python files or modules imported first (frontends they register)"
+        default_factory=list, description="Python files or modules imported first (implementations they register)"
     )
     dataset: DatasetConfig = DatasetConfig()
     frontend: FrontendConfig = FrontendConfig()
@@ -217,6 +229,9 @@ class CommandConfig(Section):
 
     name: str | None = Field(None, description="results folder name (default: the command, map and method)")
     seed: int = Field(0, ge=0, lt=2**63, description="one seed for every random choice")
+    plugins: list[str] = Field(
+        default_factory=list, description="Python files or modules imported first (implementations they register)"
+    )
     map: str | None = Field(None, description="map file (map.yaml, floor-plan PNG, Moving AI .map)")
     resolution: float | None = Field(None, gt=0, description="m per pixel of an image map (default 0.05)")
     output: OutputConfig = OutputConfig()
@@ -227,23 +242,9 @@ class CommandConfig(Section):
         return None if name is None else folder_name(name)
 
 
-def short_repr(value: Any, limit: int = 80) -> str:
-    """``repr(value)`` cut to ``limit`` characters, so that an error stays one short line.
-
-    Nested and long containers are abbreviated before they are printed (a YAML alias bomb is not expanded).
-    """
-    shorter = reprlib.Repr()
-    shorter.maxlevel, shorter.maxstring, shorter.maxother = 3, limit, limit
-    text = shorter.repr(value)
-    return text if len(text) <= limit else f"{text[:limit - 3]}..."
-
-
-def _format_error(err: ValidationError, source: str) -> InputError:
-    e = err.errors()[0]
-    key = ".".join(str(p) for p in e["loc"]) or "<root>"
-    if e["type"] == "extra_forbidden":
-        return InputError(source, f"unknown key '{key}'")
-    return InputError(source, f"key '{key}': {e['msg']} (got {short_repr(e.get('input'))})")
+def _format_error(err: ValidationError, source: str, model: type[BaseModel] | None = None) -> InputError:
+    """The first error of ``err`` in validating a config read from ``source`` (the one formatter, in the registry)."""
+    return validation_error(err, source=source, model=model)
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -272,11 +273,16 @@ def read_yaml(path: Path) -> Any:
 
 
 def validate(data: dict[str, Any], source: str = "config", model: type[BaseModel] | None = None):
-    """Build a ``model`` (default ExperimentConfig) from a plain dict, with one-line errors."""
+    """Build a ``model`` (default ExperimentConfig) from a plain dict, with one-line errors. The plugins
+    it lists are imported first, so that the names they register are known to its checks."""
+    model = model or ExperimentConfig
+    plugins = data.get("plugins") if isinstance(data, dict) and "plugins" in model.model_fields else None
+    if isinstance(plugins, list) and all(isinstance(p, str) for p in plugins):
+        load_plugins(plugins)
     try:
-        return (model or ExperimentConfig).model_validate(data or {})
+        return model.model_validate(data or {})
     except ValidationError as err:
-        raise _format_error(err, source) from None
+        raise _format_error(err, source, model) from None
 
 
 def load_dict(path: str | Path) -> dict[str, Any]:
@@ -324,12 +330,9 @@ def load(path: str | Path | None = None, overrides: list[str] | dict[str, Any] =
     items = overrides.items() if isinstance(overrides, dict) else map(parse_override, overrides)
     for key, value in items:
         set_key(data, key, value)
-    cfg = validate(data, str(path) if path else "config", model)
-    if path and getattr(cfg, "plugins", None):
-        from slam2d.plugins import resolve
-
-        cfg.plugins = [resolve(p, Path(path).parent) for p in cfg.plugins]
-    return cfg
+    if path and isinstance(data.get("plugins"), list):  # relative plugin files: beside the config
+        data["plugins"] = [resolve(p, Path(path).parent) if isinstance(p, str) else p for p in data["plugins"]]
+    return validate(data, str(path) if path else "config", model)
 
 
 def dump(cfg: BaseModel, describe: bool = False) -> str:

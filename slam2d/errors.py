@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import reprlib
+from typing import Any
+
 
 class InputError(ValueError):
     """Bad input: names what is wrong and where (file and line, or config key)."""
@@ -24,6 +27,17 @@ def _one_line(text: str) -> str:
     if "\n" in text or "\r" in text:
         text = " ".join(text.split())
     return text if len(text) <= MAX_MESSAGE else text[: MAX_MESSAGE - 3] + "..."
+
+
+def short_repr(value: Any, limit: int = 80) -> str:
+    """``repr(value)`` cut to ``limit`` characters, so that an error stays one short line.
+
+    Nested and long containers are abbreviated before they are printed (a YAML alias bomb is not expanded).
+    """
+    shorter = reprlib.Repr()
+    shorter.maxlevel, shorter.maxstring, shorter.maxother = 3, limit, limit
+    text = shorter.repr(value)
+    return text if len(text) <= limit else f"{text[:limit - 3]}..."
 
 
 def read_text(path) -> str:

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from slam2d import geometry
+from slam2d.backend.base import BACKENDS
 from slam2d.config import ExperimentConfig
 from slam2d.errors import InputError
 from slam2d.frontends import create_frontend
@@ -44,40 +45,12 @@ class SlamResult:
     cpu_s: float  # CPU time (s) of the run: reading, frontend, back end, in every process
     skipped: Counter = field(default_factory=Counter)
     stats: dict[str, Any] = field(default_factory=dict)
-    graph: Any = None  # the PoseGraph when the back end is 'pose_graph'
+    graph: Any = None  # the back end's pose graph (the PoseGraph of 'pose_graph'), if it has one
 
     @property
     def fallbacks(self) -> int:
         """Scans after the first answered with confidence 0 (the frontend returned odometry)."""
         return int(np.count_nonzero(self.confidences[1:] <= 0.0))
-
-
-class ChainBackend:
-    """Back end 'none': the frontend's deltas chained from the first odometry pose."""
-
-    graph = None
-
-    def __init__(self) -> None:
-        self.poses: list[np.ndarray] = []
-
-    def add(self, scan: Scan, result: FrontendResult) -> None:
-        pose = scan.odom if not self.poses else geometry.compose(self.poses[-1], result.delta)
-        self.poses.append(np.asarray(pose, float))
-
-    def finish(self) -> np.ndarray:
-        return np.array(self.poses)
-
-    def current_pose(self) -> np.ndarray:
-        """Pose (3,) of the latest scan."""
-        return self.poses[-1]
-
-    def scan_anchors(self, start: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """As GraphSlamBackend's: every scan is its own keyframe, at offset zero."""
-        n = len(self.poses) - start
-        return np.arange(start, start + n), np.zeros((n, 3))
-
-    def summary(self) -> dict[str, int]:
-        return {}
 
 
 def frontend_steps(frontend, scans: Iterable[Scan]) -> Iterator[tuple[Scan, FrontendResult]]:
@@ -209,11 +182,8 @@ class SlamPipeline:
         self.frontend = create_frontend(cfg.frontend.name, cfg.frontend.options)
 
     def _new_backend(self):
-        if self.cfg.backend.name == "pose_graph":
-            from slam2d.backend.slam import GraphSlamBackend
-
-            return GraphSlamBackend(self.cfg.backend)
-        return ChainBackend()
+        """The back end ``backend.name`` names, built from the ``backend`` section."""
+        return BACKENDS.create(self.cfg.backend.name, None, self.cfg.backend)
 
     def run(self, scans: Iterable[Scan], on_scan: Callable[[], None] | None = None, view=None) -> SlamResult:
         """Process every scan; ``on_scan`` is called after each one (progress); ``view``

@@ -152,7 +152,7 @@ def test_segment_map_rejects_unknown_names(tmp_path):
 
 def test_segment_map_spectral(tmp_path):
     plan = _write_plan(tmp_path)
-    rooms = segment_map(plan, method="spectral", similarity="nearest_neighbor", k_max=4)
+    rooms = segment_map(plan, method="spectral", similarity="nearest_neighbor", params={"k_max": 4})
     write_segmentation(rooms, tmp_path / "out")
     m = rooms.metrics
     assert m["similarity"] == "nearest_neighbour" and m["k"] >= 1 and m["rooms"] >= 1

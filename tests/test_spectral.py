@@ -265,5 +265,5 @@ def test_observations_from_a_slam_run_segment_the_rooms():
 def test_unknown_similarity_parameters_are_named():
     with pytest.raises(InputError, match="sigmaa"):
         segment_spectral(two_rooms(), RES, "hausdorff", similarity_params={"sigmaa": 1.0})
-    with pytest.raises(InputError, match="similarity: Input should be 'visibility'"):
+    with pytest.raises(InputError, match="similarity: unknown measure .cosmic."):
         segment_spectral(two_rooms(), RES, "cosmic")

@@ -17,13 +17,15 @@ from collections import Counter
 import numpy as np
 
 from slam2d import geometry
+from slam2d.backend.base import register_backend
 from slam2d.config import BackendConfig
 from slam2d.frontends.base import FrontendResult
 from slam2d.types import Scan
 
 
+@register_backend("pose_graph")
 class GraphSlamBackend:
-    """Builds and optimises the pose graph; returns a pose for every scan."""
+    """Builds and optimises the pose graph with GTSAM; returns a pose for every scan."""
 
     def __init__(self, cfg: BackendConfig):
         from slam2d.backend.loop_closure import LoopCloser

@@ -1,4 +1,4 @@
-"""What every reader shares: the ScanSource interface and the checks on scans."""
+"""What every reader shares: the ScanSource interface, the checks on scans, and the registry of readers."""
 
 from __future__ import annotations
 
@@ -6,10 +6,12 @@ import logging
 import math
 from collections import Counter, deque
 from collections.abc import Iterator
+from typing import Protocol
 
 import numpy as np
 
 from slam2d.errors import InputError
+from slam2d.registry import Registry
 from slam2d.types import Scan
 
 log = logging.getLogger(__name__)
@@ -171,3 +173,24 @@ class ScanSource:
             log.warning("%s: %d of %d scans (%.1f%%) skipped", self.where, n, len(self), 100 * n / max(len(self), 1))
         if self.invalid_beams:
             log.info("%s: %d beams had no valid range (NaN, inf or negative) and were ignored", self.name, self.invalid_beams)
+
+
+class DatasetReader(Protocol):
+    """Opens the scan stream of a dataset config (its ``kind`` names the reader)."""
+
+    def __call__(self, cfg, seed: int) -> ScanSource:
+        """The :class:`ScanSource` of ``cfg`` (a :class:`slam2d.config.DatasetConfig`), seeded by ``seed``."""
+        ...
+
+
+DATASETS = Registry("datasets", "dataset kind", key="dataset.kind", builtins={
+    "simulator": "slam2d.datasets.simulator",
+    "rosbag": "slam2d.datasets.rosbag",
+    "carmen": "slam2d.datasets.carmen",
+})
+"""The readers by name (``dataset.kind``)."""
+
+
+def register_dataset(name: str, **kw):
+    """Decorator of a :class:`DatasetReader`: ``dataset.kind: name`` opens with it."""
+    return DATASETS.register(name, **kw)

@@ -23,7 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from slam2d import geometry
-from slam2d.datasets.base import MAX_COORD, ScanSource
+from slam2d.config import DatasetConfig
+from slam2d.datasets.base import MAX_COORD, ScanSource, register_dataset
+from slam2d.datasets.registry import log_path
 from slam2d.errors import InputError
 from slam2d.types import Scan
 
@@ -206,3 +208,9 @@ class CarmenSource(ScanSource):
             self.notes[f"{tag} lines whose laser pose is not the first line's offset from the "
                        "robot pose (corrected poses?); first offset used"] += 1
         return mount
+
+
+@register_dataset("carmen")
+def open_carmen(cfg: DatasetConfig, seed: int) -> CarmenSource:
+    """A CARMEN log's laser lines with their odometry (``dataset.path``)."""
+    return CarmenSource(log_path(cfg), max_scans=cfg.max_scans)

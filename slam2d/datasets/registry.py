@@ -1,4 +1,5 @@
-"""Dataset config -> ScanSource; where data files are looked up."""
+"""Dataset config -> ScanSource (the reader ``dataset.kind`` names, :data:`slam2d.datasets.base.DATASETS`);
+where data files are looked up."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import os
 from pathlib import Path
 
 from slam2d.config import DatasetConfig
-from slam2d.datasets.base import ScanSource
+from slam2d.datasets.base import DATASETS, ScanSource
 from slam2d.errors import InputError
 
 DEFAULT_DATA_ROOT = Path("../shared/datasets")
@@ -26,25 +27,15 @@ def resolve_data_path(path: str | Path, key: str = "dataset.path") -> Path:
     raise InputError(key, f"file not found: {path} (looked here and under SLAM2D_DATA={data_root()})")
 
 
-def open_dataset(cfg: DatasetConfig, seed: int = 0) -> ScanSource:
-    """The ScanSource a dataset config names, allowed to skip ``cfg.max_skipped`` of its scans."""
-    source = _open(cfg, seed)
-    source.max_skipped = cfg.max_skipped
-    return source
-
-
-def _open(cfg: DatasetConfig, seed: int) -> ScanSource:
-    if cfg.kind == "simulator":
-        from slam2d.datasets.simulator import SimulatorSource
-
-        return SimulatorSource(cfg.simulator, seed=seed, max_scans=cfg.max_scans)
+def log_path(cfg: DatasetConfig) -> Path:
+    """The existing log file ``dataset.path`` names (for the readers of files)."""
     if cfg.path is None:
         raise InputError("dataset.path", f"a '{cfg.kind}' dataset needs a path")
-    path = resolve_data_path(cfg.path)
-    if cfg.kind == "rosbag":
-        from slam2d.datasets.rosbag import RosbagSource
+    return resolve_data_path(cfg.path)
 
-        return RosbagSource(path, scan_topic=cfg.scan_topic, odom_topic=cfg.odom_topic, max_scans=cfg.max_scans)
-    from slam2d.datasets.carmen import CarmenSource
 
-    return CarmenSource(path, max_scans=cfg.max_scans)
+def open_dataset(cfg: DatasetConfig, seed: int = 0) -> ScanSource:
+    """The ScanSource a dataset config names, allowed to skip ``cfg.max_skipped`` of its scans."""
+    source = DATASETS.create(cfg.kind, None, cfg, seed)
+    source.max_skipped = cfg.max_skipped
+    return source

@@ -15,7 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from slam2d import geometry
-from slam2d.datasets.base import MAX_COORD, ScanSource
+from slam2d.config import DatasetConfig
+from slam2d.datasets.base import MAX_COORD, ScanSource, register_dataset
+from slam2d.datasets.registry import log_path
 from slam2d.errors import InputError
 from slam2d.types import Scan
 
@@ -236,3 +238,9 @@ class RosbagSource(ScanSource):
     def _corrupt_index(self, found: str) -> InputError:
         return InputError(self.path, f"corrupt index: it lists {self._count} messages on {self.scan_topic}, "
                           f"the bag holds {found}")
+
+
+@register_dataset("rosbag")
+def open_rosbag(cfg: DatasetConfig, seed: int) -> RosbagSource:
+    """A ROS 1 or ROS 2 bag's LaserScan and Odometry topics (``dataset.path``, ``scan_topic``, ``odom_topic``)."""
+    return RosbagSource(log_path(cfg), scan_topic=cfg.scan_topic, odom_topic=cfg.odom_topic, max_scans=cfg.max_scans)

@@ -18,8 +18,8 @@ from collections.abc import Iterator
 import numpy as np
 
 from slam2d import geometry
-from slam2d.config import SimulatorConfig
-from slam2d.datasets.base import ScanSource
+from slam2d.config import DatasetConfig, SimulatorConfig
+from slam2d.datasets.base import ScanSource, register_dataset
 from slam2d.errors import InputError
 from slam2d.sim.robot import ROBOT_RADIUS, Laser, beam_angles, measure_ranges, sample_odometry
 from slam2d.sim.world import World, load_world
@@ -179,3 +179,9 @@ def route_start(world: str) -> np.ndarray:
     route = office_route()
     d = route[1] - route[0]
     return np.array([*route[0], np.arctan2(d[1], d[0])])
+
+
+@register_dataset("simulator")
+def open_simulator(cfg: DatasetConfig, seed: int) -> SimulatorSource:
+    """A simulated robot driving a route through a world (``dataset.simulator``), ground truth included."""
+    return SimulatorSource(cfg.simulator, seed=seed, max_scans=cfg.max_scans)

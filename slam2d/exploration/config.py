@@ -4,24 +4,29 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator
 
 from slam2d import config as config_mod
 from slam2d.config import ExperimentConfig, Section
+from slam2d.exploration.base import EXPLORATION_STRATEGIES
+from slam2d.registry import Choice
 
 STRATEGY_HELP = ("goal choice: Yamauchi's nearest frontier, explore_lite's cost, Li et al.'s candidates "
-                 "(nearest, farthest, utility)")
-STRATEGIES = ("nearest_frontier", "explore_lite", "nearest_candidate", "farthest_candidate", "utility")
+                 "(nearest, farthest, utility), or a plugin's strategy")
+STRATEGIES = EXPLORATION_STRATEGIES
+"""The strategies by name (iterating gives the names)."""
 
 
 class ExplorationConfig(Section):
     """Where the robot explores, how it picks goals, and the limits of a run."""
 
-    strategy: Literal["nearest_frontier", "explore_lite", "nearest_candidate", "farthest_candidate", "utility"] = (
-        Field("utility", description=STRATEGY_HELP)
-    )
+    strategy: Annotated[str, Choice("exploration_strategies", options="strategy_options")] = Field(
+        "utility", description=STRATEGY_HELP)
+    strategy_options: dict[str, Any] = Field(
+        default_factory=dict, description="the strategy's own parameters (its Config: a plugin's; the built-ins "
+        "take theirs from this section)")
     start: tuple[float, float, float] | None = Field(
         None, description="x, y (m), heading (rad); None: the office route's start, or a seeded open cell of a PNG world"
     )

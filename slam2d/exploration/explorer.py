@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit
 
 from slam2d import geometry
+from slam2d.exploration.base import EXPLORATION_STRATEGIES
 from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candidates
 from slam2d.exploration.config import ExplorationConfig
 from slam2d.exploration.frontiers import WALL_GAP, depth_cells, find_frontiers, frontier_mask, shallow_entries
@@ -40,7 +41,6 @@ from slam2d.exploration.gridops import (
 from slam2d.exploration.hybrid import FINAL, HybridMap
 from slam2d.segmentation.observations import raycast_grid
 
-FRONTIER_STRATEGIES = ("nearest_frontier", "explore_lite")
 POCKET_SPACING = 0.2  # m between the places tried as views of pockets
 POCKET_RAYS = 360  # rays cast from each of them (one a degree, as the laser's beams)
 POCKET_BATCH = 8, 256  # places scored at a time, nearest first: the first batch, doubling up to the last
@@ -169,8 +169,9 @@ class Goal:
 
 
 class Explorer:
-    """Chooses goals with ``decide``; ``observe`` makes topological nodes (with their candidates)
-    from the scans; ``spent`` says when the current goal is no longer worth reaching."""
+    """Chooses goals with ``decide`` (by the strategy ``cfg.strategy`` names, then pockets); ``observe`` makes
+    topological nodes (with their candidates) from the scans; ``spent`` says when the current goal is no
+    longer worth reaching."""
 
     def __init__(self, cfg: ExplorationConfig, robot_radius: float, inflation: float, range_max: float):
         self.cfg, self.radius, self.inflation, self.range_max = cfg, robot_radius, inflation, range_max
@@ -186,6 +187,7 @@ class Explorer:
         self.fallbacks = self.pocket_goals = self.tight_goals = 0
         self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest view counted on
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
+        self.strategy = EXPLORATION_STRATEGIES.create(cfg.strategy, cfg.strategy_options)
 
     # -- nodes and candidates --------------------------------------------------------------
 
@@ -266,42 +268,32 @@ class Explorer:
         distance = geodesic(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution)
         roomy = view.traversable(self.radius + self.cfg.goal_clearance)
         distance[~roomy] = np.inf  # goals only where the robot has room
-        if self.cfg.strategy in FRONTIER_STRATEGIES:
-            goal = self._frontier_goal(pose, view, distance, self.cfg.strategy)
-        elif self.cfg.strategy == "utility":
-            goal = self._utility_goal(pose, view, distance)
-        else:
-            goal = self._candidate_goal(pose, view, distance)
-            if goal is None and self.cfg.fallback_frontiers:
-                goal = self._frontier_goal(pose, view, distance, "nearest_frontier")
-                self.fallbacks += goal is not None
+        goal = self.strategy.choose(self, pose, view, distance)
         if goal is None and self.cfg.pockets:
             goal = self._pocket_goal(pose, view, distance)
             self.pocket_goals += goal is not None
         return goal
 
-    def _frontiers(self, pose, view, distance) -> list:
+    def frontiers(self, pose, view, distance) -> list:
+        """The frontier regions the robot can reach (``find_frontiers``), away from visited and inaccessible goals."""
         avoid = self.visited + self.inaccessible
         return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
                               self.cfg.avoid_radius, self.width)  # fmt: skip
 
-    def _frontier_goal(self, pose, view, distance, strategy) -> Goal | None:
-        found = self._frontiers(pose, view, distance)
+    def frontier_goal(self, pose, view, distance, cost=None) -> Goal | None:
+        """The goal of the frontier region of lowest ``cost`` (a function of a region; default its path length)."""
+        found = self.frontiers(pose, view, distance)
         if not found:
             return None
-        if strategy == "explore_lite":
-            res = view.resolution
-            cost = [self.cfg.potential_scale * f.min_distance * res - self.cfg.gain_scale * f.size * res for f in found]
-        else:
-            cost = [f.path for f in found]
+        cost = [cost(f) for f in found] if cost is not None else [f.path for f in found]
         k = int(np.argmin(cost))
         return Goal(found[k].goal, "frontier", score=float(cost[k]))
 
-    def _utility_goal(self, pose, view, distance) -> Goal | None:
+    def utility_goal(self, pose, view, distance) -> Goal | None:
         """The candidate or frontier region's goal of highest utility, scored together: candidates are made
         only at nodes from one scan each, so a side opening the scans missed has a frontier but no candidate."""
         live, pts, path, target = self._candidate_options(view, distance)
-        found = self._frontiers(pose, view, distance)
+        found = self.frontiers(pose, view, distance)
         if not live and not found:
             return None
         fronts = np.array([f.goal for f in found]).reshape(-1, 2)
@@ -418,12 +410,12 @@ class Explorer:
             return none
         return [c for c, k in zip(live, ok) if k], pts[ok], path[ok], target[ok]
 
-    def _candidate_goal(self, pose, view, distance) -> Goal | None:
-        """The nearest or farthest open candidate by grid path."""
+    def candidate_goal(self, pose, view, distance, nearest: bool = True) -> Goal | None:
+        """The nearest (or farthest) open candidate by grid path."""
         live, _, path, target = self._candidate_options(view, distance)
         if not live:
             return None
-        score = -path if self.cfg.strategy == "nearest_candidate" else path
+        score = -path if nearest else path
         for c, s in zip(live, score):
             c.utility = float(s)
         k = int(np.argmax(score))

@@ -8,17 +8,13 @@ through the ``slam2d.frontends`` entry-point group.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from importlib import import_module
-from importlib.metadata import entry_points
-from importlib.util import find_spec
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel
 
-from slam2d.errors import InputError
+from slam2d.registry import Registry
 from slam2d.types import LandmarkObservation, Scan
 
 
@@ -47,60 +43,35 @@ class Frontend(Protocol):
         ...
 
 
-_REGISTRY: dict[str, Callable[..., Frontend]] = {}
-
-# Built-in frontends, imported on first use so that importing slam2d stays light.
-_BUILTIN = {
+FRONTENDS = Registry("frontends", "frontend", key="frontend.name", options_key="frontend.options", builtins={
+    "odometry": "slam2d.frontends.base",
     "icp": "slam2d.frontends.icp",
     "lines": "slam2d.frontends.lines",
     "corners": "slam2d.frontends.corners",
     "fuzzy_vertex": "slam2d.frontends.fuzzy_vertex",
     "fused": "slam2d.frontends.fused",
-}
+})
+"""The frontends by name (``frontend.name``); their options are ``frontend.options``."""
 
 
 def register_frontend(name: str):
     """Class decorator: make a frontend available under ``name`` in configs."""
-
-    def decorate(cls):
-        _REGISTRY[name] = cls
-        return cls
-
-    return decorate
+    return FRONTENDS.register(name)
 
 
 def available_frontends() -> list[str]:
     """Names of all registered frontends, built-ins and entry points included."""
-    _load_entry_points()
-    return sorted(set(_REGISTRY) | {n for n, m in _BUILTIN.items() if find_spec(m) is not None})
+    return sorted(FRONTENDS.names())
 
 
 def frontend_class(name: str):
     """The class registered as ``name`` (entry points included)."""
-    if name not in _REGISTRY and name in _BUILTIN and find_spec(_BUILTIN[name]) is not None:
-        import_module(_BUILTIN[name])
-    if name not in _REGISTRY:
-        _load_entry_points()
-    if name not in _REGISTRY:
-        raise InputError("frontend.name", f"unknown frontend '{name}' (available: {', '.join(available_frontends())})")
-    return _REGISTRY[name]
+    return FRONTENDS.get(name)
 
 
 def resolve_options(name: str, options: dict[str, Any] | None = None) -> BaseModel | None:
     """The frontend's ``Config`` model filled from ``options`` (None if it takes none)."""
-    cls = frontend_class(name)
-    model = getattr(cls, "Config", None)
-    if model is None:
-        if options:
-            raise InputError("frontend.options", f"frontend '{name}' takes no options, got {sorted(options)}")
-        return None
-    try:
-        return model.model_validate(options or {})
-    except ValidationError as err:
-        e = err.errors()[0]
-        key = "frontend.options." + ".".join(str(p) for p in e["loc"])
-        what = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
-        raise InputError(key, what) from None
+    return FRONTENDS.resolve_options(name, options)
 
 
 def create_frontend(name: str, options: dict[str, Any] | None = None) -> Frontend:
@@ -109,15 +80,7 @@ def create_frontend(name: str, options: dict[str, Any] | None = None) -> Fronten
     A frontend with parameters declares them as a nested pydantic ``Config``
     class and takes an instance of it as its only constructor argument.
     """
-    cls = frontend_class(name)
-    params = resolve_options(name, options)
-    return cls() if params is None else cls(params)
-
-
-def _load_entry_points() -> None:
-    for ep in entry_points(group="slam2d.frontends"):
-        if ep.name not in _REGISTRY:
-            _REGISTRY[ep.name] = ep.load()
+    return FRONTENDS.create(name, options)
 
 
 # Odometry noise used as the pass-through frontend's information: 2 cm, 1 deg per step.

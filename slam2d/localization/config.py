@@ -4,13 +4,15 @@ and with the recovery its documentation suggests), so that both run through one 
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationError, model_validator
 
 from slam2d.config import CommandConfig, Section
+from slam2d.localization.base import MCL_PRESETS, register_preset
+from slam2d.registry import Choice, validation_error
 
-__all__ = ["PRESETS", "LocalizationConfig", "LocalizeConfig", "MclConfig", "amcl_config", "preset"]
+__all__ = ["LocalizationConfig", "LocalizeConfig", "MclConfig", "amcl_config", "preset"]
 
 
 class MclConfig(Section):
@@ -94,12 +96,27 @@ def _delta_of_z(z: float) -> float:
     return 0.5 * math.erfc(z / math.sqrt(2.0))
 
 
-PRESETS = {"slam2d": lambda: MclConfig(), "amcl": lambda: amcl_config(False), "amcl_recovery": lambda: amcl_config(True)}
+@register_preset("slam2d")
+def slam2d_preset() -> MclConfig:
+    """slam2d's defaults: augmented MCL with its recovery, KLD sampling, the likelihood field."""
+    return MclConfig()
+
+
+@register_preset("amcl")
+def amcl_preset() -> MclConfig:
+    """ROS 1 amcl's defaults as shipped (recovery off)."""
+    return amcl_config(False)
+
+
+@register_preset("amcl_recovery")
+def amcl_recovery_preset() -> MclConfig:
+    """ROS 1 amcl's defaults with the recovery its documentation suggests."""
+    return amcl_config(True)
 
 
 def preset(name: str) -> MclConfig:
-    """The parameters named ``name``: slam2d, amcl (shipped) or amcl_recovery."""
-    return PRESETS[name]()
+    """The parameters named ``name`` (``MCL_PRESETS``): slam2d, amcl (shipped) or amcl_recovery."""
+    return MCL_PRESETS.create(name)
 
 
 class LocalizationConfig(Section):
@@ -108,7 +125,7 @@ class LocalizationConfig(Section):
     mode: Literal["global", "tracking"] = Field("global", description="no initial pose, or a rough one")
     initial_pose: tuple[float, float, float] | None = Field(
         None, description="tracking: x, y (m), heading (rad); None: the first true (or reference) pose")
-    preset: Literal["slam2d", "amcl", "amcl_recovery"] = Field(
+    preset: Annotated[str, Choice("mcl_presets")] = Field(
         "slam2d", description="parameters the 'mcl' keys start from: slam2d's, or ROS amcl's (recovery off / on)")
     mcl: dict = Field(default_factory=dict, description="filter parameters over the preset (MclConfig keys)")
     world: str | None = Field(None, description="simulated world: 'office' or a floor-plan PNG; None: the map")
@@ -123,17 +140,10 @@ class LocalizationConfig(Section):
 
     def filter_config(self) -> MclConfig:
         """The preset with the ``mcl`` keys over it (an InputError names an unknown or bad key)."""
-        from pydantic import ValidationError
-
-        from slam2d.errors import InputError
-
         try:
             return MclConfig.model_validate({**preset(self.preset).model_dump(), **self.mcl})
         except ValidationError as err:
-            e = err.errors()[0]
-            key = ".".join(str(p) for p in e["loc"])
-            what = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
-            raise InputError(f"mcl.{key}", what) from None
+            raise validation_error(err, "localization.mcl", model=MclConfig) from None
 
 
 class LocalizeConfig(CommandConfig):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from slam2d.localization.base import register_localizer
 from slam2d.localization.config import MclConfig
 from slam2d.localization.maps import KnownMap
 from slam2d.localization.mcl import ParticleFilter
@@ -16,6 +17,7 @@ from slam2d.localization.mcl import ParticleFilter
 __all__ = ["MclPoseSource"]
 
 
+@register_localizer("mcl", takes=("range_max", "seed"))
 class MclPoseSource:
     """A ``pose_source`` for :func:`slam2d.navigation.run_navigation`: tracking from the rough pose
     ``start`` (3,) (the config's initial spread unless ``sd_xy`` m / ``sd_theta`` rad are given)."""

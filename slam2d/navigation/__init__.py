@@ -6,7 +6,15 @@ command; ``navigator`` plans, replans, recovers and reports "unreachable";
 ``run_navigation`` drives a :class:`slam2d.sim.Robot` to a goal.
 """
 
-from slam2d.navigation.common import Command, LocalPlanner
+from slam2d.navigation.base import (
+    LOCAL_PLANNERS,
+    RECOVERY_BEHAVIOURS,
+    LocalPlanner,
+    RecoveryBehaviour,
+    register_local_planner,
+    register_recovery,
+)
+from slam2d.navigation.common import Command
 from slam2d.navigation.dwa import DwaConfig, DynamicWindow
 from slam2d.navigation.fsm import AvoidanceStateMachine, FsmConfig
 from slam2d.navigation.maps import free_mask, world_grid
@@ -15,6 +23,11 @@ from slam2d.navigation.navigator import NavigationResult, Navigator, NavigatorCo
 __all__ = [
     "Command",
     "LocalPlanner",
+    "LOCAL_PLANNERS",
+    "RecoveryBehaviour",
+    "RECOVERY_BEHAVIOURS",
+    "register_local_planner",
+    "register_recovery",
     "DwaConfig",
     "DynamicWindow",
     "FsmConfig",

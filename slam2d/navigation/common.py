@@ -1,15 +1,14 @@
-"""What every local planner shares: the command it returns, its interface, path helpers."""
+"""What every local planner shares: the command it returns and path helpers (its interface: ``base``)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 
 from slam2d import geometry
 
-__all__ = ["Command", "LocalPlanner", "point_along", "path_ahead", "approach_speed", "in_robot_frame"]
+__all__ = ["Command", "point_along", "path_ahead", "approach_speed", "in_robot_frame"]
 
 
 @dataclass(frozen=True)
@@ -21,21 +20,6 @@ class Command:
     w: float
     blocked: bool = False
     state: str = ""
-
-
-class LocalPlanner(Protocol):
-    """Turns the laser's view and the remaining path into a velocity command."""
-
-    def command(self, pose, velocity, points, path, unmapped=None) -> Command:
-        """Command from the robot ``pose`` (3,) (world), its ``velocity`` (v m/s, w rad/s),
-        laser hit ``points`` (M, 2) in the robot frame (m) and the remaining ``path``
-        (L, 2) world waypoints (m) from near the robot to the goal (its last point);
-        ``unmapped`` (M,) bool marks points the map does not explain, if known."""
-        ...
-
-    def reset(self) -> None:
-        """Forget any manoeuvre in progress (after a replan or a recovery)."""
-        ...
 
 
 def point_along(path, s: float) -> np.ndarray:

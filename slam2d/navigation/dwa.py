@@ -28,6 +28,7 @@ from pydantic import Field
 from scipy.spatial import cKDTree
 
 from slam2d.config import Section
+from slam2d.navigation.base import register_local_planner
 from slam2d.navigation.common import Command, approach_speed, in_robot_frame, path_ahead, point_along
 from slam2d.sim.robot import RobotConfig
 
@@ -67,6 +68,7 @@ def arcs(v, w, times) -> np.ndarray:
     return np.stack([chord * np.cos(turn / 2), chord * np.sin(turn / 2), turn], axis=-1)
 
 
+@register_local_planner("dwa", config=DwaConfig)
 class DynamicWindow:
     """DWA local planner for a robot with :class:`RobotConfig` limits (see the module docstring)."""
 

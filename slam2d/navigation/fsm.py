@@ -39,6 +39,7 @@ from pydantic import Field
 
 from slam2d import geometry
 from slam2d.config import Section
+from slam2d.navigation.base import register_local_planner
 from slam2d.navigation.common import Command, approach_speed, in_robot_frame, path_ahead, point_along
 from slam2d.sim.robot import RobotConfig
 
@@ -93,6 +94,7 @@ def state_code(bits, stuck: bool = False) -> int:
     return 16 * bool(stuck) + 8 * b[0] + 4 * b[1] + 2 * b[2] + 1 * b[3]
 
 
+@register_local_planner("fsm", config=FsmConfig)
 class AvoidanceStateMachine:
     """The thesis's avoidance state machine as a local planner (see the module docstring)."""
 

@@ -23,21 +23,22 @@ from __future__ import annotations
 
 import time as _time
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Annotated, Any
 
 import numpy as np
-from pydantic import Field, ValidationError
+from pydantic import BaseModel, Field, ValidationError
 from scipy import ndimage
 
 from slam2d import geometry
 from slam2d.config import Section
-from slam2d.errors import InputError
+from slam2d.navigation.base import LOCAL_PLANNERS, RECOVERY_BEHAVIOURS, register_recovery
 from slam2d.navigation.common import Command, approach_speed, in_robot_frame, point_along
-from slam2d.navigation.dwa import DwaConfig, DynamicWindow
-from slam2d.navigation.fsm import AvoidanceStateMachine, FsmConfig
+from slam2d.navigation.dwa import DwaConfig
+from slam2d.navigation.fsm import FsmConfig
 from slam2d.navigation.maps import free_mask, mark_points
 from slam2d.planning.astar import AStar
 from slam2d.planning.grid import PlanningGrid, around, refresh_clearance
+from slam2d.registry import Choice, validation_error
 from slam2d.sim.robot import RobotConfig
 
 __all__ = [
@@ -68,7 +69,10 @@ GOAL_PADDING = 1.0  # m of free cells kept around a goal beyond a map whose unkn
 class NavigatorConfig(Section):
     """Global planning, goal tolerances, recovery and the time budget of a navigation run."""
 
-    planner: Literal["dwa", "fsm"] = "dwa"
+    planner: Annotated[str, Choice("local_planners")] = Field(
+        "dwa", description="local planner: dwa, fsm (its parameters: the section of that name)")
+    recovery: Annotated[str, Choice("recovery_behaviours")] = Field(
+        "backoff", description="what a recovery does (slam2d.navigation.base.RECOVERY_BEHAVIOURS)")
     period: float = Field(0.1, gt=0, description="s, control period")
     inflation_margin: float = Field(0.05, ge=0, description="m; a cell where the disc comes this close costs `tight_weight`")
     tight_weight: float = Field(20.0, ge=0, description="extra step cost at the radius (lethal), falling to 0 over the margin")
@@ -95,12 +99,24 @@ class NavigatorConfig(Section):
 
 
 def make_local_planner(name: str, robot: RobotConfig, cfg: NavigatorConfig):
-    """The local planner ``dwa`` or ``fsm`` with the control period of ``cfg``."""
-    if name == "dwa":
-        return DynamicWindow(robot, cfg.dwa.model_copy(update={"period": cfg.period}))
-    if name == "fsm":
-        return AvoidanceStateMachine(robot, cfg.fsm.model_copy(update={"period": cfg.period}))
-    raise ValueError(f"local planner must be 'dwa' or 'fsm', got {name!r}")
+    """The local planner ``name`` (``LOCAL_PLANNERS``) with the section of ``cfg`` of that name (``dwa``,
+    ``fsm``; a planner without one: its defaults) and the control period of ``cfg``."""
+    section = getattr(cfg, name, None)
+    options = LOCAL_PLANNERS.resolve_options(name, section if isinstance(section, BaseModel) else None,
+                                             f"navigation.options.{name}")  # fmt: skip
+    if options is not None and "period" in type(options).model_fields:
+        options = options.model_copy(update={"period": cfg.period})
+    return LOCAL_PLANNERS.create(name, options, robot)
+
+
+@register_recovery("backoff")
+class BackOffRecovery:
+    """Replan with the laser's points in the map and turn to the path; from the second recovery in a row
+    on, back off ``backoff`` m first if the rear is clear."""
+
+    def manoeuvres(self, navigator, level: int, pose, points) -> list[str]:
+        back = level >= 2 and navigator.rear_clear(points)
+        return ["back", "replan", "turn"] if back else ["replan", "turn"]
 
 
 class Navigator:
@@ -113,6 +129,7 @@ class Navigator:
         if self.goal.shape not in ((2,), (3,)) or not np.isfinite(self.goal).all():
             raise ValueError(f"goal must be finite (x, y) or (x, y, theta), got {goal}")
         self.local = make_local_planner(self.cfg.planner, self.robot, self.cfg)
+        self.recovery = RECOVERY_BEHAVIOURS.create(self.cfg.recovery)
         self.status, self.reason = ACTIVE, ""
         self.path: np.ndarray | None = None
         self.paths: list[np.ndarray] = []
@@ -404,7 +421,7 @@ class Navigator:
     # recovery ---------------------------------------------------------------
 
     def _recover(self, pose, points, now: float) -> Command:
-        """Next recovery: replan with the laser's points; later also back off and turn to the path."""
+        """Next recovery: the manoeuvres of the recovery behaviour (``recovery``) at this level."""
         self._level += 1
         self.recoveries += 1
         self._log(now, "recovery", f"level {self._level}")
@@ -413,14 +430,12 @@ class Navigator:
         if self._level > self.cfg.max_recoveries:
             why = f"recovery exhausted ({self.cfg.max_recoveries} attempts without progress)"
             return self._finish(UNREACHABLE, why)
-        if self._level >= 2 and self._rear_clear(points):
-            self._manoeuvre.append(["back", pose[:2].copy(), now])
-        self._manoeuvre.append(["replan", None, now])
-        self._manoeuvre.append(["turn", None, now])
+        for kind in self.recovery.manoeuvres(self, self._level, pose, points):
+            self._manoeuvre.append([kind, pose[:2].copy() if kind == "back" else None, now])
         self._best = (np.inf, now)
         return Command(0.0, 0.0, False, "recover")
 
-    def _rear_clear(self, points) -> bool:
+    def rear_clear(self, points) -> bool:
         """No laser point in the strip the robot sweeps backing off ``backoff`` m, as wide as the disc
         + the DWA's margin, or, wedged closer than that, as wide as the gap it has (backing off
         brings it no closer to anything)."""
@@ -432,7 +447,7 @@ class Navigator:
     def _manoeuvre_command(self, pose, points, now: float) -> Command:
         kind, data, since = self._manoeuvre[0]
         if kind == "back":
-            if np.hypot(*(pose[:2] - data)) < self.cfg.backoff and now - since < 4.0 and self._rear_clear(points):
+            if np.hypot(*(pose[:2] - data)) < self.cfg.backoff and now - since < 4.0 and self.rear_clear(points):
                 return Command(-0.2, 0.0, False, "back off")
         elif kind == "replan":
             self._log(now, "replan", "recovery, with the laser's points in the map")
@@ -600,6 +615,4 @@ def navigator_config(options: dict[str, Any], slam: bool, section: str = "naviga
     try:
         return NavigatorConfig.model_validate(merged)
     except ValidationError as err:
-        e = err.errors()[0]
-        key = ".".join(str(p) for p in e["loc"])
-        raise InputError(section, f"'{key}': {e['msg']}") from None
+        raise validation_error(err, section, model=NavigatorConfig) from None

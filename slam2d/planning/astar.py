@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from slam2d.planning.base import register_planner
 from slam2d.planning.grid import PlanningGrid
 
 __all__ = ["PlanResult", "AStar", "astar", "path_length", "path_cost", "check_path", "endpoint_problem", "SQRT2"]
@@ -448,3 +449,9 @@ def _padded_cost(cost, shape) -> np.ndarray:
 def astar(grid: PlanningGrid | np.ndarray, start, goal, connectivity: int = 8, cost=None) -> PlanResult:
     """One-off A* between (row, col) cells (allocates buffers; use :class:`AStar` for many queries)."""
     return AStar(grid, connectivity, cost).plan(start, goal)
+
+
+@register_planner("astar")
+def astar_planner(grid: PlanningGrid | np.ndarray) -> AStar:
+    """A* on the 8-connected grid, octile heuristic, no corner cutting."""
+    return AStar(grid)

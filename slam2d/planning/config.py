@@ -2,19 +2,20 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated
 
 from pydantic import Field, model_validator
 
 from slam2d.config import CommandConfig, Section
 from slam2d.planning.timing import TrajectoryLimits
+from slam2d.registry import Choice
 from slam2d.segmentation.config import SegmentationConfig
 
 
 class PlanningConfig(Section):
     """Which planner, on which query (or on ``queries`` random ones beside A*)."""
 
-    hierarchy: Literal["none", "hpa", "rooms"] = Field(
+    hierarchy: Annotated[str, Choice("global_planners", canonical=False)] = Field(
         "none", description="none (A*), hpa (square clusters) or rooms (the room graph of a segmentation)"
     )
     cluster_size: int = Field(16, gt=1, description="HPA* cluster side, cells")

@@ -57,6 +57,7 @@ from slam2d.planning.astar import (
     path_cost,
     path_length,
 )
+from slam2d.planning.base import register_planner
 from slam2d.planning.grid import PlanningGrid
 from slam2d.planning.smoothing import smooth_octile
 
@@ -655,6 +656,18 @@ class RoomGraphPlanner:
                 "raw_length": raw_length}  # fmt: skip
         return PlanResult(path, path_length(path), int(expanded + self.route_expanded), time.perf_counter() - t0,
                           True, "", path_cost(path, lo.cost), res, info)  # fmt: skip
+
+
+@register_planner("hpa")
+def hpa_planner(grid: PlanningGrid | np.ndarray, cluster_size: int = 16) -> HPAStar:
+    """HPA*: A* over the entrances of square clusters of ``cluster_size`` cells, refined inside them."""
+    return HPAStar(grid, cluster_size)
+
+
+@register_planner("rooms", takes=("labels", "graph"))
+def room_planner(grid: PlanningGrid | np.ndarray, labels: np.ndarray, graph=None) -> RoomGraphPlanner:
+    """A route over the rooms' graph (a room segmentation's ``labels``), then A* inside the route's rooms."""
+    return RoomGraphPlanner(grid, labels, graph)
 
 
 def _traversable(cells: np.ndarray, region: np.ndarray, ia: int, ib: int, free: np.ndarray) -> bool:

@@ -14,17 +14,14 @@ from scipy import ndimage
 
 from slam2d.errors import InputError
 from slam2d.planning.astar import AStar, PlanResult, check_path, path_length
+from slam2d.planning.base import GLOBAL_PLANNERS
 from slam2d.planning.grid import PlanningGrid, load_grid
 from slam2d.planning.smoothing import shortcut
 from slam2d.planning.timing import TimedPath, TrajectoryLimits, time_parametrize
 from slam2d.segmentation.config import SegmentationConfig
 from slam2d.segmentation.rooms import segment_free
 
-__all__ = ["MapPlan", "plan_on_map", "plan_queries", "make_planner", "room_labels", "NoPathError", "PLANNERS"]
-
-PLANNERS = ("hpa", "rooms")
-"""Values of ``hierarchical``: HPA* over square clusters, or the room-graph planner."""
-
+__all__ = ["MapPlan", "plan_on_map", "plan_queries", "make_planner", "planner_name", "room_labels", "NoPathError"]
 
 @dataclass(frozen=True, eq=False)
 class MapPlan:
@@ -57,8 +54,7 @@ def room_labels(grid: PlanningGrid, segmentation=None, seed: int = 0) -> np.ndar
     """Room labels (H, W) aligned with ``grid`` (rows going up): the map segmented as ``slam2d segment``
     would (row 0 the top) by ``segmentation`` (a SegmentationConfig; None: morphological)."""
     seg = segmentation or SegmentationConfig(method="morphological")
-    params = {"seed": seed, **seg.params} if seg.method == "spectral" else seg.params
-    labels, _ = segment_free(np.flipud(grid.free), grid.resolution, seg.method, seg.similarity, params)
+    labels, _ = segment_free(np.flipud(grid.free), grid.resolution, seg.method, seg.similarity, seg.params, seed)
     return np.ascontiguousarray(labels[::-1])
 
 
@@ -106,23 +102,29 @@ def _read_labels(path: Path) -> np.ndarray:
         raise InputError(path, f"not a readable label image or .npy array ({str(err)[:120]})") from None
 
 
-def make_planner(grid: PlanningGrid, hierarchical: str | None = None, cluster_size: int = 16, labels=None, graph=None):
-    """A* (``None``), HPA* (``"hpa"``) or the room-graph planner (``"rooms"``) on ``grid``.
+def make_planner(grid: PlanningGrid, name: str | None = None, cluster_size: int = 16, labels=None, graph=None,
+                 key: str = "hierarchical"):
+    """The global planner ``name`` (:data:`~slam2d.planning.base.GLOBAL_PLANNERS`; None: A*) on ``grid``.
 
-    The room-graph planner takes ``labels`` (H, W) int aligned with ``grid``
-    (rows going up), by default the morphological segmentation of ``grid``.
+    A planner that takes room ``labels`` (the room graph) gets them aligned with ``grid`` (rows going
+    up): an array, a .npy or a labels.png, by default the morphological segmentation of ``grid``.
+    ``key`` names the choice in an error.
     """
-    if hierarchical is None:
-        return AStar(grid)
-    if hierarchical == "hpa":
-        from slam2d.planning.hierarchical import HPAStar
+    name = planner_name(name, key)
+    inputs = {"labels": _labels(labels, grid), "graph": graph} if "labels" in GLOBAL_PLANNERS.takes(name) else {}
+    return GLOBAL_PLANNERS.create(name, GLOBAL_PLANNERS.options_in(name, {"cluster_size": cluster_size}), grid,
+                                  **inputs)
 
-        return HPAStar(grid, cluster_size)
-    if hierarchical == "rooms":
-        from slam2d.planning.hierarchical import RoomGraphPlanner
 
-        return RoomGraphPlanner(grid, _labels(labels, grid), graph)
-    raise InputError("hierarchical", f"expected one of {', '.join(PLANNERS)} or none, got {hierarchical!r}")
+def planner_name(name: str | None, key: str = "hierarchical") -> str:
+    """The registered name of the global planner ``name`` (None: A*); an InputError naming ``key`` if unknown."""
+    GLOBAL_PLANNERS.entry(name or "none", key)
+    return GLOBAL_PLANNERS.canonical(name or "none")
+
+
+def _uses_rooms(name: str | None) -> bool:
+    """Whether the planner ``name`` plans over the rooms of a segmentation (it takes room labels)."""
+    return "labels" in GLOBAL_PLANNERS.takes(name or "none")
 
 
 def plan_on_map(
@@ -142,7 +144,7 @@ def plan_on_map(
 
     ``map_path``: map_server ``.yaml``, Moving AI ``.map`` or a floor-plan
     image (``resolution`` m/px, default 0.05). Obstacles are inflated by
-    ``robot_radius`` m. ``hierarchical``: None (A*), ``"hpa"`` or ``"rooms"``
+    ``robot_radius`` m. ``hierarchical``: a global planner's name (None: A*; ``"hpa"``, ``"rooms"``)
     (``labels``: a region image aligned with the map's rows going up, or
     None for the map's segmentation by ``segmentation``, a SegmentationConfig, default
     morphological, run on the map before inflation; ``seed`` for spectral). The metrics say
@@ -156,14 +158,15 @@ def plan_on_map(
     grid = load_grid(map_path, resolution=resolution)
     free = grid.inflated(robot_radius)
     t0 = time.perf_counter()
-    if hierarchical == "rooms":
+    name = planner_name(hierarchical)
+    if _uses_rooms(name):
         labels = _labels(labels, grid, segmentation, seed)  # segment the map itself, not the inflated free space
-    planner = make_planner(free, hierarchical, cluster_size, labels)
+    planner = make_planner(free, name, cluster_size, labels)
     build_s = time.perf_counter() - t0
     result = planner.plan(free.world_to_cell(start), free.world_to_cell(goal))
     metrics = {
         "map": str(map_path),
-        "planner": hierarchical or "astar",
+        "planner": name,
         "found": result.found,
         "reason": result.reason,
         "start": start.tolist(),
@@ -173,7 +176,7 @@ def plan_on_map(
         "build_ms": 1e3 * build_s,
         "plan_ms": 1e3 * result.seconds,
         "nodes_expanded": result.expanded,
-        **({"rooms": planner.graph.number_of_nodes()} if hierarchical == "rooms" else {}),
+        **({"rooms": planner.graph.number_of_nodes()} if _uses_rooms(name) else {}),
         "limits": limits.model_dump(),
     }
     timed = waypoints = None
@@ -205,15 +208,15 @@ def plan_queries(map_path, cfg, labels=None) -> dict:
     of A* CPU time / the planner's, per query), CPU ms per query (medians), rooms, build and
     segmentation seconds."""
     p = cfg.planning
-    hierarchy = None if p.hierarchy == "none" else p.hierarchy
+    hierarchy = planner_name(p.hierarchy, "planning.hierarchy")
     grid = load_grid(map_path, resolution=cfg.resolution)
     free = grid.inflated(p.robot_radius)
     t0 = time.perf_counter()
-    if hierarchy == "rooms":
+    if _uses_rooms(hierarchy):
         labels = _labels(labels, grid, cfg.segmentation, cfg.seed)
     segmentation_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    planner = make_planner(free, hierarchy, p.cluster_size, labels)
+    planner = make_planner(free, hierarchy, p.cluster_size, labels, key="planning.hierarchy")
     build_s = time.perf_counter() - t0
     astar = AStar(free)
     queries = sample_queries(free, astar, p.queries, p.min_distance, cfg.seed, Path(map_path).stem)
@@ -232,12 +235,12 @@ def plan_queries(map_path, cfg, labels=None) -> dict:
         own_ms.append(1e3 * own_s)
     stat = (lambda f, v: float(f(v)) if len(v) else None)  # noqa: E731
     return {
-        "map": str(map_path), "planner": hierarchy or "astar", "queries": len(queries), "failures": failures,
+        "map": str(map_path), "planner": hierarchy, "queries": len(queries), "failures": failures,
         "mean_subopt_pct": stat(np.mean, sub), "max_subopt_pct": stat(np.max, sub),
         "median_speedup": stat(np.median, speedups), "astar_ms_median": stat(np.median, ref_ms),
         "planner_ms_median": stat(np.median, own_ms),
         "min_query_m": stat(np.min, [np.hypot(*(s - g)) * grid.resolution for s, g in queries]),
-        **({"rooms": planner.graph.number_of_nodes(), "segmentation_s": segmentation_s} if hierarchy == "rooms"
+        **({"rooms": planner.graph.number_of_nodes(), "segmentation_s": segmentation_s} if _uses_rooms(hierarchy)
            else {}),
         "build_s": build_s, "robot_radius_m": p.robot_radius, "resolution_m": grid.resolution,
     }  # fmt: skip

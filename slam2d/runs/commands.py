@@ -7,54 +7,65 @@ import importlib
 from dataclasses import dataclass
 from pathlib import Path
 
-from slam2d import config as config_mod
-from slam2d.config import ExperimentConfig
-from slam2d.errors import InputError
-from slam2d.frontends.base import resolve_options
 from slam2d.plugins import load_plugins
+from slam2d.registry import Registry, resolve_config
 
 
 @dataclass(frozen=True)
 class Command:
     """A command: its config model and runner (``"module:name"``, imported when used) and the metrics its
-    tables show first (dotted keys of its metrics.json)."""
+    tables show first (dotted keys of its metrics.json). The runner takes a config of the model and
+    returns the results folder it wrote."""
 
     model: str
     runner: str
     main_metrics: tuple[str, ...]
+    about: str = ""
+
+    def __post_init__(self):
+        object.__setattr__(self, "__doc__", self.about)  # what ``slam2d plugins`` lists
 
     def config_model(self) -> type:
         return _named(self.model)
 
 
-COMMANDS = {
+COMMANDS = Registry("commands", "command", key="command")
+"""Every command that writes a results folder, by name; ``slam2d ablate`` sweeps any of them."""
+
+
+def register_command(name: str, command: Command) -> None:
+    """Make ``command`` available as ``slam2d ablate``'s ``command: name`` (and to :func:`run_command`)."""
+    COMMANDS.add(name, command)
+
+
+for _name, _command in {
     "run": Command("slam2d.config:ExperimentConfig", "slam2d.runs.run:run_experiment", (
         "relations.trans_abs_mean", "relations.trans_abs_std", "relations.rot_abs_mean", "relations.rot_abs_std",
         "odometry_relations.trans_abs_mean", "ate.rmse", "odometry_ate.rmse", "rpe.trans_rmse", "rpe.rot_rmse_deg",
         "cpu_ms_per_scan", "slam.loop closures kept", "slam.loop closures rejected", "frontend_fallbacks", "scans",
-        "runtime_s", "peak_rss_mb")),
+        "runtime_s", "peak_rss_mb"), 'SLAM on a dataset: trajectory, map, graph, ATE/RPE and the relations metric.'),
     "segment": Command("slam2d.segmentation.config:SegmentConfig", "slam2d.runs.segment:run_segment", (
-        "recall", "precision", "rooms_found", "rooms_gt", "rooms", "k", "seconds", "cpu_seconds")),
+        "recall", "precision", "rooms_found", "rooms_gt", "rooms", "k", "seconds", "cpu_seconds"), 'Rooms of a map: labels, region graph, recall and precision against a ground truth.'),
     "plan": Command("slam2d.planning.config:PlanConfig", "slam2d.runs.plan:run_plan", (
         "found", "length_m", "duration_s", "plan_ms", "nodes_expanded", "queries", "failures", "mean_subopt_pct",
-        "max_subopt_pct", "median_speedup", "segmentation_s")),
+        "max_subopt_pct", "median_speedup", "segmentation_s"), 'A path on a map (A* or a hierarchy), shortened and timed; or seeded queries against A*.'),
     "navigate": Command("slam2d.runs.navigate:NavigateConfig", "slam2d.runs.navigate:run_navigate", (
         "success", "status", "time", "path_length", "length_ratio", "goal_error", "heading_error", "collisions",
-        "min_clearance", "pose_rmse", "planner_hz", "wall_s")),
+        "min_clearance", "pose_rmse", "planner_hz", "wall_s"), 'Drive the simulated robot to a goal on online SLAM (or a known map).'),
     "explore": Command("slam2d.exploration.config:ExploreConfig", "slam2d.runs.explore:run_explore", (
         "coverage", "distance_to_99", "time_to_99", "distance_to_90", "map_iou", "ate_rmse", "collisions",
-        "min_clearance", "path_repetition", "decision_ms_median", "stop_reason", "wall_s")),
+        "min_clearance", "path_repetition", "decision_ms_median", "stop_reason", "wall_s"), 'Explore a simulated world from nothing with SLAM in the loop.'),
     "localize": Command("slam2d.localization.config:LocalizeConfig", "slam2d.runs.localize:run_localize", (
         "position_rmse", "heading_rmse_deg", "converged_s", "false_convergence", "position_rmse_converged",
-        "particles_median", "update_ms_median")),
+        "particles_median", "update_ms_median"), 'Monte Carlo localisation on a known map: tracking, global localisation, kidnapping.'),
     "map": Command("slam2d.runs.map:MapConfig", "slam2d.runs.map:run_map", (
         "grid.dense_uint8_bytes", "sparse.bytes", "quadtree.bytes", "quadtree.trinary_bytes", "lines.bytes",
-        "mesh.bytes")),
+        "mesh.bytes"), 'Mapping layers of a map: sparse grid, quadtrees, line map, wall mesh.'),
     "optimize": Command("slam2d.runs.optimize:OptimizeConfig", "slam2d.runs.optimize:run_optimize", (
         "gtsam_error", "iterations", "seconds", "verified", "certified", "loops_rejected", "precision", "recall",
-        "rmse_to_reference")),
-}
-"""Every command that writes a results folder, by name; ``slam2d ablate`` sweeps any of them."""
+        "rmse_to_reference"), 'One batch optimisation of a g2o / TORO pose graph, with false loops if asked.'),
+}.items():
+    register_command(_name, _command)
 
 
 def _named(target: str):
@@ -64,9 +75,7 @@ def _named(target: str):
 
 def command_of(command: str, key: str = "command") -> Command:
     """The :class:`Command` named ``command``; InputError naming ``key`` otherwise."""
-    if command not in COMMANDS:
-        raise InputError(key, f"unknown command {config_mod.short_repr(command)} ({', '.join(COMMANDS)})")
-    return COMMANDS[command]
+    return COMMANDS.get(command, key)
 
 
 def command_model(command: str, key: str = "command"):
@@ -75,21 +84,19 @@ def command_model(command: str, key: str = "command"):
 
 
 def run_command(cfg, quiet: bool = False) -> Path:
-    """Run the config of any command of :data:`COMMANDS` into its results folder; return the folder."""
-    for command in COMMANDS.values():
+    """Run the config of any command of :data:`COMMANDS` into its results folder (its plugins imported
+    first, as in a sweep's worker process); return the folder."""
+    load_plugins(getattr(cfg, "plugins", ()))
+    for name in COMMANDS:
+        command = COMMANDS.get(name)
         if type(cfg) is command.config_model():
             runner = _named(command.runner)
-            return runner(cfg, quiet=quiet) if command is COMMANDS["run"] else runner(cfg)
+            return runner(cfg, quiet=quiet) if name == "run" else runner(cfg)
     raise TypeError(f"not a command config: {type(cfg).__name__}")
 
 
 def resolved(cfg):
-    """``cfg`` with the frontend's options completed by its defaults (its plugins imported first);
-    the config of another command as it is."""
-    if not isinstance(cfg, ExperimentConfig):
-        return cfg
-    load_plugins(cfg.plugins)
-    params = resolve_options(cfg.frontend.name, cfg.frontend.options)
-    if params is None:
-        return cfg
-    return cfg.model_copy(update={"frontend": cfg.frontend.model_copy(update={"options": params.model_dump()})})
+    """``cfg`` with the options of every implementation it names (frontend, segmentation method,
+    exploration strategy...) completed by their defaults, its plugins imported first."""
+    load_plugins(getattr(cfg, "plugins", ()))
+    return resolve_config(cfg)

@@ -27,7 +27,8 @@ from slam2d.config import ExperimentConfig
 from slam2d.datasets.simulator import route_start
 from slam2d.errors import InputError
 from slam2d.evaluation.trajectory import write_tum
-from slam2d.localization import KnownMap, MclPoseSource
+from slam2d.localization import KnownMap
+from slam2d.localization.base import LOCALIZERS
 from slam2d.navigation import Navigator, run_navigation, world_grid
 from slam2d.navigation.navigator import navigator_config
 from slam2d.runs.results import jsonable, results_folder
@@ -114,7 +115,7 @@ def simulate(cfg: ExperimentConfig) -> NavigationRun:
         online = OnlineSlam(cfg)
         map_grid, pose_source = record.wrap(online), lambda step: online.pose
     else:
-        map_grid, pose_source = record.wrap(None, truth), _mcl_source(nav, world, start, robot, cfg.seed)
+        map_grid, pose_source = record.wrap(None, truth), _localizer(nav, world, start, robot, cfg.seed)
     result = run_navigation(world, robot, map_grid, goal, nav.planner, options, pose_source=pose_source)
     wall = time.perf_counter() - t0
     reference = Navigator(goal, robot.cfg, options)
@@ -159,12 +160,13 @@ class _Recorder:
         return map_grid
 
 
-def _mcl_source(nav, world, start, robot, seed: int):
-    """The pose from Monte Carlo localisation in the world's map (``navigation.localization: mcl``), or None."""
-    if nav.localization != "mcl":
+def _localizer(nav, world, start, robot, seed: int):
+    """The pose source of the localiser ``navigation.localization`` names in the world's map, or None
+    (``none``: the true pose)."""
+    if nav.localization == "none":
         return None
-
-    return MclPoseSource(KnownMap.from_world(world), start, range_max=robot.cfg.laser.range_max, seed=seed)
+    return LOCALIZERS.create(nav.localization, None, KnownMap.from_world(world), start,
+                             range_max=robot.cfg.laser.range_max, seed=seed)
 
 
 def _pose_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, float]:

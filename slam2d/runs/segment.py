@@ -37,11 +37,11 @@ def run_segment(cfg) -> Path:
     map_path = resolve_data_path(cfg.map, key="map")
     gt = resolve_data_path(cfg.ground_truth, key="ground_truth") if cfg.ground_truth else None
     seg = cfg.segmentation
-    params = {"seed": cfg.seed, **seg.params} if seg.method == "spectral" else seg.params
     name = cfg.name or f"segment-{map_path.stem}-{seg.method}"
     with results_folder(cfg.output.root, name) as (work, published):
         (work / "config.yaml").write_text(config_mod.dump(cfg))
-        rooms = segment_map(map_path, seg.method, seg.similarity, ground_truth=gt, resolution=cfg.resolution, **params)
+        rooms = segment_map(map_path, seg.method, seg.similarity, ground_truth=gt, resolution=cfg.resolution,
+                            params=seg.params, seed=cfg.seed)
         write_segmentation(rooms, work, figures=cfg.output.figures)
     return published[0]
 

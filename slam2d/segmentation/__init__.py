@@ -6,6 +6,7 @@
   feature-point and virtual-visibility similarity of observations;
 - :mod:`~slam2d.segmentation.spectral`: spectral clustering with a
   silhouette-chosen k, and labels for every free cell (``segment_spectral``);
+- :mod:`~slam2d.segmentation.base`: the measures and methods by name, and ``segment``, which runs one;
 - :mod:`~slam2d.segmentation.evaluate`: per-room recall / precision against
   ground-truth room images (Bormann et al., ICRA 2016).
 
@@ -17,6 +18,11 @@ from __future__ import annotations
 import importlib
 
 _EXPORTS = {
+    "SEGMENTATION_METHODS": "base",
+    "SIMILARITY_MEASURES": "base",
+    "segment": "base",
+    "register_method": "base",
+    "register_similarity": "base",
     "load_floor_plan": "evaluate",
     "load_ground_truth": "evaluate",
     "score": "evaluate",

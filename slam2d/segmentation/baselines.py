@@ -22,6 +22,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from slam2d.segmentation.base import register_method
+
 __all__ = ["morphological", "distance", "voronoi", "grow_regions", "BASELINES"]
 
 EIGHT = np.ones((3, 3), bool)
@@ -75,6 +77,7 @@ def _components(mask: np.ndarray, resolution: float, area_min: float, area_max: 
     return lab, ok, small
 
 
+@register_method("morphological")
 def morphological(free, resolution, room_area_min=0.8, room_area_max=47.0, max_erosion=3.65) -> np.ndarray:
     """Erode the free space one cell at a time (3 x 3); a component whose area
     lies within (room_area_min, room_area_max) m² when it splits off is a room
@@ -113,6 +116,7 @@ def _bounding_box(mask: np.ndarray) -> tuple[slice, slice] | None:
     return slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
 
 
+@register_method("distance")
 def distance(free, resolution, room_area_min=0.35, room_area_max=163.0) -> np.ndarray:
     """Threshold the distance-to-obstacle map (after one 3 x 3 erosion) at every
     level, one cell apart; keep the level (the lowest among ties) with the most
@@ -129,6 +133,7 @@ def distance(free, resolution, room_area_min=0.35, room_area_max=163.0) -> np.nd
     return grow_regions(best, free)
 
 
+@register_method("voronoi")
 def voronoi(
     free,
     resolution,
@@ -367,5 +372,6 @@ def _merge_regions(labels, clearance_m, lines, res, opening_ratio, room_area_min
     return _relabel(parent[labels].astype(np.int32))
 
 
-BASELINES = {"morphological": morphological, "distance": distance, "voronoi": voronoi}
-"""Method name -> function, as ``slam2d segment --method`` names them."""
+BASELINES = {fn.__name__: fn for fn in (morphological, distance, voronoi)}
+"""Method name -> function of the baselines (all registered with the other methods in
+:data:`slam2d.segmentation.base.SEGMENTATION_METHODS`)."""

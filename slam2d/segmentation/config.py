@@ -2,32 +2,31 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any
 
-from pydantic import Field, field_validator
+from pydantic import Field
 
 from slam2d.config import CommandConfig, Section
+from slam2d.registry import Choice
+from slam2d.segmentation.base import SIMILARITY_MEASURES
 
-SIMILARITY_ALIASES = {"nearest_neighbor": "nearest_neighbour", "knn": "nearest_neighbour"}
+SIMILARITY_ALIASES = SIMILARITY_MEASURES.aliases
+"""Other names of the similarity measures -> theirs (the registry's)."""
 
 
 class SegmentationConfig(Section):
     """How a map is split into rooms (:func:`slam2d.segmentation.rooms.segment_map`)."""
 
-    method: Literal["spectral", "morphological", "distance", "voronoi"] = Field(
+    method: Annotated[str, Choice("segmentation_methods", options="params")] = Field(
         "spectral", description="spectral clustering, or a baseline of slam2d.segmentation.baselines"
     )
-    similarity: Literal["visibility", "hausdorff", "nearest_neighbour", "feature_points"] = Field(
+    similarity: Annotated[str, Choice("similarity_measures")] = Field(
         "visibility", description="spectral: similarity of virtual observations (ignored by the baselines)"
     )
     params: dict[str, Any] = Field(
-        default_factory=dict, description="the method's own parameters (SpectralConfig fields, or the baseline's)"
+        default_factory=dict, description="the method's own parameters (SpectralConfig fields but similarity, or "
+        "the baseline's)"
     )
-
-    @field_validator("similarity", mode="before")
-    @classmethod
-    def _alias(cls, value):
-        return SIMILARITY_ALIASES.get(value, value) if isinstance(value, str) else value
 
 
 class SegmentConfig(CommandConfig):

@@ -18,12 +18,11 @@ import yaml
 
 from slam2d.errors import InputError
 from slam2d.mapping.topological import region_graph
+from slam2d.segmentation.base import SEGMENTATION_METHODS, segment
 from slam2d.segmentation.evaluate import load_floor_plan, load_ground_truth, score
 
-__all__ = ["RoomSegmentation", "segment_map", "segment_free", "METHODS", "find_ground_truth", "load_map"]
+__all__ = ["RoomSegmentation", "segment_map", "segment_free", "find_ground_truth", "load_map"]
 
-METHODS = ("spectral", "morphological", "distance", "voronoi")
-"""Method names :func:`segment_map` accepts."""
 
 
 FURNISHED_SUFFIX = "_furnitures"
@@ -64,39 +63,16 @@ def find_ground_truth(map_path) -> Path | None:
     return gt if gt.is_file() else None
 
 
-def segment_free(free, resolution, method, similarity="visibility", params=None) -> tuple[np.ndarray, dict]:
+def segment_free(free, resolution, method, similarity="visibility", params=None, seed: int = 0
+                 ) -> tuple[np.ndarray, dict]:  # fmt: skip
     """Labels (H, W) int32 of the free space ``free`` (H, W) bool at ``resolution`` m/cell by ``method``
-    (with ``similarity`` for spectral, and the method's ``params``), and run facts (seconds, cpu_seconds;
-    k, silhouette and similarity for spectral)."""
+    (a :data:`~slam2d.segmentation.base.SEGMENTATION_METHODS` name, with ``similarity`` for spectral, the
+    method's ``params`` and the run's ``seed``), and run facts (seconds, cpu_seconds; k, silhouette and
+    similarity for spectral)."""
     cpu0 = time.process_time()
-    run = _run_method(free, resolution, method, similarity, params or {})
+    run = segment(free, resolution, method, similarity, params, seed=seed)
     run["cpu_seconds"] = time.process_time() - cpu0
     return run.pop("labels"), run
-
-
-def _run_method(free, resolution, method, similarity, params) -> dict:
-    """Labels (H, W) int32 and run facts (seconds; k and silhouette for spectral)."""
-    if method == "spectral":
-        from slam2d.segmentation.config import SIMILARITY_ALIASES
-        from slam2d.segmentation.similarity import SIMILARITIES
-        from slam2d.segmentation.spectral import segment_spectral
-
-        similarity = SIMILARITY_ALIASES.get(similarity, similarity)
-        if similarity not in SIMILARITIES:
-            raise InputError("similarity", f"unknown measure {similarity!r}; choose from {sorted(SIMILARITIES)}")
-        res = segment_spectral(free, resolution, similarity=similarity, **params)
-        return dict(labels=np.asarray(res.labels, np.int32), seconds=float(res.seconds), k=int(res.k),
-                    silhouette=float(res.silhouette), similarity=similarity)  # fmt: skip
-    from slam2d.segmentation.baselines import BASELINES
-
-    if method not in BASELINES:
-        raise InputError("method", f"unknown method {method!r}; choose from {list(METHODS)}")
-    t0 = time.perf_counter()
-    try:
-        labels = BASELINES[method](free, resolution, **params)
-    except TypeError as exc:  # an unknown keyword
-        raise InputError("params", f"{method}: {exc}") from None
-    return dict(labels=labels, seconds=time.perf_counter() - t0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -124,26 +100,27 @@ class RoomSegmentation:
 
 
 def segment_map(map_path, method="spectral", similarity="visibility", *, ground_truth=None, resolution=None,
-                **params) -> RoomSegmentation:
+                params=None, seed: int = 0) -> RoomSegmentation:
     """Segment the map at ``map_path`` into rooms.
 
-    method: one of :data:`METHODS`; similarity: the spectral measure (ignored by the baselines);
+    method: a :data:`~slam2d.segmentation.base.SEGMENTATION_METHODS` name; similarity: the spectral
+    measure (ignored by the baselines); seed: the run's seed (spectral's default);
     ground_truth: GT image (default: found beside the map, see :func:`find_ground_truth`);
-    resolution: m/px for an image map (default 0.05); params: the method's parameters. The metrics:
+    resolution: m/px for an image map (default 0.05); params: the method's parameters (checked before
+    any work). The metrics:
     ``seconds`` (wall) and ``cpu_seconds`` of the segmentation itself, ``furnished`` (the map is a
     ``*_furnitures`` variant), rooms, portals, and the scores against a ground truth.
     """
     map_path = Path(map_path)
-    if method not in METHODS:
-        raise InputError("method", f"unknown method {method!r}; choose from {list(METHODS)}")
+    SEGMENTATION_METHODS.resolve_options(method, params, "segmentation.params")  # before reading the map
     m = load_map(map_path, resolution)
     if not m["free"].any():
         raise InputError(map_path, "no free cell: nothing to segment (check the image, negate and free_thresh)")
-    labels, run = segment_free(m["free"], m["resolution"], method, similarity, params)
+    labels, run = segment_free(m["free"], m["resolution"], method, similarity, params, seed)
     graph = region_graph(labels, m["resolution"], m["origin"], row0_top=m["row0_top"])
     image_labels = labels if m["row0_top"] else np.flipud(labels)
     metrics = dict(map=str(map_path), furnished=map_path.stem.endswith(FURNISHED_SUFFIX), method=method, **run,
-                   rooms=graph.number_of_nodes(), portals=graph.number_of_edges(), params=_params_jsonable(params))
+                   rooms=graph.number_of_nodes(), portals=graph.number_of_edges(), params=_params_jsonable(params or {}))
     metrics.update(_score(image_labels, ground_truth, map_path))
     return RoomSegmentation(map_path, labels, image_labels, m["free"], m["resolution"], m["origin"], m["row0_top"],
                             graph, metrics)

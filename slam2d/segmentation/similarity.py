@@ -18,6 +18,7 @@ from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
 from slam2d.errors import InputError
+from slam2d.segmentation.base import SIMILARITY_MEASURES, register_similarity
 from slam2d.segmentation.observations import Observations, cell_centres
 
 __all__ = [
@@ -138,6 +139,7 @@ def local_scale(n: int, pairs: np.ndarray, dist: np.ndarray, knn: int = 7) -> np
     return np.maximum(np.where(np.isfinite(sc), sc, med), 1e-6)
 
 
+@register_similarity("hausdorff")
 def hausdorff_similarity(obs: Observations, sigma: float | None = None, radius: float = 4.0,
                          max_points: int | None = 60, knn: int = 15) -> sparse.csr_array:
     """Hausdorff similarity of the observations' hit points: exp(-H / sigma), or with
@@ -165,6 +167,7 @@ def hausdorff_similarity(obs: Observations, sigma: float | None = None, radius: 
 # --------------------------------------------------------------------------- (2) nearest neighbour
 
 
+@register_similarity("nearest_neighbour")
 def nearest_neighbour_similarity(obs: Observations, threshold: float = 0.1, sigma: float | None = None,
                                  radius: float = 4.0, max_points: int | None = 60, knn: int = 7) -> sparse.csr_array:
     """Nearest-neighbour similarity 1 / (1 + R / sigma) (thesis Algorithm 1, bounded and symmetric).
@@ -320,6 +323,7 @@ def associate_corners(points: np.ndarray, threshold: float = 0.3) -> np.ndarray:
     return csgraph.connected_components(g, directed=False)[1].astype(np.int64)
 
 
+@register_similarity("feature_points", options_of=(extract_corners,))
 def feature_point_similarity(obs: Observations, threshold: float = 0.3, min_views: int = 2,
                              norm: str = "min", **corner_kw) -> sparse.csr_array:
     """Shared corners |C_i & C_j| / min(|C_i|, |C_j|) (``norm="min"``) or Jaccard (``norm="jaccard"``).
@@ -365,6 +369,7 @@ def virtual_points(obs: Observations, spacing_m: float | None = None) -> np.ndar
     return cell_centres(np.column_stack([rows * step + off, cols * step + off]), obs.resolution, obs.origin)
 
 
+@register_similarity("visibility")
 def visibility_similarity(obs: Observations, spacing_m: float | None = 1.0, norm: str = "jaccard",
                           slack: float = 0.05) -> np.ndarray:
     """Virtual-visibility similarity (thesis eq. 19): shared visible virtual points, normalised.
@@ -395,13 +400,8 @@ def visibility_similarity(obs: Observations, spacing_m: float | None = 1.0, norm
     return s
 
 
-SIMILARITIES = {
-    "hausdorff": hausdorff_similarity,
-    "nearest_neighbour": nearest_neighbour_similarity,
-    "feature_points": feature_point_similarity,
-    "visibility": visibility_similarity,
-}
-"""Similarity measures by name."""
+SIMILARITIES = SIMILARITY_MEASURES
+"""Similarity measures by name (the registry: iterating gives the names)."""
 
 
 def similarity_matrix(obs: Observations, name: str = "visibility", **params):
@@ -409,16 +409,4 @@ def similarity_matrix(obs: Observations, name: str = "visibility", **params):
 
     Unknown measure names and parameters are an :class:`InputError` naming them.
     """
-    import inspect
-
-    if name not in SIMILARITIES:
-        raise InputError("similarity", f"unknown measure {name!r}; choose from {sorted(SIMILARITIES)}")
-    fn = SIMILARITIES[name]
-    sig = inspect.signature(fn)
-    has_kw = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values())
-    bad = sorted(set(params) - set(sig.parameters) - {"obs"}) if not has_kw else []
-    if name == "feature_points":
-        bad = sorted(set(params) - set(sig.parameters) - set(inspect.signature(extract_corners).parameters))
-    if bad:
-        raise InputError("similarity_params", f"unknown parameter(s) {bad} of measure {name!r}")
-    return fn(obs, **params)
+    return SIMILARITY_MEASURES.create(name, params, obs)

@@ -21,22 +21,25 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from numba import njit
-from pydantic import Field, ValidationError
+from pydantic import Field, ValidationError, create_model
 from scipy import linalg, sparse
 from scipy.sparse.linalg import eigsh
 from threadpoolctl import threadpool_limits
 
 from slam2d.config import Section
 from slam2d.errors import InputError
+from slam2d.registry import Choice, validation_error
+from slam2d.segmentation.base import SEGMENTATION_METHODS, SIMILARITY_MEASURES, register_method
 from slam2d.segmentation.observations import Observations, dda_start, dda_step, virtual_observations
 from slam2d.segmentation.similarity import similarity_matrix
 
 __all__ = [
     "SpectralConfig",
+    "SpectralOptions",
     "SegmentationResult",
     "binarise",
     "second_order",
@@ -52,6 +55,7 @@ __all__ = [
     "label_free_cells",
     "merge_open_boundaries",
     "segment_spectral",
+    "spectral",
 ]
 
 log = logging.getLogger(__name__)
@@ -71,7 +75,7 @@ a few metres apart, and sharing neighbours reaches further (benchmarked: +2 to +
 class SpectralConfig(Section):
     """Parameters of :func:`segment_spectral` (defaults are the benchmarked best)."""
 
-    similarity: Literal["visibility", "hausdorff", "nearest_neighbour", "feature_points"] = "visibility"
+    similarity: Annotated[str, Choice("similarity_measures")] = "visibility"
     spacing_m: float = Field(1.2, gt=0, description="viewpoint lattice step, m")
     beams: int = Field(360, gt=3, description="beams per virtual scan over 360 deg")
     max_range: float = Field(20.0, gt=0, description="virtual scan range, m")
@@ -110,6 +114,15 @@ class SpectralConfig(Section):
     )
     merge_min_contact_m: float = Field(0.5, ge=0, description="least common boundary for a merge, m")
     merge_elongation: float = Field(3.0, ge=0, description="merge only segments with area >= this * width^2")
+
+
+SpectralOptions = create_model(
+    "SpectralOptions", __base__=Section, __doc__="The options of the ``spectral`` method (``segmentation.params``): "
+    "SpectralConfig's but the measure (``segmentation.similarity``); the seed defaults to the run's.",
+    **{name: (f.annotation, f) for name, f in SpectralConfig.model_fields.items()
+       if name not in ("similarity", "seed")},
+    seed=(int | None, Field(None, description="k-means seed; None: the run's seed")),
+)
 
 
 @dataclass(eq=False)
@@ -734,8 +747,7 @@ def segment_spectral(free, resolution: float, similarity: str = "visibility", *,
     try:
         cfg = SpectralConfig.model_validate({**base, **params, "similarity": similarity})
     except ValidationError as err:
-        e = err.errors()[0]
-        raise InputError("segment_spectral: " + ".".join(map(str, e["loc"])), e["msg"]) from None
+        raise validation_error(err, "segment_spectral", model=SpectralConfig) from None
     free = np.asarray(free, dtype=bool)
     if free.ndim != 2:
         raise InputError("segment_spectral", f"free must be a 2-D mask, got shape {free.shape}")
@@ -765,3 +777,17 @@ def segment_spectral(free, resolution: float, similarity: str = "visibility", *,
              cfg.similarity, len(obs), k, sil, wall, cpu)
     timings = {"wall": sw.wall, "cpu": sw.cpu, "cpu_total": cpu}
     return SegmentationResult(labels, int(k), float(sil), wall, lab, obs, timings)
+
+
+@register_method("spectral", config=SpectralOptions, takes=("similarity", "seed"))
+def spectral(free, resolution: float, options, similarity: str = "visibility", seed: int = 0) -> dict:
+    """Spectral clustering of virtual observations compared by a similarity measure, k by silhouette (the thesis)."""
+    found = SIMILARITY_MEASURES.canonical(similarity)
+    if found is None:
+        raise SIMILARITY_MEASURES.unknown(similarity)
+    SIMILARITY_MEASURES.resolve_options(found, options.similarity_params,
+                                        f"{SEGMENTATION_METHODS.options_key}.similarity_params")  # before any work
+    params = {**options.model_dump(), "seed": seed if options.seed is None else options.seed}
+    res = segment_spectral(free, resolution, similarity=found, **params)
+    return dict(labels=np.asarray(res.labels, np.int32), seconds=float(res.seconds), k=int(res.k),
+                silhouette=float(res.silhouette), similarity=found)

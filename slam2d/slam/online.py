@@ -1,7 +1,8 @@
 """OnlineSlam: the configured frontend and pose graph fed one scan at a time.
 
-The same objects as ``SlamPipeline``: ``create_frontend`` for the frontend,
-``GraphSlamBackend`` for keyframes, loop closures and optimisation, so that
+The same objects as ``SlamPipeline``: ``create_frontend`` for the frontend, the
+back end ``backend.name`` names (one with a pose graph: ``GraphSlamBackend``) for
+keyframes, loop closures and optimisation, so that
 ``finish()`` returns the batch pipeline's poses for the same stream. At any
 moment ``pose`` is the back end's current estimate of the latest scan and
 ``grid`` the occupancy grid at the current keyframe estimates, kept by a
@@ -14,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from slam2d import geometry
+from slam2d.backend.base import BACKENDS
 from slam2d.config import ExperimentConfig
 from slam2d.errors import InputError
 from slam2d.frontends import create_frontend
@@ -32,13 +34,12 @@ class OnlineSlam:
     """
 
     def __init__(self, cfg: ExperimentConfig, tolerance: float | None = None):
-        from slam2d.backend.slam import GraphSlamBackend
-
-        if cfg.backend.name != "pose_graph":
-            raise InputError("backend.name", f"online SLAM needs the 'pose_graph' back end, got '{cfg.backend.name}'")
+        self.backend = BACKENDS.create(cfg.backend.name, None, cfg.backend)
+        if self.backend.graph is None:
+            raise InputError("backend.name", f"online SLAM needs a back end with a pose graph ('pose_graph'), "
+                                             f"got '{cfg.backend.name}'")
         self.cfg = cfg
         self.frontend = create_frontend(cfg.frontend.name, cfg.frontend.options)
-        self.backend = GraphSlamBackend(cfg.backend)
         self.map = KeyframeGrid(cfg.mapping, tolerance)
         self.scans: list[Scan] = []
         self.confidences: list[float] = []
