@@ -22,7 +22,7 @@ import numpy as np
 
 from slam2d.config import MappingConfig
 from slam2d.mapping.export import save_map_png, save_map_server
-from slam2d.mapping.occupancy import OccupancyGrid
+from slam2d.mapping.grid import OccupancyGrid
 
 
 def synthetic_grid(rows: int, cols: int, room: int = 200, seed: int = 0) -> OccupancyGrid:

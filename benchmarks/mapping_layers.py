@@ -34,9 +34,9 @@ import numpy as np
 
 from slam2d.mapping.export import LOADED_LOG_ODDS
 from slam2d.mapping.geometric import LineMap, chamfer, extract_line_map, line_scores
-from slam2d.mapping.layers import load_grid
+from slam2d.mapping.maps import load_map
 from slam2d.mapping.mesh import footprint_hausdorff, solids_watertight, wall_mesh
-from slam2d.mapping.occupancy import OccupancyGrid
+from slam2d.mapping.grid import OccupancyGrid
 from slam2d.mapping.quadtree import QuadTree, decode_trinary, encode_trinary, trinary_values
 from slam2d.mapping.sparse import HashedGrid, Triplets, sparsity
 
@@ -147,7 +147,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     paths = [p for p in sorted(ROOMS.glob("*.png")) if not p.stem.endswith(("_furnitures", "_gt_segmentation"))]
     names = [p.stem for p in paths] + [f"{p.parent.name}/{p.name}" for p in args.maps]
-    grids = [load_grid(p) for p in paths + list(args.maps)]
+    grids = [load_map(p) for p in paths + list(args.maps)]
     if args.mesh_only:
         masks = [g.occupied_mask() for g in grids]
         lines = [extract_line_map(m, g.resolution, g.origin) for m, g in zip(masks, grids, strict=True)]

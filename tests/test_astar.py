@@ -206,7 +206,7 @@ def test_floor_plan_and_map_server_loading(tmp_path):
 
     from slam2d.config import MappingConfig
     from slam2d.mapping.export import save_map_server
-    from slam2d.mapping.occupancy import OccupancyGrid
+    from slam2d.mapping.grid import OccupancyGrid
 
     img = np.full((4, 6), 255, np.uint8)
     img[0, :] = 0  # top row of the image is a wall

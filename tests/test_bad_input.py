@@ -164,7 +164,7 @@ def _map(tmp_path, wall=slice(2, 18)):
     """A 20 x 20 free map with a wall on row 10, written as map.pgm + map.yaml; the YAML's path."""
     from slam2d.config import MappingConfig
     from slam2d.mapping.export import save_map_server
-    from slam2d.mapping.occupancy import OccupancyGrid
+    from slam2d.mapping.grid import OccupancyGrid
 
     lo = np.full((20, 20), -3.0, np.float32)
     lo[10, wall] = 3.0
@@ -443,7 +443,7 @@ def test_plan_without_path_writes_no_folder_and_segment_needs_free_space(tmp_pat
 def test_16_bit_floor_plans_and_worlds_are_scaled_not_clipped(tmp_path):
     from PIL import Image
 
-    from slam2d.planning.grid import load_floor_plan as planning_floor_plan
+    from slam2d.planning.grid import load_grid
     from slam2d.segmentation.evaluate import load_floor_plan as segmentation_floor_plan
     from slam2d.sim.world import World
 
@@ -452,7 +452,7 @@ def test_16_bit_floor_plans_and_worlds_are_scaled_not_clipped(tmp_path):
     Image.fromarray(grey).save(tmp_path / "plan16.png")
     free, _ = segmentation_floor_plan(tmp_path / "plan16.png")
     assert free.sum() == 44
-    assert planning_floor_plan(tmp_path / "plan16.png").free.sum() == 44
+    assert load_grid(tmp_path / "plan16.png").free.sum() == 44
     assert World.from_png(tmp_path / "plan16.png", 0.1).grid[0].sum() == 4
 
 

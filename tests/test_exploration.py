@@ -505,7 +505,7 @@ def test_the_area_to_explore_leaves_out_what_a_plan_leaves_unknown(tmp_path):
 
     from slam2d.config import MappingConfig
     from slam2d.exploration.coverage import Coverage
-    from slam2d.mapping.occupancy import OccupancyGrid
+    from slam2d.mapping.grid import OccupancyGrid
 
     mapped = OccupancyGrid(np.where(seen, -3.0, 0.0), frame.resolution, frame.origin)  # free where the laser saw
     assert Coverage(asked, frame, MappingConfig(), world.unmapped).iou(mapped) == 1.0  # the band says nothing

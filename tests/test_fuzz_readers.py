@@ -243,7 +243,7 @@ def map_files(tmp_path_factory):
     """(map.yaml bytes, map.pgm bytes) of a small saved map."""
     from slam2d.config import MappingConfig
     from slam2d.mapping.export import save_map_server
-    from slam2d.mapping.occupancy import OccupancyGrid
+    from slam2d.mapping.grid import OccupancyGrid
 
     lo = np.full((12, 16), -3.0, np.float32)
     lo[6, 2:14] = 3.0

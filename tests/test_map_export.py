@@ -11,7 +11,7 @@ from PIL import Image
 from slam2d.config import MappingConfig
 from slam2d.mapping import export
 from slam2d.mapping.export import FREE, OCCUPIED, UNKNOWN, load_map_server, save_map_png, save_map_server
-from slam2d.mapping.occupancy import OccupancyGrid
+from slam2d.mapping.grid import OccupancyGrid
 
 
 def walled_grid(rows: int, cols: int, room: int = 250) -> OccupancyGrid:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slam2d.mapping.occupancy import OccupancyGrid
+from slam2d.mapping.grid import OccupancyGrid
 
 
 def _grid(seed: int = 0) -> OccupancyGrid:
@@ -422,14 +422,14 @@ def test_map_command_takes_a_floor_plan_image(tmp_path):
     from typer.testing import CliRunner
 
     from slam2d.cli import app
-    from slam2d.mapping.layers import load_grid
+    from slam2d.mapping.maps import load_map
     from slam2d.mapping.quadtree import QuadTree
 
     img = np.full((40, 60), 255, np.uint8)
     img[5, 5:55] = img[35, 5:55] = 0  # two walls; image row 0 is the top
     img[10:20, 10:20] = 205  # unknown
     Image.fromarray(img).save(tmp_path / "plan.png")
-    grid = load_grid(tmp_path / "plan.png")
+    grid = load_map(tmp_path / "plan.png")
     assert grid.resolution == 0.05 and np.array_equal(grid.occupied_mask(), img[::-1] == 0)
     assert np.count_nonzero(grid.log_odds == 0) == 100
     out = CliRunner().invoke(app, ["map", str(tmp_path / "plan.png"), "--layers", "quadtree,lines", "-o",
@@ -437,3 +437,30 @@ def test_map_command_takes_a_floor_plan_image(tmp_path):
     assert out.exit_code == 0, out.output
     made = next((tmp_path / "r").glob("map-plan-*"))
     assert np.array_equal(QuadTree.load(made / "map.quadtree").to_mask(), img[::-1] == 0)
+
+
+def test_one_loader_reads_every_map_file_with_rows_up(tmp_path):
+    """A floor plan, its map_server map, the results folder holding that map and a Moving AI map load
+    through one function into one grid type; the image's top row is the grid's last row."""
+    from PIL import Image
+
+    from slam2d.config import MappingConfig
+    from slam2d.mapping.export import save_map_server
+    from slam2d.mapping.maps import load_map
+    from slam2d.planning.grid import load_grid
+
+    img = np.full((10, 12), 255, np.uint8)
+    img[0, :] = 0  # a wall along the top of the image
+    img[5:7, 2:4] = 205  # unknown
+    Image.fromarray(img).save(tmp_path / "plan.png")
+    plan = load_map(tmp_path / "plan.png", 0.1)
+    assert plan.resolution == 0.1 and plan.occupied_mask()[-1].all() and not plan.occupied_mask()[:-1].any()
+    save_map_server(plan, tmp_path / "run" / "map", MappingConfig())
+    for source in (tmp_path / "run" / "map.yaml", tmp_path / "run"):
+        again = load_map(source)
+        assert np.array_equal(again.occupied_mask(), plan.occupied_mask())
+        assert np.array_equal(again.free_mask(), plan.free_mask())
+    assert np.array_equal(load_grid(tmp_path / "run").free, load_grid(tmp_path / "plan.png", resolution=0.1).free)
+    (tmp_path / "m.map").write_text("type octile\nheight 2\nwidth 3\nmap\n@..\n..T\n")
+    grid = load_map(tmp_path / "m.map")
+    assert grid.resolution == 1.0 and grid.free_mask().tolist() == [[False, True, True], [True, True, False]]

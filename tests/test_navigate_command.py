@@ -55,7 +55,7 @@ def test_bad_navigation_input_is_a_one_line_error(tmp_path):
 def test_a_goal_beyond_a_map_being_built_is_planned_through_unknown_space():
     """The live map covers only what the robot has seen; with unknown cells free the goal beyond it
     is planned to, not reported unreachable (it was, at the first step of SLAM runs)."""
-    from slam2d.mapping.occupancy import OccupancyGrid
+    from slam2d.mapping.grid import OccupancyGrid
     from slam2d.navigation import Navigator, NavigatorConfig
 
     seen = OccupancyGrid(np.full((40, 40), -1.0, dtype=np.float32), 0.05, (0.0, 0.0))  # 2 m x 2 m, all free

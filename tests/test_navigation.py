@@ -279,7 +279,7 @@ def test_a_new_map_that_blocks_the_path_makes_the_navigator_replan(hall):
 
 @pytest.mark.parametrize("unknown_free", [False, True])
 def test_unknown_cells_of_an_occupancy_map_are_free_or_blocked_as_configured(hall, unknown_free):
-    from slam2d.mapping.occupancy import OccupancyGrid
+    from slam2d.mapping.grid import OccupancyGrid
 
     world, grid = hall
     log_odds = np.where(grid.free, -2.0, 2.0)
@@ -350,7 +350,7 @@ def test_a_goal_blocked_in_a_map_being_built_is_approached_until_the_map_clears(
     """A live map holds a person mapped in passing on the goal (the world has nothing there) until
     the robot comes within 1.5 m: being built, the robot drives to the nearest free cell and on to
     the goal once it clears; a fixed map's blocked goal is unreachable at once."""
-    from slam2d.mapping.occupancy import OccupancyGrid
+    from slam2d.mapping.grid import OccupancyGrid
 
     world, grid = hall
     goal = np.array([8.5, 2.0])

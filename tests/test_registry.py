@@ -241,11 +241,11 @@ def test_plugin_parts_run_from_the_cli_and_in_a_sweep(plugin, tmp_path):
     out = runner.invoke(app, ["explore", "--strategy", "farthest_frontier", "-c", str(_yaml(tmp_path, explore)),
                               "-q"])
     assert out.exit_code == 0, out.output
-    for command, config, key, name in (
+    for command, base, key, name in (
             ("explore", explore, "exploration.strategy", "farthest_frontier"),
             ("segment", {"plugins": [str(plugin)], "map": str(path), "segmentation": {"params": {"k": 2}},
                          "output": {"root": str(tmp_path / "res")}}, "segmentation.similarity", "centre_distance")):
-        sweep = _yaml(tmp_path, {"command": command, "config": config, "workers": 1,
+        sweep = _yaml(tmp_path, {"command": command, "config": base, "workers": 1,
                                  "variants": [{"name": "plugin", "set": {key: name}}]}, f"{command}_sweep.yaml")
         folder, rows = run_sweep(sweep, quiet=True)
         assert rows[0]["error"] == "", rows

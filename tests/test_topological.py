@@ -78,7 +78,7 @@ def test_cell_world_conventions():
 
 
 def test_grid_orientation_matches_occupancy_grid():
-    from slam2d.mapping.occupancy import OccupancyGrid
+    from slam2d.mapping.grid import OccupancyGrid
 
     grid = OccupancyGrid(np.zeros((10, 20)), 0.5, (2.0, 3.0))
     cells = np.array([[0, 0], [3, 7], [9, 19]])

@@ -13,6 +13,7 @@ import numpy as np
 from scipy import ndimage
 
 from slam2d.errors import InputError
+from slam2d.mapping.maps import load_map
 from slam2d.types import GridFrame
 
 __all__ = ["KnownMap"]
@@ -115,11 +116,8 @@ class KnownMap(GridFrame):
 
             return cls.from_world(World.office(), resolution)
         path = Path(path)
-        if not path.is_file():
-            raise InputError(path, "map not found (a map.yaml, a floor-plan image or 'office')")
-        from slam2d.mapping.layers import load_grid
-
-        if path.suffix.lower() not in (".yaml", ".yml", ".png", ".pgm", ".jpg", ".jpeg", ".bmp"):
+        if not path.exists():
+            raise InputError(path, "map not found (a map.yaml, a results folder, a floor-plan image or 'office')")
+        if path.is_file() and path.suffix.lower() not in (".yaml", ".yml", ".png", ".pgm", ".jpg", ".jpeg", ".bmp"):
             raise InputError(path, "a map is a map.yaml or an image (png, pgm)")
-        grid = load_grid(path, resolution)
-        return cls.from_occupancy(grid, name=path.stem)
+        return cls.from_occupancy(load_map(path, resolution), name=path.stem)

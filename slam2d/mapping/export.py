@@ -10,7 +10,7 @@ import numpy as np
 from slam2d.config import MappingConfig, read_yaml, short_repr
 from slam2d.errors import InputError
 from slam2d.mapping.image import read_grey
-from slam2d.mapping.occupancy import OccupancyGrid, logit
+from slam2d.mapping.grid import OccupancyGrid, logit
 
 __all__ = ["save_map_server", "load_map_server", "save_map_png", "downsample", "FREE", "OCCUPIED", "UNKNOWN"]
 
@@ -97,6 +97,12 @@ def _pixel_log_odds(meta: dict) -> np.ndarray:
         p = np.clip(occ, 0.001, 0.999)
         lo = np.log(p / (1.0 - p))
     return lo.astype(np.float32)
+
+
+def map_yaml_free_thresh(path) -> float:
+    """The ``free_thresh`` of the map_server YAML at ``path`` (or in the folder ``path``)."""
+    path = Path(path)
+    return float(_read_map_yaml(path / "map.yaml" if path.is_dir() else path)["free_thresh"])
 
 
 def _read_map_yaml(path: Path) -> dict:

@@ -20,26 +20,12 @@ import numpy as np
 
 from slam2d.config import MappingConfig
 from slam2d.mapping.base import MAP_LAYERS, register_layer
-from slam2d.mapping.occupancy import OccupancyGrid
+from slam2d.mapping.grid import OccupancyGrid
 
-__all__ = ["LAYERS", "LayerInputs", "write_layers", "load_grid"]
+__all__ = ["LAYERS", "LayerInputs", "write_layers"]
 
 LAYERS = MAP_LAYERS
 """Layer names of ``mapping.layers`` (the registry: iterating gives the names)."""
-
-
-def load_grid(path, resolution: float = 0.05) -> OccupancyGrid:
-    """A map_server YAML, or a floor-plan image at ``resolution`` m/px (origin its lower-left corner): pixels
-    darker than 128 occupied, 250 and lighter free, the rest unknown."""
-    from slam2d.mapping.export import LOADED_LOG_ODDS, load_map_server
-    from slam2d.mapping.image import read_grey
-
-    path = Path(path)
-    if path.suffix.lower() in (".yaml", ".yml"):
-        return load_map_server(path)
-    grey = read_grey(path)[::-1]  # rows up in y
-    lo = np.where(grey < 128, LOADED_LOG_ODDS, np.where(grey >= 250, -LOADED_LOG_ODDS, 0.0))
-    return OccupancyGrid(lo.astype(np.float32), resolution, (0.0, 0.0))
 
 
 @dataclass(eq=False)

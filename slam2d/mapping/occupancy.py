@@ -23,7 +23,6 @@ through counts as hit. Log-odds are clamped to
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -31,7 +30,8 @@ from numba import njit
 from slam2d import geometry
 from slam2d.config import MappingConfig
 from slam2d.errors import InputError
-from slam2d.types import GridFrame, Scan
+from slam2d.mapping.grid import OccupancyGrid, logit
+from slam2d.types import Scan
 
 __all__ = [
     "OccupancyGrid", "build_grid", "beam_segments", "trace_beams", "check_resolution", "logit",
@@ -51,55 +51,6 @@ MARGIN_M = 0.5
 
 MAX_CELLS = 100_000_000
 """Largest grid build_grid will allocate (12 bytes a cell while building)."""
-
-
-@dataclass(eq=False)
-class OccupancyGrid(GridFrame):
-    """Log-odds grid: ``log_odds`` (H, W) float32, ``resolution`` m/cell,
-    ``origin`` (x, y) m of the lower-left corner of cell ``[0, 0]``."""
-
-    log_odds: np.ndarray
-    resolution: float
-    origin: tuple[float, float]
-
-    def __post_init__(self):
-        self.log_odds = np.asarray(self.log_odds, dtype=np.float32)
-        if self.log_odds.ndim != 2:
-            raise ValueError(f"log_odds must be 2-D, got shape {self.log_odds.shape}")
-        self.resolution = float(self.resolution)
-        self.origin = (float(self.origin[0]), float(self.origin[1]))
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """(H, W) in cells."""
-        return self.log_odds.shape
-
-    @property
-    def extent(self) -> tuple[float, float, float, float]:
-        """(x_min, x_max, y_min, y_max) in metres (matplotlib ``extent``)."""
-        h, w = self.shape
-        ox, oy = self.origin
-        return ox, ox + w * self.resolution, oy, oy + h * self.resolution
-
-    def probability(self) -> np.ndarray:
-        """Occupancy probability (H, W) in [0, 1]."""
-        return 1.0 / (1.0 + np.exp(-self.log_odds.astype(np.float64)))
-
-    def occupied_mask(self, thresh: float = 0.65) -> np.ndarray:
-        """Cells with occupancy probability > ``thresh`` (as map_server reads a map), bool (H, W)."""
-        return self.log_odds > np.float64(logit(thresh))
-
-    def free_mask(self, thresh: float = 0.196) -> np.ndarray:
-        """Cells with occupancy probability < ``thresh`` (as map_server reads a map), bool (H, W)."""
-        return self.log_odds < np.float64(logit(thresh))
-
-
-def logit(p: float) -> float:
-    """Log-odds ``log(p / (1 - p))`` of a probability ``p`` in (0, 1).
-
-    ``log_odds > logit(t)`` is ``probability > t`` without a float64 copy of the grid.
-    """
-    return float(np.log(p) - np.log1p(-p))
 
 
 def build_grid(poses, scans: Sequence[Scan], cfg: MappingConfig) -> OccupancyGrid:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slam2d.mapping.occupancy import OccupancyGrid
+from slam2d.mapping.grid import OccupancyGrid
 
 __all__ = ["SPARSE_SHARE", "Triplets", "HashedGrid", "sparsity"]
 

@@ -19,30 +19,23 @@ import numpy as np
 from scipy import ndimage
 
 from slam2d.errors import InputError
+from slam2d.mapping.export import map_yaml_free_thresh
+from slam2d.mapping.maps import is_map_yaml, load_map, read_movingai_map
 from slam2d.types import GridFrame
 
 __all__ = [
     "PlanningGrid",
     "Scenarios",
     "load_grid",
-    "load_map_yaml",
-    "load_floor_plan",
     "load_movingai_map",
     "load_scenarios",
     "grid_from_occupancy",
     "inflate",
     "wall_cost",
-    "FLOOR_PLAN_FREE_MIN",
-    "MOVINGAI_PASSABLE",
 ]
 
-FLOOR_PLAN_FREE_MIN = 250
-"""Grey level (0-255) from which a floor-plan pixel is free (white)."""
-
-MOVINGAI_PASSABLE = frozenset(".GS")
-"""Passable terrain of Moving AI octile maps; ``@ O T W`` are blocked."""
-
-_MOVINGAI_KNOWN = frozenset(".GS@OTW")
+DEFAULT_FREE_THRESH = 0.196
+"""Occupancy probability below which a cell is free (map_server's default ``free_thresh``)."""
 
 
 @dataclass(eq=False)
@@ -162,98 +155,22 @@ def wall_cost(grid: PlanningGrid, distance: float, weight: float = 1.0) -> np.nd
 # ---------------------------------------------------------------- loaders
 
 
-def load_grid(
-    path, *, resolution: float | None = None, origin=(0.0, 0.0), free_thresh: float | None = None
-) -> PlanningGrid:
-    """Load a planning grid by file type.
-
-    ``.yaml``/``.yml``: map_server map (free = p < free_thresh, default the
-    YAML's); ``.map``: Moving AI; any image (``.png``, ``.pgm``, ...): floor
-    plan, free = grey >= 250, with ``resolution`` (default 0.05 m) and ``origin``.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "map file not found")
-    suffix = path.suffix.lower()
-    if suffix in (".yaml", ".yml"):
-        return load_map_yaml(path, free_thresh=free_thresh)
-    if suffix == ".map":
-        return load_movingai_map(path)
-    return load_floor_plan(path, resolution=0.05 if resolution is None else resolution, origin=origin)
-
-
-def grid_from_occupancy(grid, free_thresh: float = 0.196, name: str = "") -> PlanningGrid:
-    """Free = occupancy probability < ``free_thresh``; unknown and occupied are blocked."""
-    return PlanningGrid(grid.free_mask(free_thresh), grid.resolution, grid.origin, name)
-
-
-def load_map_yaml(path, free_thresh: float | None = None) -> PlanningGrid:
-    """map_server YAML + image via :func:`~slam2d.mapping.export.load_map_server`.
-
-    Free = p < ``free_thresh`` (default: the YAML's ``free_thresh``); unknown
-    cells are blocked.
-    """
-    import yaml
-
-    from slam2d.mapping.export import load_map_server
-
-    path = Path(path)
-    occ = load_map_server(path)  # validates the YAML and the image
+def load_grid(path, *, resolution: float | None = None, free_thresh: float | None = None) -> PlanningGrid:
+    """The planning grid of any map file :func:`slam2d.mapping.maps.load_map` reads: free = occupancy
+    probability < ``free_thresh`` (default: a map.yaml's own, else 0.196); unknown cells are blocked."""
     if free_thresh is None:
-        free_thresh = float(yaml.safe_load(path.read_text())["free_thresh"])
-    return grid_from_occupancy(occ, free_thresh, name=str(path))
-
-
-def load_floor_plan(
-    path, resolution: float = 0.05, origin=(0.0, 0.0), free_min: int = FLOOR_PLAN_FREE_MIN
-) -> PlanningGrid:
-    """Grey floor plan (free white >= ``free_min``); image row 0 is the top of the map."""
-    from slam2d.mapping.image import read_grey
-
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "floor plan not found")
-    grey = read_grey(path)
-    return PlanningGrid(np.flipud(grey >= free_min), resolution, origin, str(path))
-
-
-def _header_value(lines: list[str], i: int, key: str, path: Path) -> int:
-    if i >= len(lines):
-        raise InputError(f"{path}:{i + 1}", f"expected '{key} N', got end of file")
-    parts = lines[i].split()
-    if len(parts) != 2 or parts[0] != key or not parts[1].isdigit() or int(parts[1]) <= 0:
-        raise InputError(f"{path}:{i + 1}", f"expected '{key} N' with N > 0, got {lines[i]!r}")
-    return int(parts[1])
+        free_thresh = map_yaml_free_thresh(path) if is_map_yaml(path) else DEFAULT_FREE_THRESH
+    return grid_from_occupancy(load_map(path, resolution), free_thresh, name=str(path))
 
 
 def load_movingai_map(path) -> PlanningGrid:
-    """Moving AI ``.map``: header ``type``, ``height``, ``width``, ``map``, then the rows.
+    """A Moving AI ``.map`` (:func:`slam2d.mapping.maps.read_movingai_map`) at 1 m per cell, rows as in the file."""
+    return PlanningGrid(read_movingai_map(path), 1.0, (0.0, 0.0), str(path))
 
-    Passable terrain ``. G S``; ``@ O T W`` are blocked; anything else is an error.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(path, "map file not found")
-    lines = path.read_text(errors="replace").splitlines()
-    if not lines or not lines[0].startswith("type"):
-        raise InputError(f"{path}:1", f"expected 'type octile', got {lines[0] if lines else ''!r}")
-    h = _header_value(lines, 1, "height", path)
-    w = _header_value(lines, 2, "width", path)
-    if len(lines) < 4 or lines[3].strip() != "map":
-        raise InputError(f"{path}:4", f"expected 'map', got {lines[3] if len(lines) > 3 else ''!r}")
-    rows = lines[4 : 4 + h]
-    if len(rows) < h:
-        raise InputError(f"{path}:{4 + len(rows) + 1}", f"expected {h} map rows, file ends after {len(rows)}")
-    for k, row in enumerate(rows):
-        if len(row) != w:
-            raise InputError(f"{path}:{k + 5}", f"expected {w} characters, got {len(row)}")
-    text = np.frombuffer("".join(rows).encode("latin-1", "replace"), dtype=np.uint8).reshape(h, w)
-    known = np.isin(text, np.frombuffer("".join(sorted(_MOVINGAI_KNOWN)).encode(), dtype=np.uint8))
-    if not known.all():
-        r, c = np.argwhere(~known)[0]
-        raise InputError(f"{path}:{r + 5}", f"unknown terrain {chr(text[r, c])!r} at column {c + 1}")
-    free = np.isin(text, np.frombuffer("".join(sorted(MOVINGAI_PASSABLE)).encode(), dtype=np.uint8))
-    return PlanningGrid(free, 1.0, (0.0, 0.0), str(path))
+
+def grid_from_occupancy(grid, free_thresh: float = DEFAULT_FREE_THRESH, name: str = "") -> PlanningGrid:
+    """Free = occupancy probability < ``free_thresh``; unknown and occupied are blocked."""
+    return PlanningGrid(grid.free_mask(free_thresh), grid.resolution, grid.origin, name)
 
 
 @dataclass(eq=False)

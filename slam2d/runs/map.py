@@ -12,13 +12,11 @@ from slam2d import config as config_mod
 from slam2d.config import CommandConfig, MappingConfig
 from slam2d.datasets.registry import resolve_data_path
 from slam2d.errors import InputError
-from slam2d.mapping.layers import LAYERS, load_grid, write_layers
+from slam2d.mapping.layers import LAYERS, write_layers
+from slam2d.mapping.maps import load_map
 from slam2d.runs.results import json_text, results_folder
 
 __all__ = ["MapConfig", "run_map"]
-
-FLOOR_PLAN_RESOLUTION = 0.05  # m per pixel of a floor-plan image unless ``resolution`` says otherwise
-
 
 class MapConfig(CommandConfig):
     """``slam2d map``: the map (map.yaml or a floor-plan image) and the layers to make of it."""
@@ -40,7 +38,7 @@ def run_map(cfg: MapConfig, quiet: bool = False) -> Path:
     if cfg.map is None:
         raise InputError("map", "no map given (map: FILE in the config, or slam2d map MAP)")
     map_path = resolve_data_path(cfg.map, key="map")
-    grid = load_grid(map_path, cfg.resolution or FLOOR_PLAN_RESOLUTION)
+    grid = load_map(map_path, cfg.resolution)
     with results_folder(cfg.output.root, cfg.name or f"map-{map_path.stem}") as (work, published):
         (work / "config.yaml").write_text(config_mod.dump(cfg))
         stats = write_layers(grid, work, MappingConfig(layers=cfg.layers), cfg.output.figures, cfg.wall_height)

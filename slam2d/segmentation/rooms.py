@@ -14,14 +14,15 @@ from pathlib import Path
 
 import networkx as nx
 import numpy as np
-import yaml
 
 from slam2d.errors import InputError
+from slam2d.mapping.export import map_yaml_free_thresh
+from slam2d.mapping.maps import is_map_yaml, load_map
 from slam2d.mapping.topological import region_graph
 from slam2d.segmentation.base import SEGMENTATION_METHODS, segment
-from slam2d.segmentation.evaluate import load_floor_plan, load_ground_truth, score
+from slam2d.segmentation.evaluate import load_ground_truth, score
 
-__all__ = ["RoomSegmentation", "segment_map", "segment_free", "find_ground_truth", "load_map"]
+__all__ = ["RoomSegmentation", "segment_map", "segment_free", "find_ground_truth", "free_space"]
 
 
 
@@ -29,28 +30,19 @@ FURNISHED_SUFFIX = "_furnitures"
 GT_SUFFIX = "_gt_segmentation.png"
 
 
-def load_map(map_path, resolution: float | None = None) -> dict:
-    """Free space of a floor-plan image or a map_server YAML.
+def free_space(map_path, resolution: float | None = None) -> dict:
+    """Free space of a map file (:func:`slam2d.mapping.maps.load_map`), in the orientation of its image.
 
-    Returns ``dict(free (H, W) bool, resolution m, origin (x, y) m, row0_top)``;
-    ``row0_top`` is False for YAML maps, whose grid rows run up in y (as
-    :class:`slam2d.mapping.occupancy.OccupancyGrid`).
+    Returns ``dict(free (H, W) bool, resolution m, origin (x, y) m, row0_top)``: a floor plan is
+    segmented as drawn (``row0_top``: image row 0 the top); a map_server map in grid rows (rows up in y),
+    free = occupancy probability < its YAML's ``free_thresh``.
     """
     path = Path(map_path)
-    if not path.is_file():
-        raise InputError(path, "map file not found")
-    if path.suffix.lower() in (".yaml", ".yml"):
-        from slam2d.mapping.export import load_map_server  # loads numba: only for map_server maps
-
-        grid = load_map_server(path)
-        free_thresh = float(yaml.safe_load(path.read_text())["free_thresh"])
-        return dict(free=grid.free_mask(free_thresh), resolution=grid.resolution, origin=grid.origin, row0_top=False)
-    free, res = load_floor_plan(path)
-    if resolution is not None:
-        if not resolution > 0:
-            raise InputError("resolution", f"must be > 0 m/px, got {resolution}")
-        res = float(resolution)
-    return dict(free=free, resolution=float(res), origin=(0.0, 0.0), row0_top=True)
+    grid = load_map(path, resolution)
+    if is_map_yaml(path):
+        free = grid.free_mask(map_yaml_free_thresh(path))
+        return dict(free=free, resolution=grid.resolution, origin=grid.origin, row0_top=False)
+    return dict(free=np.flipud(grid.free_mask()), resolution=grid.resolution, origin=(0.0, 0.0), row0_top=True)
 
 
 def find_ground_truth(map_path) -> Path | None:
@@ -113,7 +105,7 @@ def segment_map(map_path, method="spectral", similarity="visibility", *, ground_
     """
     map_path = Path(map_path)
     SEGMENTATION_METHODS.resolve_options(method, params, "segmentation.params")  # before reading the map
-    m = load_map(map_path, resolution)
+    m = free_space(map_path, resolution)
     if not m["free"].any():
         raise InputError(map_path, "no free cell: nothing to segment (check the image, negate and free_thresh)")
     labels, run = segment_free(m["free"], m["resolution"], method, similarity, params, seed)

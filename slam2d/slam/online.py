@@ -20,7 +20,7 @@ from slam2d.config import ExperimentConfig
 from slam2d.errors import InputError
 from slam2d.frontends import create_frontend
 from slam2d.frontends.base import FrontendResult
-from slam2d.mapping.occupancy import OccupancyGrid
+from slam2d.mapping.grid import OccupancyGrid
 from slam2d.slam.keyframe_grid import GridUpdate, KeyframeGrid
 from slam2d.types import Scan
 
