@@ -25,7 +25,8 @@ SETTINGS = (((0.1, 0.1, 0.01), 1), ((0.01, 0.01, 0.01), 1))  # (pose thresholds,
 
 def replay(graph, every: int, threshold, skip: int) -> tuple[float, float, int, float, float]:
     """(incremental s, final batch s, iSAM2 updates, error before and after the final batch) of one replay."""
-    from slam2d.backend import batch, pose_graph as pgm
+    from slam2d.backend import batch
+    from slam2d.backend import pose_graph as pgm
     from slam2d.config import BackendConfig
 
     saved = pgm.RELINEARIZE_POSE, pgm.RELINEARIZE_SKIP
