@@ -7,7 +7,7 @@ from slam2d import config, geometry
 from slam2d.datasets.registry import open_dataset
 from slam2d.datasets.simulator import World
 from slam2d.evaluation.trajectory import ate
-from slam2d.frontends.gate import odometry_information
+from slam2d.frontends.odometry import odometry_information
 from slam2d.frontends.lines import (
     LineExtractionConfig,
     LineFrontend,

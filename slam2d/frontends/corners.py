@@ -49,13 +49,22 @@ from pydantic import Field
 from slam2d import geometry
 from slam2d.config import Section
 from slam2d.frontends.base import FrontendResult, register_frontend
-from slam2d.frontends.gate import (
-    HeadingCalibration,
-    MotionNoise,
-    SimilarityGate,
+from slam2d.frontends.common import (
+    MaxCorrectionThetaDeg,
+    MaxCorrectionXY,
+    MaxRange,
+    MaxSigmaThetaDeg,
+    MaxSigmaXY,
+    MinRange,
+    MinSigmaThetaDeg,
+    MinSigmaXY,
+    beyond_correction,
     bound_information,
-    odometry_spike,
+    local_information,
+    sigma_bounds,
 )
+from slam2d.frontends.gate import SimilarityGate
+from slam2d.frontends.odometry import HeadingCalibration, MotionNoise, odometry_spike
 from slam2d.types import LandmarkObservation, Scan
 
 log = logging.getLogger(__name__)
@@ -92,8 +101,8 @@ class CornerExtractionConfig(Section):
     noise: float = Field(0.01, gt=0, description="m; floor of the range noise in the arms' angle error")
     significance: float = Field(3.0, ge=0, description="the turn must exceed this many of its standard errors")
     max_offset: float = Field(0.2, gt=0, description="m; the arms' intersection must lie this close to the candidate")
-    min_range: float = Field(0.1, ge=0, description="m; nearer hits are ignored")
-    max_range: float = Field(15.0, gt=0, description="m; farther hits are ignored")
+    min_range: MinRange = 0.1
+    max_range: MaxRange = 15.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -456,9 +465,7 @@ def match_corners(obs, ref, guess, prior: np.ndarray, sigma: float, iterations: 
             break
         inliers[np.flatnonzero(inliers)[np.argmax(excess)]] = False
     pose[2] = geometry.wrap_angle(pose[2])
-    a = np.eye(3)
-    a[:2, :2] = geometry.rotation(pose[2])
-    return CornerMatch(pose, a.T @ h @ a, inliers)
+    return CornerMatch(pose, local_information(h, pose[2]), inliers)
 
 
 # --------------------------------------------------------------------------- the frontend
@@ -481,15 +488,15 @@ class CornerFrontend:
         use_direction: bool = Field(False, description="the corners' bisectors also constrain the heading")
         sigma_corner: float = Field(0.05, gt=0, description="m; std of an observed corner against its listed one")
         sigma_direction_deg: float = Field(1.0, gt=0, description="std added to a bisector's own (arm fit) std")
-        max_correction_xy: float = Field(0.5, gt=0, description="m; corrections beyond this are divergence")
-        max_correction_theta_deg: float = Field(15.0, gt=0, description="corrections beyond this are divergence")
+        max_correction_xy: MaxCorrectionXY = 0.5
+        max_correction_theta_deg: MaxCorrectionThetaDeg = 15.0
         motion: MotionNoise = MotionNoise()
         max_pose_sigma_xy: float = Field(0.5, gt=0, description="m; the pose uncertainty between matches stops here")
         max_pose_sigma_theta_deg: float = Field(10.0, gt=0, description="... and here")
-        min_sigma_xy: float = Field(0.005, gt=0, description="m; the information never claims a smaller std")
-        min_sigma_theta_deg: float = Field(0.1, gt=0, description="the information never claims a smaller std")
-        max_sigma_xy: float = Field(1.0, gt=0, description="m; largest std of a direction")
-        max_sigma_theta_deg: float = Field(20.0, gt=0, description="largest std of a direction")
+        min_sigma_xy: MinSigmaXY = 0.005
+        min_sigma_theta_deg: MinSigmaThetaDeg = 0.1
+        max_sigma_xy: MaxSigmaXY = 1.0
+        max_sigma_theta_deg: MaxSigmaThetaDeg = 20.0
         landmarks: bool = Field(True, description="return matched corners as landmark observations")
         landmark_sigma: float = Field(0.2, gt=0, description="m; std of a landmark observation (range, and across)")
         gate: SimilarityGate.Config = SimilarityGate.Config(min_confidence=0.66)
@@ -507,8 +514,7 @@ class CornerFrontend:
         self._last_delta: np.ndarray | None = None
         self._cov_cap = np.array([cfg.max_pose_sigma_xy, cfg.max_pose_sigma_xy,
                                   np.deg2rad(cfg.max_pose_sigma_theta_deg)])
-        self._min_sigma = np.array([cfg.min_sigma_xy, cfg.min_sigma_xy, np.deg2rad(cfg.min_sigma_theta_deg)])
-        self._max_sigma = np.array([cfg.max_sigma_xy, cfg.max_sigma_xy, np.deg2rad(cfg.max_sigma_theta_deg)])
+        self._min_sigma, self._max_sigma = sigma_bounds(cfg)
         self._previous: np.ndarray | None = None
         self._index = 0
         self.calibration = HeadingCalibration(cfg.calibration)
@@ -570,9 +576,7 @@ class CornerFrontend:
                         dir_var=ext.direction_var[sel] + np.deg2rad(cfg.sigma_direction_deg) ** 2)
         prior = np.linalg.inv(predicted + 1e-12 * np.eye(3))
         match = match_corners(corners[sel], self.map.xy[idx[sel]], guess, prior, cfg.sigma_corner, **dirs)
-        corr = geometry.between(guess, match.pose)
-        if (np.hypot(corr[0], corr[1]) > cfg.max_correction_xy
-                or abs(corr[2]) > np.deg2rad(cfg.max_correction_theta_deg)):
+        if beyond_correction(guess, match.pose, cfg.max_correction_xy, cfg.max_correction_theta_deg):
             return self._fallback("correction beyond max_correction")
         used = sel[match.inliers]
         if not len(used):

@@ -40,7 +40,7 @@ odometry prediction fused with the vertex fit by information
 (``odometry_prior``), with fits too far from it rejected (``max_mahalanobis``);
 the pruning of vertices seen only once; and an online calibration of the
 odometry heading (curvature bias and turn scale) from the accepted fits
-(``calibration``, see ``gate.HeadingCalibration``). With ``heading="translation"``,
+(``calibration``, see ``odometry.HeadingCalibration``). With ``heading="translation"``,
 ``arm_heading``, ``wall_heading``, ``odometry_prior``, ``rigid_check``,
 ``calibration`` and the gates off, the frontend is the paper's method as printed.
 """
@@ -58,7 +58,17 @@ from pydantic import Field
 from slam2d import geometry
 from slam2d.config import Section
 from slam2d.frontends.base import FrontendResult, register_frontend
-from slam2d.frontends.gate import HeadingCalibration
+from slam2d.frontends.common import (
+    MaxCorrectionThetaDeg,
+    MaxCorrectionXY,
+    MaxRange,
+    MinRange,
+    MinSigmaThetaDeg,
+    MinSigmaXY,
+    cap_information,
+    local_information,
+)
+from slam2d.frontends.odometry import HeadingCalibration
 from slam2d.types import LandmarkObservation, Scan
 
 __all__ = [
@@ -735,8 +745,8 @@ class FuzzyVertexFrontend:
     class Config(Section):
         """Parameters; defaults suit 180-beam 1-degree SICK logs and the simulator."""
 
-        min_range: float = Field(0.1, ge=0, description="m; ignore hits closer to the sensor")
-        max_range: float = Field(30.0, gt=0, description="m; ignore hits farther from the sensor")
+        min_range: MinRange = 0.1
+        max_range: MaxRange = 30.0
         xi: float = Field(0.05, gt=0, description="m; collinearity tolerance (definition 1)")
         xi_range: float = Field(0.01, ge=0, description="xi added per metre of range (range-proportional noise)")
         max_gap: float | None = Field(0.5, gt=0, description="m; a farther point starts a new set (None: off)")
@@ -766,12 +776,12 @@ class FuzzyVertexFrontend:
         max_mahalanobis: float | None = Field(
             4.0, gt=0, description="reject a vertex fit this many stds from the odometry prediction (None: off)"
         )
-        max_correction_xy: float = Field(1.0, gt=0, description="m; a larger correction of odometry is rejected")
-        max_correction_theta_deg: float = Field(15.0, gt=0, description="a larger heading correction is rejected")
+        max_correction_xy: MaxCorrectionXY = 1.0
+        max_correction_theta_deg: MaxCorrectionThetaDeg = 15.0
         prune_after: int | None = Field(50, ge=1, description="scans after which a vertex seen once is dropped")
         unit_map: bool = Field(True, description="keep the fused global unit map (eqs. 13-21)")
-        min_sigma_xy: float = Field(0.005, gt=0, description="m; the information never claims a smaller std")
-        min_sigma_theta_deg: float = Field(0.1, gt=0, description="the information never claims a smaller std")
+        min_sigma_xy: MinSigmaXY = 0.005
+        min_sigma_theta_deg: MinSigmaThetaDeg = 0.1
         calibration: HeadingCalibration.Config = HeadingCalibration.Config()
 
     def __init__(self, config: Config | None = None):
@@ -933,7 +943,8 @@ class FuzzyVertexFrontend:
         self.pose = pose
         matched = len(li)
         self.matched_counts.append(matched)
-        info = _bounded(_to_local(info_world, pose[2]), cfg.min_sigma_xy, np.deg2rad(cfg.min_sigma_theta_deg))
+        info = cap_information(local_information(info_world, pose[2]), cfg.min_sigma_xy,
+                               np.deg2rad(cfg.min_sigma_theta_deg))
         return FrontendResult(delta=delta, information=info, confidence=matched / (matched + 1.0), landmarks=landmarks)
 
 
@@ -945,12 +956,8 @@ def _scan_points(scan: Scan, min_range: float, max_range: float):
 
     A full-turn scan is rotated to start after its widest gap.
     """
-    mask = scan.hit_mask()
-    r = scan.ranges
-    with np.errstate(invalid="ignore"):
-        mask &= (r >= min_range) & (r <= max_range)
-    rr, a = r[mask], scan.angles[mask]
-    pts = geometry.transform_points(scan.sensor_pose, np.column_stack([rr * np.cos(a), rr * np.sin(a)]))
+    rr = scan.ranges[scan.hit_mask(min_range, max_range)]
+    pts = scan.points_in_base(min_range, max_range)
     n = len(scan.angles)
     circular = n > 1 and (scan.angles[-1] - scan.angles[0]) * n / (n - 1) >= 2 * np.pi - 1e-6
     if circular and len(pts) > 2:
@@ -973,23 +980,6 @@ def _vertex_information(pose, p, w, rotation: bool) -> np.ndarray:
         info[:2, 2] = info[2, :2] = (w[:, None] * lever).sum(0)
         info[2, 2] = (w * (lever**2).sum(1)).sum()
     return info
-
-
-def _to_local(info_world: np.ndarray, theta: float) -> np.ndarray:
-    """Information of a pose perturbed in its own frame from one perturbed in the map frame."""
-    a = np.eye(3)
-    a[:2, :2] = geometry.rotation(theta)
-    return a.T @ info_world @ a
-
-
-def _bounded(info: np.ndarray, min_sigma_xy: float, min_sigma_theta: float) -> np.ndarray:
-    """``info`` symmetrised, with no direction claiming a std below the minimums."""
-    s = np.diag([min_sigma_xy, min_sigma_xy, min_sigma_theta])
-    scaled = s @ (0.5 * (info + info.T)) @ s
-    vals, vecs = np.linalg.eigh(scaled)
-    vals = np.clip(vals, 1e-12, 1.0)
-    inv = np.diag(1.0 / np.diag(s))
-    return inv @ (vecs * vals) @ vecs.T @ inv
 
 
 def _combine(pred, estimates) -> tuple[np.ndarray, np.ndarray]:

@@ -62,6 +62,22 @@ from pydantic import Field
 from slam2d import geometry
 from slam2d.config import Section
 from slam2d.frontends.base import FrontendResult, register_frontend
+from slam2d.frontends.common import (
+    MaxCorrectionThetaDeg,
+    MaxCorrectionXY,
+    MaxRange,
+    MaxSigmaThetaDeg,
+    MaxSigmaXY,
+    MinRange,
+    MinSigmaThetaDeg,
+    MinSigmaXY,
+    OdomSigmaThetaDeg,
+    OdomSigmaXY,
+    bound_information,
+    local_information,
+    sigma_bounds,
+)
+from slam2d.frontends.odometry import odometry_information
 from slam2d.types import Scan
 
 log = logging.getLogger(__name__)
@@ -152,8 +168,8 @@ class IcpFrontend:
         method: Literal["point_to_line", "point_to_point"] = Field(
             "point_to_line", description="2D point-to-line Gauss-Newton, or kiss-icp's 3D point-to-point"
         )
-        min_range: float = Field(0.1, ge=0, description="m; ignore hits closer to the sensor")
-        max_range: float = Field(30.0, gt=0, description="m; ignore hits farther from the sensor")
+        min_range: MinRange = 0.1
+        max_range: MaxRange = 30.0
         voxel_size: float = Field(0.0, ge=0, description="m; downsampling of the registered points (0: none)")
         map_voxel_size: float = Field(0.2, gt=0, description="m; voxel of the local map")
         map_max_points_per_voxel: int = Field(20, gt=0, description="points kept per map voxel")
@@ -187,17 +203,15 @@ class IcpFrontend:
         retry_below: float = Field(0.6, ge=0, le=1, description="matched fraction below which other guesses are tried")
         min_points: int = Field(20, ge=3, description="fewer valid points than this -> odometry fallback")
         min_inlier_fraction: float = Field(0.2, ge=0, le=1, description="fewer matched points -> fallback")
-        max_correction_xy: float = Field(0.5, gt=0, description="m; ICP farther than this from odometry diverged")
-        max_correction_theta_deg: float = Field(
-            30.0, gt=0, description="ICP rotated more than this from odometry diverged"
-        )
+        max_correction_xy: MaxCorrectionXY = 0.5
+        max_correction_theta_deg: MaxCorrectionThetaDeg = 30.0
         max_planarity_error: float = Field(1e-3, gt=0, description="point_to_point: tolerated z (m) / tilt (rad)")
-        odom_sigma_xy: float = Field(0.05, gt=0, description="m; std of the odometry delta (prior, fallback)")
-        odom_sigma_theta_deg: float = Field(2.0, gt=0, description="std of the odometry delta (prior, fallback)")
-        min_sigma_xy: float = Field(0.002, gt=0, description="m; the information never claims a smaller std")
-        min_sigma_theta_deg: float = Field(0.05, gt=0, description="the information never claims a smaller std")
-        max_sigma_xy: float = Field(1.0, gt=0, description="m; degenerate directions get at most this std")
-        max_sigma_theta_deg: float = Field(20.0, gt=0, description="degenerate directions get at most this std")
+        odom_sigma_xy: OdomSigmaXY = 0.05  # the prior and the fallback
+        odom_sigma_theta_deg: OdomSigmaThetaDeg = 2.0
+        min_sigma_xy: MinSigmaXY = 0.002
+        min_sigma_theta_deg: MinSigmaThetaDeg = 0.05
+        max_sigma_xy: MaxSigmaXY = 1.0
+        max_sigma_theta_deg: MaxSigmaThetaDeg = 20.0
         threads: int = Field(1, ge=0, description="kiss-icp registration threads (0: all cores)")
         still_distance: float = Field(
             0.01, ge=0, description="m; odometry motion since the last registered scan below which a scan is skipped"
@@ -215,10 +229,9 @@ class IcpFrontend:
             initial_threshold=cfg.initial_threshold, min_motion_th=cfg.min_motion, max_range=cfg.threshold_range
         )
         self._registration = Registration(cfg.max_iterations, cfg.convergence, cfg.threads)
-        sigmas = np.array([cfg.odom_sigma_xy, cfg.odom_sigma_xy, np.deg2rad(cfg.odom_sigma_theta_deg)])
-        self._odom_information = np.diag(1.0 / sigmas**2)
-        tightest = np.array([cfg.min_sigma_xy, cfg.min_sigma_xy, np.deg2rad(cfg.min_sigma_theta_deg)])
-        self._still_information = np.diag(1.0 / tightest**2)
+        self._odom_information = odometry_information(cfg.odom_sigma_xy, cfg.odom_sigma_theta_deg)
+        self._sigma_bounds = sigma_bounds(cfg)
+        self._still_information = np.diag(1.0 / self._sigma_bounds[0] ** 2)  # the tightest
         # the odometry prior in the units of the unweighted point residuals (m^2)
         self._prior = cfg.point_sigma**2 * self._odom_information if cfg.odom_prior else np.zeros((3, 3))
         self.pose = np.zeros(3)
@@ -241,7 +254,7 @@ class IcpFrontend:
             log.debug("non-finite odometry delta %s; registering from no motion", odom_delta)
             odom_delta = np.zeros(3)
         guess = geometry.compose(self.pose, odom_delta)
-        points = self._valid_points(scan)
+        points = scan.points_in_base(cfg.min_range, cfg.max_range)
         if not self._started:
             return self._first(points, guess, odom_delta)
         self._unregistered = geometry.compose(self._unregistered, odom_delta)
@@ -294,15 +307,6 @@ class IcpFrontend:
         return float(np.clip(sigma, self.config.min_threshold, self.config.max_threshold))
 
     # ------------------------------------------------------------------ steps
-
-    def _valid_points(self, scan: Scan) -> np.ndarray:
-        """Hit points (M, 2) in the base frame within [min_range, max_range] of the sensor."""
-        r = scan.ranges
-        with np.errstate(invalid="ignore"):
-            keep = scan.hit_mask() & (r >= self.config.min_range) & (r <= self.config.max_range)
-        a = scan.angles[keep]
-        sensor = np.column_stack([r[keep] * np.cos(a), r[keep] * np.sin(a)])
-        return geometry.transform_points(scan.sensor_pose, sensor)
 
     def _source(self, points: np.ndarray) -> np.ndarray:
         """Registered points with their scan-line normals (M, 4): x, y, nx, ny (normal 0: none).
@@ -413,9 +417,7 @@ class IcpFrontend:
         cfg = self.config
         sigma2 = max(fit.weighted_sq / max(fit.weight_sum - 3, 1.0), cfg.min_sigma_xy**2)
         info = fit.h / sigma2 + (self._odom_information if cfg.odom_prior and cfg.method == "point_to_line" else 0.0)
-        a = np.eye(3)
-        a[:2, :2] = geometry.rotation(self.pose[2])
-        return _bounded(a.T @ info @ a, cfg)
+        return bound_information(local_information(info, self.pose[2]), *self._sigma_bounds)
 
     def _diverged(self, pose, guess) -> str | None:
         """Reason the result is implausibly far from the odometry prediction, else None."""
@@ -769,22 +771,4 @@ def _icp_line(grid, source, start, guess, prior, radius, kernel, k, along, line_
     pose[2] = (pose[2] + np.pi) % (2.0 * np.pi) - np.pi
     return pose, True
 
-
-def _bounded(info: np.ndarray, cfg) -> np.ndarray:
-    """Clip ``info`` so every direction's std lies within [min_sigma, max_sigma] (per-axis scaled)."""
-    info = 0.5 * (info + info.T)
-    lo = np.array([cfg.min_sigma_xy, cfg.min_sigma_xy, np.deg2rad(cfg.min_sigma_theta_deg)])
-    hi = np.array([cfg.max_sigma_xy, cfg.max_sigma_xy, np.deg2rad(cfg.max_sigma_theta_deg)])
-    info = _clip_eigen(info, hi, floor=True)
-    return _clip_eigen(info, lo, floor=False)
-
-
-@njit(cache=True, nogil=True)
-def _clip_eigen(info, scale, floor):
-    """Clip eigenvalues of diag(scale) info diag(scale) at 1 from below (floor) or above."""
-    normalised = scale[:, None] * info * scale[None, :]
-    vals, vecs = np.linalg.eigh(normalised)
-    vals = np.maximum(vals, 1.0) if floor else np.minimum(vals, 1.0)
-    out = (vecs * vals) @ vecs.T / scale[:, None] / scale[None, :]
-    return 0.5 * (out + out.T)
 

@@ -26,7 +26,7 @@ After the patrol-robot thesis (Tian 2016, sections 2.3.1 and 2.3.3):
   small there (only the odometry prior).
 - Confidence is the thesis's eq. 7: matched observed length / observed length.
 - Optionally (``calibration``, off by default) the odometry heading is
-  calibrated online from the accepted matches (see ``gate.HeadingCalibration``).
+  calibrated online from the accepted matches (see ``odometry.HeadingCalibration``).
 
 :func:`lines_from_grid` extracts map lines from an occupancy grid (Canny and
 probabilistic Hough, scikit-image, through ``slam2d.mapping.geometric``); :meth:`LineFrontend.reanchor` rebuilds the
@@ -47,7 +47,24 @@ from pydantic import Field
 from slam2d import geometry
 from slam2d.config import Section
 from slam2d.frontends.base import FrontendResult, register_frontend
-from slam2d.frontends.gate import HeadingCalibration, SimilarityGate, bound_information, odometry_information
+from slam2d.frontends.common import (
+    MaxCorrectionThetaDeg,
+    MaxCorrectionXY,
+    MaxRange,
+    MaxSigmaThetaDeg,
+    MaxSigmaXY,
+    MinRange,
+    MinSigmaThetaDeg,
+    MinSigmaXY,
+    OdomSigmaThetaDeg,
+    OdomSigmaXY,
+    beyond_correction,
+    bound_information,
+    local_information,
+    sigma_bounds,
+)
+from slam2d.frontends.gate import SimilarityGate
+from slam2d.frontends.odometry import HeadingCalibration, odometry_information
 from slam2d.types import Scan
 
 log = logging.getLogger(__name__)
@@ -76,8 +93,8 @@ class LineExtractionConfig(Section):
     """Per-scan segment extraction; the thesis gives no values, these suit 1-degree scans, ~1 cm noise."""
 
     method: Literal["angle", "split_merge"] = Field("angle", description="turning-angle runs, or split-and-merge")
-    min_range: float = Field(0.1, ge=0, description="m; hits closer to the sensor are ignored")
-    max_range: float = Field(20.0, gt=0, description="m; hits farther from the sensor are ignored")
+    min_range: MinRange = 0.1
+    max_range: MaxRange = 20.0
     jump_distance: float = Field(0.2, gt=0, description="m; consecutive points farther apart split a chain ...")
     jump_factor: float = Field(4.0, gt=0, description="... when also beyond this many beam spacings (range x angle)")
     support_length: float = Field(0.15, gt=0, description="m of path on each side of a point for its turning angle")
@@ -104,8 +121,8 @@ class LineMatchConfig(Section):
     sigma_point: float = Field(0.02, gt=0, description="m; floor of the per-point noise of a segment fit")
     sigma_map_distance: float = Field(0.01, gt=0, description="m; map line position noise")
     sigma_map_angle_deg: float = Field(0.3, gt=0, description="map line direction noise")
-    max_correction_xy: float = Field(0.5, gt=0, description="m; corrections beyond this are divergence")
-    max_correction_theta_deg: float = Field(25.0, gt=0, description="corrections beyond this are divergence")
+    max_correction_xy: MaxCorrectionXY = 0.5
+    max_correction_theta_deg: MaxCorrectionThetaDeg = 25.0
 
 
 # --------------------------------------------------------------------------- segments
@@ -560,13 +577,6 @@ def _prior_terms(pose, guess, prior: np.ndarray):
     return j.T @ prior @ j, j.T @ prior @ r
 
 
-def _to_local(h_world: np.ndarray, theta: float) -> np.ndarray:
-    """Information over world-frame (x, y, theta) perturbations -> over the pose's local frame."""
-    a = np.eye(3)
-    a[:2, :2] = geometry.rotation(theta)
-    return a.T @ h_world @ a
-
-
 @dataclass(frozen=True, eq=False)
 class LineMatch:
     """Outcome of :func:`match_lines`: base ``pose`` (map frame), ``information`` of the line
@@ -662,7 +672,7 @@ def _solve(obs, lines, start, guess, prior, weights, cfg: LineMatchConfig) -> tu
     if args is not None and sel.any():
         chi2 = _chi2(pose, *args)
         score = float((length[sel] / (1.0 + chi2 / cfg.robust_scale**2)).sum())
-    return LineMatch(pose, _to_local(h_lines, pose[2]), confidence, matched), score
+    return LineMatch(pose, local_information(h_lines, pose[2]), confidence, matched), score
 
 
 def _chi2(pose, c_obs, a_obs, w_d, w_a, n_map, d_map, a_map) -> np.ndarray:
@@ -729,12 +739,12 @@ class LineFrontend:
         match_window: int = Field(0, ge=0, description="match only lines seen in the last n scans (0: all)")
         # a tight odometry prior: with a few short segments (ACES) a loose one let the match jitter by
         # centimetres and degrees from scan to scan, also while the robot stood still
-        odom_sigma_xy: float = Field(0.02, gt=0, description="m; std of the odometry delta (prior and fallback)")
-        odom_sigma_theta_deg: float = Field(0.5, gt=0, description="std of the odometry delta (prior and fallback)")
-        min_sigma_xy: float = Field(0.005, gt=0, description="m; the information never claims a smaller std")
-        min_sigma_theta_deg: float = Field(0.1, gt=0, description="the information never claims a smaller std")
-        max_sigma_xy: float = Field(1.0, gt=0, description="m; largest std of a direction")
-        max_sigma_theta_deg: float = Field(20.0, gt=0, description="largest std of a direction")
+        odom_sigma_xy: OdomSigmaXY = 0.02  # the prior and the fallback
+        odom_sigma_theta_deg: OdomSigmaThetaDeg = 0.5
+        min_sigma_xy: MinSigmaXY = 0.005
+        min_sigma_theta_deg: MinSigmaThetaDeg = 0.1
+        max_sigma_xy: MaxSigmaXY = 1.0
+        max_sigma_theta_deg: MaxSigmaThetaDeg = 20.0
         reanchor_every: int = Field(0, ge=0, description="rebuild the map lines from a grid of recent scans every n "
                                     "scans (0: off)")
         reanchor_window: int = Field(300, gt=0, description="recent scans in that grid")
@@ -753,8 +763,7 @@ class LineFrontend:
         self.gate = SimilarityGate(cfg.gate)
         self.gate.events = self.events
         self.odometry_information = odometry_information(cfg.odom_sigma_xy, cfg.odom_sigma_theta_deg)
-        self._min_sigma = np.array([cfg.min_sigma_xy, cfg.min_sigma_xy, np.deg2rad(cfg.min_sigma_theta_deg)])
-        self._max_sigma = np.array([cfg.max_sigma_xy, cfg.max_sigma_xy, np.deg2rad(cfg.max_sigma_theta_deg)])
+        self._min_sigma, self._max_sigma = sigma_bounds(cfg)
         self._previous: np.ndarray | None = None
         self._index = 0
         self._recent: deque = deque(maxlen=cfg.reanchor_window)
@@ -807,9 +816,7 @@ class LineFrontend:
         match = match_lines(segs, self.map.lines.subset(near), guess, self.odometry_information, cfg.matching)
         if not (match.matched >= 0).any():
             return self._fallback("no matched lines", odom_delta), guess
-        corr = geometry.between(guess, match.pose)
-        if (np.hypot(corr[0], corr[1]) > cfg.matching.max_correction_xy
-                or abs(corr[2]) > np.deg2rad(cfg.matching.max_correction_theta_deg)):
+        if beyond_correction(guess, match.pose, cfg.matching.max_correction_xy, cfg.matching.max_correction_theta_deg):
             return self._fallback("correction beyond max_correction", odom_delta), guess
         info = bound_information(match.information + self.odometry_information, self._min_sigma, self._max_sigma)
         delta = geometry.between(self.pose, match.pose)
