@@ -51,10 +51,10 @@ _REGISTRY: dict[str, Callable[..., Frontend]] = {}
 
 # Built-in frontends, imported on first use so that importing slam2d stays light.
 _BUILTIN = {
-    "icp": "slam2d.frontends.icp",
-    "lines": "slam2d.frontends.lines",
-    "corners": "slam2d.frontends.corners",
-    "fuzzy_vertex": "slam2d.frontends.fuzzy_vertex",
+    "icp": "slam2d.frontends.icp.frontend",
+    "lines": "slam2d.frontends.lines.frontend",
+    "corners": "slam2d.frontends.corners.frontend",
+    "fuzzy_vertex": "slam2d.frontends.fuzzy_vertex.frontend",
     "fused": "slam2d.frontends.fused",
 }
 
