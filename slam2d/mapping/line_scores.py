@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from slam2d.mapping.geometric import nearest_segment, point_segment_distance, segment_frame
+from slam2d.mapping.geometric import (
+    nearest_segment,
+    point_segment_distance,
+    segment_frame,
+)
 
 __all__ = ["line_scores", "chamfer"]
 

@@ -39,10 +39,18 @@ After the patrol-robot thesis (Tian 2016, sections 2.3.2, 2.3.3 and 4.2.1):
 The frontend class is ``frontend``.
 """
 
-from slam2d.frontends.corners.extraction import CornerExtraction, CornerExtractionConfig, extract_corners
+from slam2d.frontends.corners.extraction import (
+    CornerExtraction,
+    CornerExtractionConfig,
+    extract_corners,
+)
 from slam2d.frontends.corners.frontend import CornerFrontend
 from slam2d.frontends.corners.map import CornerMap
-from slam2d.frontends.corners.matching import CornerMatch, corner_confidence, match_corners
+from slam2d.frontends.corners.matching import (
+    CornerMatch,
+    corner_confidence,
+    match_corners,
+)
 
 __all__ = [
     "CornerExtractionConfig",

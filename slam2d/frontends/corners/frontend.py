@@ -23,9 +23,17 @@ from slam2d.frontends.common import (
     bound_information,
     sigma_bounds,
 )
-from slam2d.frontends.corners.extraction import CornerExtraction, CornerExtractionConfig, extract_corners
+from slam2d.frontends.corners.extraction import (
+    CornerExtraction,
+    CornerExtractionConfig,
+    extract_corners,
+)
 from slam2d.frontends.corners.map import CornerMap
-from slam2d.frontends.corners.matching import corner_confidence, match_corners, unique_matches
+from slam2d.frontends.corners.matching import (
+    corner_confidence,
+    match_corners,
+    unique_matches,
+)
 from slam2d.frontends.gate import SimilarityGate
 from slam2d.frontends.odometry import HeadingCalibration, MotionNoise, odometry_spike
 from slam2d.types import LandmarkObservation, Scan

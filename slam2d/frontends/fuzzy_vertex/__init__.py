@@ -65,7 +65,12 @@ from slam2d.frontends.fuzzy_vertex.extraction import (
     vertex_from_slopes,
 )
 from slam2d.frontends.fuzzy_vertex.frontend import FuzzyVertexFrontend
-from slam2d.frontends.fuzzy_vertex.map import UnitMap, VertexMap, fuse_units, update_vertices
+from slam2d.frontends.fuzzy_vertex.map import (
+    UnitMap,
+    VertexMap,
+    fuse_units,
+    update_vertices,
+)
 from slam2d.frontends.fuzzy_vertex.matching import (
     fit_se2,
     match_units,

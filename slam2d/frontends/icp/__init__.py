@@ -55,6 +55,10 @@ the next scan is registered whatever odometry says.
 """
 
 from slam2d.frontends.icp.config import IcpConfig
-from slam2d.frontends.icp.frontend import ODOMETRY_OVERRULED_EVENT, STILL_EVENT, IcpFrontend
+from slam2d.frontends.icp.frontend import (
+    ODOMETRY_OVERRULED_EVENT,
+    STILL_EVENT,
+    IcpFrontend,
+)
 
 __all__ = ["IcpFrontend", "IcpConfig", "STILL_EVENT", "ODOMETRY_OVERRULED_EVENT"]

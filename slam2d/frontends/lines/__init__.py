@@ -35,10 +35,21 @@ frontend's own recent scans). The segments and their moments are ``segments``; t
 frontend class is ``frontend``.
 """
 
-from slam2d.frontends.lines.extraction import LineExtraction, LineExtractionConfig, extract_lines, lines_from_grid
+from slam2d.frontends.lines.extraction import (
+    LineExtraction,
+    LineExtractionConfig,
+    extract_lines,
+    lines_from_grid,
+)
 from slam2d.frontends.lines.frontend import LineFrontend
 from slam2d.frontends.lines.map import SegmentMap
-from slam2d.frontends.lines.matching import LineMatch, LineMatchConfig, associate, heading_correction, match_lines
+from slam2d.frontends.lines.matching import (
+    LineMatch,
+    LineMatchConfig,
+    associate,
+    heading_correction,
+    match_lines,
+)
 from slam2d.frontends.lines.segments import Segments, fit_line
 
 __all__ = [

@@ -23,7 +23,11 @@ from slam2d.frontends.common import (
     sigma_bounds,
 )
 from slam2d.frontends.gate import SimilarityGate
-from slam2d.frontends.lines.extraction import LineExtractionConfig, extract_lines, lines_from_grid
+from slam2d.frontends.lines.extraction import (
+    LineExtractionConfig,
+    extract_lines,
+    lines_from_grid,
+)
 from slam2d.frontends.lines.map import SegmentMap
 from slam2d.frontends.lines.matching import LineMatchConfig, associate, match_lines
 from slam2d.frontends.lines.segments import Segments

@@ -15,7 +15,11 @@ from pydantic import Field
 
 from slam2d import geometry
 from slam2d.config import Section
-from slam2d.frontends.common import MaxCorrectionThetaDeg, MaxCorrectionXY, local_information
+from slam2d.frontends.common import (
+    MaxCorrectionThetaDeg,
+    MaxCorrectionXY,
+    local_information,
+)
 from slam2d.frontends.lines.segments import Segments
 
 __all__ = ["LineMatchConfig", "LineMatch", "associate", "heading_correction", "match_lines"]
