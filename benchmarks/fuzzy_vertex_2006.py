@@ -144,7 +144,7 @@ class EdgeMatching:
         cfg = self.cfg
         pred = np.asarray(scan.odom if self.pose is None else geometry.compose(self.pose, odom_delta), float)
         delta_a = cfg.dead_reckoning_rel * float(np.hypot(*np.asarray(odom_delta)[:2]))
-        points, ranges, _ = fv._scan_points(scan, cfg.min_range, cfg.max_range)
+        points, ranges, _ = fv.scan_points(scan, cfg.min_range, cfg.max_range)
         bounds, _ = fv.twice_classification(points, cfg.xi + cfg.xi_range * ranges, cfg.max_gap)
         local = fv.fit_units(points, bounds, delta_a, cfg.min_unit_points, cfg.min_unit_length)
         pose = pred if self.pose is None else self._localise(pred, local)

@@ -25,7 +25,8 @@ SETTINGS = (((0.1, 0.1, 0.01), 1), ((0.01, 0.01, 0.01), 1))  # (pose thresholds,
 
 def replay(graph, every: int, threshold, skip: int) -> tuple[float, float, int, float, float]:
     """(incremental s, final batch s, iSAM2 updates, error before and after the final batch) of one replay."""
-    import slam2d.backend.pose_graph as pgm
+    from slam2d.backend import batch
+    from slam2d.backend import pose_graph as pgm
     from slam2d.config import BackendConfig
 
     saved = pgm.RELINEARIZE_POSE, pgm.RELINEARIZE_SKIP
@@ -34,18 +35,18 @@ def replay(graph, every: int, threshold, skip: int) -> tuple[float, float, int, 
         t0 = time.perf_counter()
         pg = pgm.replay_g2o(graph, BackendConfig(name="pose_graph", robust="none"), every=every)
         t1 = time.perf_counter()
-        before = pgm.g2o_error(graph, pg.estimate())
+        before = batch.g2o_error(graph, pg.estimate())
         t2 = time.perf_counter()
         pg.optimize_batch()
         t3 = time.perf_counter()
     finally:
         pgm.RELINEARIZE_POSE, pgm.RELINEARIZE_SKIP = saved
-    return t1 - t0, t3 - t2, pg.isam_updates, before, pgm.g2o_error(graph, pg.estimate())
+    return t1 - t0, t3 - t2, pg.isam_updates, before, batch.g2o_error(graph, pg.estimate())
 
 
 def batch_seconds(graph) -> tuple[float, float]:
     """(wall s, error) of the batch solve from the chordal start."""
-    from slam2d.backend.pose_graph import g2o_error, optimize_g2o
+    from slam2d.backend.batch import g2o_error, optimize_g2o
 
     t0 = time.perf_counter()
     poses = optimize_g2o(graph)

@@ -33,21 +33,25 @@ class Scan:
     ground_truth: np.ndarray | None = None
     index: int = 0
 
-    def hit_mask(self) -> np.ndarray:
-        """Beams that returned a hit: finite and within [range_min, range_max)."""
+    def hit_mask(self, min_range: float = 0.0, max_range: float = np.inf) -> np.ndarray:
+        """Beams that returned a hit: finite and within [range_min, range_max); with a range window
+        (a frontend's ``min_range``, ``max_range``, m) also within [min_range, max_range]."""
         r = self.ranges
         with np.errstate(invalid="ignore"):
-            return np.isfinite(r) & (r >= self.range_min) & (r < self.range_max)
+            hit = np.isfinite(r) & (r >= self.range_min) & (r < self.range_max)
+            if min_range > 0.0 or max_range < np.inf:
+                hit &= (r >= min_range) & (r <= max_range)
+        return hit
 
-    def points(self) -> np.ndarray:
-        """Hit points (M, 2) in the sensor frame, metres."""
-        m = self.hit_mask()
+    def points(self, min_range: float = 0.0, max_range: float = np.inf) -> np.ndarray:
+        """Hit points (M, 2) in the sensor frame, metres, in beam order (range window as ``hit_mask``)."""
+        m = self.hit_mask(min_range, max_range)
         r, a = self.ranges[m], self.angles[m]
         return np.column_stack([r * np.cos(a), r * np.sin(a)])
 
-    def points_in_base(self) -> np.ndarray:
-        """Hit points (M, 2) in the robot base frame, metres."""
-        return geometry.transform_points(self.sensor_pose, self.points())
+    def points_in_base(self, min_range: float = 0.0, max_range: float = np.inf) -> np.ndarray:
+        """Hit points (M, 2) in the robot base frame, metres, in beam order (range window as ``hit_mask``)."""
+        return geometry.transform_points(self.sensor_pose, self.points(min_range, max_range))
 
 
 @dataclass(frozen=True, eq=False)

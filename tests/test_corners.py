@@ -16,7 +16,7 @@ from slam2d.frontends.corners import (
     extract_corners,
     match_corners,
 )
-from slam2d.frontends.gate import odometry_information
+from slam2d.frontends.odometry import odometry_information
 from slam2d.pipeline import SlamPipeline
 from slam2d.types import Scan
 

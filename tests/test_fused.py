@@ -7,8 +7,10 @@ from slam2d import config, geometry
 from slam2d.datasets.registry import open_dataset
 from slam2d.evaluation.trajectory import ate
 from slam2d.frontends.base import FrontendResult
+from slam2d.frontends.common import bound_information
 from slam2d.frontends.fused import FusedFrontend, fuse_deltas, se2_exp, se2_log
-from slam2d.frontends.gate import HeadingCalibration, SimilarityGate, bound_information, nn_similarity
+from slam2d.frontends.gate import SimilarityGate, nn_similarity
+from slam2d.frontends.odometry import HeadingCalibration
 from slam2d.pipeline import SlamPipeline
 from slam2d.types import Scan
 

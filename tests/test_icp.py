@@ -9,7 +9,8 @@ from slam2d import geometry
 from slam2d.datasets.simulator import World
 from slam2d.errors import InputError
 from slam2d.frontends import available_frontends, create_frontend
-from slam2d.frontends.icp import ODOMETRY_OVERRULED_EVENT, STILL_EVENT, IcpFrontend, _Grid, _knn
+from slam2d.frontends.icp import ODOMETRY_OVERRULED_EVENT, STILL_EVENT, IcpFrontend
+from slam2d.frontends.icp.grid import SearchGrid, knn
 from slam2d.types import Scan
 
 BEAMS = np.linspace(-np.pi, np.pi, 360, endpoint=False)
@@ -63,11 +64,11 @@ def assert_close_pose(delta, expected, xy=0.02, theta_deg=0.5):
 def test_grid_neighbours_equal_brute_force(cell):
     rng = np.random.default_rng(3)
     points = np.vstack([rng.uniform(0, 10, (400, 2)), np.round(rng.uniform(0, 10, (100, 2)) / cell) * cell])
-    grid = _Grid.build(points, cell)
+    grid = SearchGrid.build(points, cell)
     k, radius = 5, 0.8
     for x, y in np.vstack([rng.uniform(-1, 11, (200, 2)), [[-0.5, 5.0], [20.0, 20.0]]]):
         idx, d2 = np.empty(k, np.int64), np.empty(k)
-        n = _knn(grid, x, y, radius, idx, d2)
+        n = knn(grid, x, y, radius, idx, d2)
         dist = np.hypot(points[:, 0] - x, points[:, 1] - y)
         expected = np.sort(dist[dist <= radius])[:k]
         assert n == len(expected)

@@ -7,18 +7,18 @@ from slam2d import config, geometry
 from slam2d.datasets.registry import open_dataset
 from slam2d.datasets.simulator import World
 from slam2d.evaluation.trajectory import ate
-from slam2d.frontends.gate import odometry_information
 from slam2d.frontends.lines import (
     LineExtractionConfig,
     LineFrontend,
-    LineMap,
     LineMatchConfig,
+    SegmentMap,
     Segments,
     extract_lines,
     fit_line,
     lines_from_grid,
     match_lines,
 )
+from slam2d.frontends.odometry import odometry_information
 from slam2d.pipeline import SlamPipeline
 from slam2d.types import Scan
 
@@ -92,8 +92,8 @@ def test_tls_fit_is_exact_on_collinear_points():
     assert np.allclose(np.abs(points @ normal - centroid @ normal), 0.0, atol=1e-12)
 
 
-def test_line_map_extends_a_reobserved_line():
-    lines = LineMap()
+def test_segment_map_extends_a_reobserved_line():
+    lines = SegmentMap()
     lines.add(Segments.from_ends([[[0.0, 0.0], [2.0, 0.0]]]), index=0)
     lines.merge(np.array([0]), Segments.from_ends([[[1.5, 0.0], [4.0, 0.0]]]), index=1)
     assert len(lines) == 1 and lines.seen[0] == 2

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from slam2d import geometry
-from slam2d.backend.correlative import ProbabilityGrid, match
+from slam2d.backend.correlative import match
+from slam2d.backend.probability_grid import ProbabilityGrid
 from slam2d.backend.loop_closure import LoopCloser, LoopClosure
 from slam2d.config import LoopClosureConfig, SimulatorConfig
 from slam2d.datasets.simulator import SimulatorSource
@@ -221,7 +222,7 @@ def test_likelihood_field_matches_the_distance_transform():
     """The splatted field equals exp(-d^2 / 2 sigma^2) from scipy's exact distance transform within the cutoff."""
     from scipy.ndimage import distance_transform_edt
 
-    from slam2d.backend.correlative import FIELD_CUTOFF_SIGMAS, _likelihood_field
+    from slam2d.backend.probability_grid import FIELD_CUTOFF_SIGMAS, _likelihood_field
 
     rng = np.random.default_rng(3)
     cells = np.column_stack([rng.integers(0, 60, 40), rng.integers(0, 45, 40)])  # (col, row)

@@ -240,7 +240,8 @@ def _office_grid(res: float = 0.05):
 
 
 def test_line_map_of_the_office_finds_its_walls():
-    from slam2d.mapping.geometric import extract_line_map, line_scores
+    from slam2d.mapping.geometric import extract_line_map
+    from slam2d.mapping.line_scores import line_scores
 
     world, occ, res, origin = _office_grid()
     lines = extract_line_map(occ, res, origin)
@@ -250,7 +251,8 @@ def test_line_map_of_the_office_finds_its_walls():
 
 
 def test_binary_line_map_round_trips_losslessly():
-    from slam2d.mapping.geometric import LineMap, extract_line_map
+    from slam2d.mapping.geometric import extract_line_map
+    from slam2d.mapping.line_map import LineMap
 
     _, occ, res, origin = _office_grid()
     lines = extract_line_map(occ, res, origin)
@@ -272,7 +274,8 @@ def test_binary_line_map_round_trips_losslessly():
 
 
 def test_a_jagged_slanted_wall_stays_a_few_segments():
-    from slam2d.mapping.geometric import chamfer, extract_line_map
+    from slam2d.mapping.geometric import extract_line_map
+    from slam2d.mapping.line_scores import chamfer
 
     rows, cols = np.mgrid[:80, :200]
     across = (rows - 20) * np.cos(np.radians(10)) - (cols - 10) * np.sin(np.radians(10))  # cells from the centre line
@@ -284,7 +287,7 @@ def test_a_jagged_slanted_wall_stays_a_few_segments():
 
 
 def test_line_map_json_and_svg(tmp_path):
-    from slam2d.mapping.geometric import LineMap
+    from slam2d.mapping.line_map import LineMap
 
     lines = LineMap([np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.5]]), np.array([[1.0, 1.0], [1.5, 1.0]])],
                     0.05, (-0.5, -0.5), (60, 80), {"method": "contour"})
@@ -383,7 +386,7 @@ def test_run_writes_the_chosen_layers_and_map_makes_them_again(tmp_path):
         assert (folder / name).is_file(), name
     stats = json.loads((folder / "layers.json").read_text())
     assert stats["quadtree"]["bytes"] < stats["grid"]["dense_uint8_bytes"] / 10
-    from slam2d.mapping.geometric import LineMap
+    from slam2d.mapping.line_map import LineMap
 
     binary, text = LineMap.load(folder / "lines.bin"), LineMap.load(folder / "lines.json")
     assert stats["lines"]["bytes"] == (folder / "lines.bin").stat().st_size < stats["lines"]["json_bytes"]
@@ -408,7 +411,7 @@ def test_run_writes_the_chosen_layers_and_map_makes_them_again(tmp_path):
 
 
 def test_chamfer_of_a_wall_and_its_line():
-    from slam2d.mapping.geometric import chamfer
+    from slam2d.mapping.line_scores import chamfer
 
     occ = np.zeros((20, 40), bool)
     occ[10, 5:35] = True  # cells of centres y = 0.525 m, x from 0.275 to 1.725 m at 0.05 m

@@ -11,13 +11,9 @@ import pytest
 from slam2d import geometry
 from slam2d.backend import certificate, consistency
 from slam2d.backend import initialization as ini
-from slam2d.backend.pose_graph import (
-    CHI2_3DOF_99,
-    _g2o_factors,
-    _g2o_values,
-    loop_metrics,
-    solve_g2o,
-)
+from slam2d.backend.batch import loop_metrics, solve_g2o
+from slam2d.backend.consistency import CHI2_3DOF_99
+from slam2d.backend.factors import g2o_factors, g2o_values
 from slam2d.datasets.g2o import PoseGraphFile, inject_outliers, odometry_mask, read_g2o
 from slam2d.errors import InputError
 
@@ -233,7 +229,7 @@ def test_pairwise_support_on_laps():
 def test_edge_chi2_is_gtsams_error():
     graph, _ = inject_outliers(lap_graph(laps(), noise=1.0, seed=10), 10, "random", seed=11)
     poses = graph.poses + np.random.default_rng(12).normal(size=graph.poses.shape) * [2.0, 2.0, 2.0]
-    fg, values = _g2o_factors(graph), _g2o_values(graph.ids, poses)
+    fg, values = g2o_factors(graph), g2o_values(graph.ids, poses)
     gtsam_chi2 = [2.0 * fg.at(k).error(values) for k in range(fg.size())]
     np.testing.assert_allclose(consistency.edge_chi2(graph, poses), gtsam_chi2, rtol=1e-9, atol=1e-9)
 

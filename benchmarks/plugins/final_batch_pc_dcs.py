@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 
+from slam2d.backend import batch, factors
 from slam2d.backend import pose_graph as pg
 
 
@@ -19,13 +20,13 @@ def optimize_batch(self):
     if len(edges) != sum(self._active) - 1:  # all but the first keyframe's prior
         raise NotImplementedError("the pc_dcs final batch handles odometry and loop factors only")
     graph = self.to_g2o()  # the same edges in the same order, the poses at the current estimate
-    result = pg.solve_g2o(graph, robust="pc_dcs", robust_param=float(os.environ.get("SLAM2D_PC_DCS_PHI", "1")),
-                          init="file")  # fmt: skip
+    result = batch.solve_g2o(graph, robust="pc_dcs", robust_param=float(os.environ.get("SLAM2D_PC_DCS_PHI", "1")),
+                             init="file")  # fmt: skip
     for n, inlier in zip(edges, result.inlier):
         if self._factors[n].kind == "loop" and not inlier:
             self._active[n] = False
             self.rejected_inconsistent += 1
-    return self._restart_at(pg._g2o_values(graph.ids, result.poses))
+    return self._restart_at(factors.g2o_values(graph.ids, result.poses))
 
 
 pg.PoseGraph.optimize_batch = optimize_batch

@@ -33,8 +33,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from slam2d import geometry
-from slam2d.backend.correlative import ProbabilityGrid, angular_step, match, voxel_filter
+from slam2d.backend.correlative import angular_step, match
 from slam2d.backend.pose_graph import CHI2_3DOF_99
+from slam2d.backend.probability_grid import ProbabilityGrid, voxel_filter
 from slam2d.config import LoopClosureConfig
 
 __all__ = ["LoopClosure", "LoopCloser"]

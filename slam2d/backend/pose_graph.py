@@ -1,10 +1,10 @@
-"""The pose graph: the only module that builds GTSAM factors.
+"""The online pose graph: keyframes, loops and landmarks under iSAM2, and a final batch.
 
 Keyframe ``k`` is the gtsam key ``symbol('x', k)``, landmark ``n`` is
-``symbol('l', n)``. Keyframe 0 carries a tight prior; each later keyframe a
-between factor from its predecessor (odometry or scan matching, no robust
-kernel); loop closures are between factors with the configured robust kernel;
-landmark observations are bearing-range factors. iSAM2 keeps the incremental
+``symbol('l', n)`` (see ``factors``, which builds every factor). Keyframe 0 carries a
+tight prior; each later keyframe a between factor from its predecessor (odometry or
+scan matching, no robust kernel); loop closures are between factors with the configured
+robust kernel; landmark observations are bearing-range factors. iSAM2 keeps the incremental
 estimate (keyframes joined by odometry alone wait for the next loop or landmark, see
 ``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors.
 
@@ -12,7 +12,8 @@ Poses are numpy ``(x, y, theta)`` (m, m, rad); information matrices are 3x3
 inverse covariances in the frame of the measurement (GTSAM's tangent space,
 order x, y, theta). Errors follow GTSAM: 0.5 * sum of squared whitened residuals.
 
-``optimize_g2o`` and ``solve_g2o`` optimise a g2o file's graph in one batch.
+``replay_g2o`` feeds a g2o file's graph into a ``PoseGraph`` as a SLAM run would; ``batch``
+optimises one in a single batch.
 """
 
 from __future__ import annotations
@@ -24,8 +25,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from slam2d import geometry
-from slam2d.backend import certificate, consistency
+from slam2d.backend import consistency
 from slam2d.backend import robust as rb
+from slam2d.backend.factors import (
+    PRIOR_SIGMAS,
+    bearing_range_factor,
+    between_factor,
+    gtsam_pose,
+    landmark_key,
+    lm_params,
+    pose_key,
+    prior_factor,
+)
 from slam2d.config import BackendConfig
 from slam2d.datasets import g2o
 from slam2d.errors import InputError
@@ -38,24 +49,8 @@ RELINEARIZE_POSE = (0.1, 0.1, 0.01)  # m, m, rad: iSAM2 relinearises a pose whos
 RELINEARIZE_LANDMARK = 0.01  # m: the same for a landmark's position
 RELINEARIZE_SKIP = 1  # iSAM2: check for relinearisation at every update
 ISAM2_FACTORIZATION = "CHOLESKY"  # faster; an ill-conditioned update falls back to "QR" (see update)
-PRIOR_SIGMAS = np.array([1e-6, 1e-6, 1e-6])  # m, m, rad: anchors the first keyframe / vertex
 DEFAULT_ODOMETRY_SIGMAS = np.array([0.05, 0.05, np.deg2rad(2.0)])  # m, m, rad, when no information is given
-GNC_OUTLIER_WEIGHT = 0.5  # a loop whose final GNC weight is below this is rejected
 CHI2_3DOF_99 = consistency.CHI2_3DOF_99  # chi-square 99% quantile, 3 degrees of freedom: loop residual / consistency gate
-
-
-def pose_key(k: int) -> int:
-    """GTSAM key of keyframe ``k``."""
-    import gtsam
-
-    return gtsam.symbol("x", int(k))
-
-
-def landmark_key(n: int) -> int:
-    """GTSAM key of landmark ``n``."""
-    import gtsam
-
-    return gtsam.symbol("l", int(n))
 
 
 def _pose3(p, where: str) -> np.ndarray:
@@ -63,18 +58,6 @@ def _pose3(p, where: str) -> np.ndarray:
     if a.shape != (3,) or not np.all(np.isfinite(a)):
         raise InputError(where, f"expected a finite pose (x, y, theta), got {p!r}")
     return a
-
-
-def _gtsam_pose(p):
-    import gtsam
-
-    return gtsam.Pose2(float(p[0]), float(p[1]), float(p[2]))
-
-
-def _lm_params():
-    import gtsam
-
-    return gtsam.LevenbergMarquardtParams()
 
 
 @dataclass(frozen=True)
@@ -93,11 +76,8 @@ class PoseGraph:
     """Keyframe pose graph with iSAM2 updates and a final batch optimisation."""
 
     def __init__(self, cfg: BackendConfig | None = None):
-        import gtsam
-
         self.cfg = cfg if cfg is not None else BackendConfig(name="pose_graph")
         rb.m_estimator(self.cfg.robust, self.cfg.robust_param)  # fail early on a bad kernel
-        self._prior_model = gtsam.noiseModel.Diagonal.Sigmas(PRIOR_SIGMAS)
         self._default_odometry_info = np.diag(1.0 / DEFAULT_ODOMETRY_SIGMAS**2)
         self._default_odometry_model = rb.noise_model(self._default_odometry_info)
         self._factors: list[_Factor] = []
@@ -125,7 +105,7 @@ class PoseGraph:
         pose = _pose3(pose, "add_keyframe pose")
         k = len(self._initial)
         if k == 0:
-            factor = gtsam.PriorFactorPose2(pose_key(0), _gtsam_pose(pose), self._prior_model)
+            factor = prior_factor(pose_key(0), gtsam_pose(pose))
             self._add(_Factor("prior", factor, 0, 0, pose, np.diag(1.0 / PRIOR_SIGMAS**2)))
         else:
             if delta_from_previous is None:
@@ -137,25 +117,23 @@ class PoseGraph:
             else:
                 info = rb.check_information(information, f"odometry information {k - 1} -> {k}")
                 model = gtsam.noiseModel.Gaussian.Information(info)
-            factor = gtsam.BetweenFactorPose2(pose_key(k - 1), pose_key(k), _gtsam_pose(delta), model)
+            factor = between_factor(k - 1, k, delta, model)
             self._add(_Factor("odometry", factor, k - 1, k, delta, info))
-            self._odometry.append(_gtsam_pose(delta))
-        self._new_values.insert(pose_key(k), _gtsam_pose(pose))
+            self._odometry.append(gtsam_pose(delta))
+        self._new_values.insert(pose_key(k), gtsam_pose(pose))
         self._initial.append(pose)
         return k
 
     def add_loop(self, i: int, j: int, delta, information) -> int:
         """Loop closure: pose of keyframe ``j`` seen from keyframe ``i`` is ``delta`` (3,)
         with ``information`` (3, 3), under the configured robust kernel. Returns its factor index."""
-        import gtsam
-
         i, j = self._check_key(i), self._check_key(j)
         if i == j:
             raise InputError("add_loop", f"a loop needs two different keyframes, got {i} twice")
         delta = _pose3(delta, f"loop {i} -> {j} delta")
         info = rb.check_information(information, f"loop {i} -> {j} information")
         model = rb.noise_model(info, self.cfg.robust, self.cfg.robust_param)
-        factor = gtsam.BetweenFactorPose2(pose_key(i), pose_key(j), _gtsam_pose(delta), model)
+        factor = between_factor(i, j, delta, model)
         return self._add(_Factor("loop", factor, i, j, delta, info))
 
     def add_landmark_observation(self, key: int, landmark_id: int, bearing: float, range: float, covariance) -> int:
@@ -177,7 +155,7 @@ class PoseGraph:
             self._landmarks.add(int(landmark_id))
         kernel = rb.m_estimator(self.cfg.robust, self.cfg.robust_param)
         model = rb.wrap(gtsam.noiseModel.Gaussian.Covariance(cov), kernel)
-        factor = gtsam.BearingRangeFactor2D(pose_key(key), lkey, gtsam.Rot2(float(bearing)), float(range), model)
+        factor = bearing_range_factor(key, landmark_id, bearing, range, model)
         return self._add(_Factor("landmark", factor, key, int(landmark_id)))
 
     # -------------------------------------------------------------- optimising
@@ -284,7 +262,7 @@ class PoseGraph:
         meas_cov = np.linalg.inv(rb.check_information(information, f"loop {i} -> {j} information"))
         ki, kj = pose_key(i), pose_key(j)
         rel = self._isam.calculateEstimatePose2(ki).between(self._isam.calculateEstimatePose2(kj))
-        err = gtsam.Pose2.Logmap(_gtsam_pose(_pose3(delta, f"loop {i} -> {j} delta")).between(rel))
+        err = gtsam.Pose2.Logmap(gtsam_pose(_pose3(delta, f"loop {i} -> {j} delta")).between(rel))
         joint = self._isam.jointMarginalCovariance([ki, kj])
         a = -rel.inverse().AdjointMap()  # d(between)/d(x_i); d/d(x_j) is the identity
         sij = joint.at(ki, kj)
@@ -305,16 +283,16 @@ class PoseGraph:
         t0 = time.perf_counter()
         if self.cfg.gnc:
             inliers = [g for g, f in enumerate(index) if self._factors[f].kind != "loop"]
-            opt = gtsam.GncLMOptimizer(graph, initial, rb.gnc_params(inliers, lm_params=_lm_params()))
+            opt = gtsam.GncLMOptimizer(graph, initial, rb.gnc_params(inliers, lm_params=lm_params()))
             result = opt.optimize()
             self._reject_outliers(index, np.asarray(opt.getWeights()).ravel())
         else:
-            opt = gtsam.LevenbergMarquardtOptimizer(graph, initial, _lm_params())
+            opt = gtsam.LevenbergMarquardtOptimizer(graph, initial, lm_params())
             result = opt.optimize()
             log.info("batch LM: %d iterations", opt.iterations())
             if self._reject_inconsistent(result):
                 graph, index = self._batch_graph()
-                result = gtsam.LevenbergMarquardtOptimizer(graph, result, _lm_params()).optimize()
+                result = gtsam.LevenbergMarquardtOptimizer(graph, result, lm_params()).optimize()
         log.info(
             "batch %s: error %.6g -> %.6g in %.3f s",
             "GNC" if self.cfg.gnc else "LM",
@@ -426,7 +404,7 @@ class PoseGraph:
             if not a or f.kind != "loop":
                 continue
             rel = values.atPose2(pose_key(f.i)).between(values.atPose2(pose_key(f.j)))
-            err = gtsam.Pose2.Logmap(_gtsam_pose(f.measurement).between(rel))
+            err = gtsam.Pose2.Logmap(gtsam_pose(f.measurement).between(rel))
             if float(err @ f.information @ err) > CHI2_3DOF_99:
                 self._active[n] = False
                 rejected += 1
@@ -439,7 +417,7 @@ class PoseGraph:
         """Deactivate the loops GNC weighs as outliers (counted in ``rejected_inconsistent``)."""
         for g, n in enumerate(index):
             f = self._factors[n]
-            if f.kind == "loop" and weights[g] < GNC_OUTLIER_WEIGHT:
+            if f.kind == "loop" and weights[g] < rb.GNC_OUTLIER_WEIGHT:
                 self._active[n] = False
                 self.rejected_inconsistent += 1
                 log.info("GNC rejected loop %d -> %d (weight %.3g)", f.i, f.j, weights[g])
@@ -469,280 +447,6 @@ class PoseGraph:
         if self._isam.valueExists(lkey):
             return np.asarray(self._isam.calculateEstimatePoint2(lkey)).ravel()
         return np.asarray(self._new_values.atPoint2(lkey)).ravel()
-
-
-# ---------------------------------------------------------------- g2o graphs
-
-
-G2O_INIT = "chordal"  # batch start without outliers: reaches the best-known minimum on every benchmark graph
-G2O_ROBUST_INIT = "spanning_tree"  # start under an M-estimator: false loops do not bend odometry
-G2O_GNC_INITS = ("spanning_tree", "chordal")  # under GNC both run, the lower TLS cost kept: a graph whose
-# odometry start is poor (MIT) needs the chordal one. Not for M-estimators: their cost can prefer a chordal
-# solution bent to absorb a false loop (M3500 with 10 random false loops: DCS 25 m off)
-VERIFY_REL = 1e-6  # relative error difference under which two optima agree
-SCREEN_READMIT_CHI2 = 10 * CHI2_3DOF_99  # pc_dcs: loops within this squared whitened residual after the
-# screened DCS enter its second DCS (M3500: a true loop closing a detour has 21.7 there, random false ones ~10^3)
-
-
-@dataclass(frozen=True)
-class BatchResult:
-    """Result of a batch optimisation: poses (N, 3) in the graph's vertex order,
-    errors (0.5 * sum of squared whitened residuals, robust kernel applied) at the
-    file's poses (``initial_error``), at the start (``start_error``) and at the end,
-    LM iterations (-1 under GNC, whose count GTSAM does not expose), wall time (s) of
-    the optimisation (the start excluded), the start's name; ``verified``
-    when a second start reached the same error (None: not checked); ``inlier`` (M,)
-    bool per edge (odometry always; a loop when its GNC weight is >= 0.5, else when its
-    whitened squared residual is within the chi-square 99 % gate); ``certified``: SE-Sync's
-    certificate holds at the isotropic optimum next to the result (``certificate.certify``;
-    plain least squares with ``verify`` only, else None)."""
-
-    poses: np.ndarray
-    initial_error: float
-    final_error: float
-    iterations: int
-    seconds: float
-    init: str = "file"
-    start_error: float = float("nan")
-    verified: bool | None = None
-    inlier: np.ndarray | None = None
-    certified: bool | None = None
-
-def _g2o_values(ids, poses):
-    """gtsam.Values with vertex ``ids[n]`` at ``poses[n]``."""
-    import gtsam
-
-    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    if len(poses) != len(ids):
-        raise InputError("g2o graph", f"{len(ids)} vertices but {len(poses)} poses")
-    values = gtsam.Values()
-    for k, p in zip(np.asarray(ids).tolist(), poses):
-        values.insert(pose_key(k), _gtsam_pose(p))
-    return values
-
-
-def _g2o_factor_list(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0,
-                     plain_odometry: bool = False) -> list:
-    """One gtsam between factor per edge of a g2o graph, under the ``robust`` kernel (odometry
-    edges without it when ``plain_odometry``)."""
-    import gtsam
-
-    consistency.edge_rows(graph)  # InputError for an edge to an unknown vertex
-    info = rb.check_information_stack(graph.information, lambda k: f"g2o edge {k} ({graph.i[k]} -> {graph.j[k]})")
-    kernel = rb.m_estimator(robust, robust_param)
-    plain = g2o.odometry_mask(graph) if plain_odometry else np.zeros(len(graph.i), bool)
-    factors = []
-    for a, b, m, inf, p in zip(graph.i.tolist(), graph.j.tolist(), graph.measurements.tolist(), info, plain):
-        model = rb.wrap(gtsam.noiseModel.Gaussian.Information(inf), None if p else kernel)
-        factors.append(gtsam.BetweenFactorPose2(pose_key(a), pose_key(b), gtsam.Pose2(*m), model))
-    return factors
-
-
-def _factor_graph(factors, keep=None):
-    """gtsam.NonlinearFactorGraph of ``factors`` (those where ``keep`` (bool) is set)."""
-    import gtsam
-
-    fg = gtsam.NonlinearFactorGraph()
-    for f in factors if keep is None else (f for f, k in zip(factors, keep) if k):
-        fg.add(f)
-    return fg
-
-
-def _g2o_factors(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0,
-                 plain_odometry: bool = False):
-    """gtsam graph of a g2o file's edges (no prior); see ``_g2o_factor_list``."""
-    return _factor_graph(_g2o_factor_list(graph, robust, robust_param, plain_odometry))
-
-
-def _poses_in_vertex_order(values, ids) -> np.ndarray:
-    """(N, 3) poses of ``values`` ordered like ``ids`` (extractPose2 sorts by key)."""
-    import gtsam
-
-    sorted_poses = gtsam.utilities.extractPose2(values).reshape(-1, 3)
-    return sorted_poses[np.searchsorted(np.sort(ids), ids)]
-
-
-def g2o_error(graph: g2o.PoseGraphFile, poses=None) -> float:
-    """0.5 * sum of squared whitened edge residuals at ``poses`` (N, 3) (default: the file's)."""
-    values = _g2o_values(graph.ids, graph.poses if poses is None else poses)
-    return float(_g2o_factors(graph).error(values))
-
-
-def _anchor_prior(graph: g2o.PoseGraphFile, values):
-    """Tight prior holding the first vertex at its value in ``values``."""
-    import gtsam
-
-    anchor = pose_key(graph.ids[0])
-    return gtsam.PriorFactorPose2(anchor, values.atPose2(anchor), gtsam.noiseModel.Diagonal.Sigmas(PRIOR_SIGMAS))
-
-
-def _lm(graph: g2o.PoseGraphFile, fg, initial):
-    """Levenberg-Marquardt (GTSAM defaults) over ``fg`` and the anchor prior from gtsam.Values
-    ``initial``; returns (values, iterations)."""
-    import gtsam
-
-    anchored = gtsam.NonlinearFactorGraph(fg)
-    anchored.add(_anchor_prior(graph, initial))
-    opt = gtsam.LevenbergMarquardtOptimizer(anchored, initial, _lm_params())
-    return opt.optimize(), opt.iterations()
-
-
-def _optimize_from(graph: g2o.PoseGraphFile, fg, poses, loss: str | None):
-    """LM (or GNC with ``loss``, odometry known inliers) from ``poses``; returns
-    (values, iterations, seconds, GNC weights (M,) or None)."""
-    import gtsam
-
-    initial = _g2o_values(graph.ids, poses)
-    t0 = time.perf_counter()
-    if loss is None:
-        result, iterations = _lm(graph, fg, initial)
-        return result, iterations, time.perf_counter() - t0, None
-    anchored = gtsam.NonlinearFactorGraph(fg)
-    anchored.add(_anchor_prior(graph, initial))
-    known = np.r_[np.flatnonzero(g2o.odometry_mask(graph)), fg.size()]  # odometry and the prior
-    opt = gtsam.GncLMOptimizer(anchored, initial, rb.gnc_params(known, loss, _lm_params()))
-    result = opt.optimize()
-    return result, -1, time.perf_counter() - t0, np.asarray(opt.getWeights()).ravel()[: fg.size()]
-
-
-def _screened_from(graph: g2o.PoseGraphFile, plain: list, robust: list, poses):
-    """The ``pc_dcs`` batch method from ``poses`` (N, 3), given every edge's factor without
-    (``plain``) and with the loop kernel (``robust``, odometry plain):
-
-    1. robust LM over the odometry and the loops of ``consistency.pairwise_support``;
-    2. robust LM from there over the odometry and every loop whose squared whitened residual
-       is within ``SCREEN_READMIT_CHI2`` (isolated true loops return; loops far off stay out of
-       the linear system, where each would add fill-in);
-    3. LM over the odometry and the loops within the chi-square gate ``CHI2_3DOF_99``.
-
-    Returns (values, LM iterations of all three, seconds)."""
-    t0 = time.perf_counter()
-    odometry = g2o.odometry_mask(graph)
-    keep = consistency.pairwise_support(graph)
-    values, iterations = _g2o_values(graph.ids, poses), 0
-    for factors, limit in ((robust, None), (robust, SCREEN_READMIT_CHI2), (plain, CHI2_3DOF_99)):
-        if limit is not None:
-            keep = odometry | (edge_chi2(graph, _poses_in_vertex_order(values, graph.ids)) <= limit)
-        values, n = _lm(graph, _factor_graph(factors, keep), values)
-        iterations += n
-    return values, iterations, time.perf_counter() - t0
-
-
-def edge_chi2(graph: g2o.PoseGraphFile, poses) -> np.ndarray:
-    """(M,) squared whitened residual of every edge at ``poses`` (N, 3) (no robust kernel)."""
-    return consistency.edge_chi2(graph, poses)
-
-
-def _classify(graph: g2o.PoseGraphFile, poses, weights) -> np.ndarray:
-    """(M,) bool inlier flags (see ``BatchResult.inlier``)."""
-    keep = weights >= GNC_OUTLIER_WEIGHT if weights is not None else edge_chi2(graph, poses) <= CHI2_3DOF_99
-    return keep | g2o.odometry_mask(graph)
-
-
-@dataclass(frozen=True)
-class _Run:
-    """One optimisation from one start."""
-
-    init: str
-    start: np.ndarray
-    values: object
-    iterations: int
-    seconds: float
-    weights: np.ndarray | None
-    cost: float
-
-
-def _robust_cost(graph: g2o.PoseGraphFile, fg, values, weights) -> float:
-    """Error of ``fg`` at ``values``; under GNC (``weights`` given) each loop's error truncated at
-    GTSAM's inlier threshold (0.5 * CHI2_3DOF_99), the truncated-least-squares cost."""
-    if weights is None:
-        return float(fg.error(values))
-    e = np.array([fg.at(k).error(values) for k in range(fg.size())])
-    return float(np.sum(np.where(g2o.odometry_mask(graph), e, np.minimum(e, 0.5 * CHI2_3DOF_99))))
-
-
-def _run(graph: g2o.PoseGraphFile, fg, name: str, loss: str | None, screen=None) -> _Run:
-    """Optimise from the start ``name`` ("chordal_isotropic": chordal with unit weights); ``screen``:
-    the (plain, robust) factor lists of the ``pc_dcs`` method, else None."""
-    from slam2d.backend import initialization as ini
-
-    start = ini.chordal(graph, weighted=False) if name == "chordal_isotropic" else ini.initial_poses(graph, name)
-    if screen is None:
-        values, iters, seconds, weights = _optimize_from(graph, fg, start, loss)
-    else:
-        (values, iters, seconds), weights = _screened_from(graph, *screen, start), None
-    return _Run(name, start, values, iters, seconds, weights, _robust_cost(graph, fg, values, weights))
-
-
-def _agree(a: float, b: float) -> bool:
-    return abs(a - b) <= VERIFY_REL * max(a, b, 1e-12)
-
-
-def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0,
-              init: str | None = None, verify: bool = False) -> BatchResult:
-    """Batch optimisation of a g2o graph, the first vertex held at its start pose by a
-    tight prior; errors exclude the prior.
-
-    ``robust``: an M-estimator of ``robust.ROBUST_KERNELS`` on every edge (width
-    ``robust_param``, whitened units) under Levenberg-Marquardt (GTSAM defaults), GNC
-    ("gnc" = TLS, "gnc_gm") with the odometry edges as known inliers, or "pc_dcs": loops
-    screened by pairwise consistency, then DCS (Phi = ``robust_param``) on the loops only,
-    then least squares over the loops it keeps (``_screened_from``). ``init``:
-    "chordal", "spanning_tree" or "file"; default ``G2O_INIT``, ``G2O_ROBUST_INIT`` under an
-    M-estimator, each of ``G2O_GNC_INITS`` under GNC. ``verify``: also optimise from the other starts
-    (chordal, spanning tree, isotropic chordal). Of several runs the first is kept unless
-    another reaches a lower (robust) cost beyond VERIFY_REL; verified when another run
-    agrees with the kept one; None: one run only. Plain least squares with ``verify`` is also
-    checked by SE-Sync's certificate (``BatchResult.certified``)."""
-    loss, screened = rb.gnc_loss(robust), rb.screened_kernel(robust)
-    kernel = "none" if loss is not None else (screened or robust)
-    plain = kernel == "none" and loss is None
-    default = [G2O_INIT] if plain else (list(G2O_GNC_INITS) if loss else [G2O_ROBUST_INIT])
-    names = [str(init).lower()] if init else default
-    if verify:
-        names += [n for n in ("chordal", "spanning_tree", "chordal_isotropic") if n not in names]
-    factors = _g2o_factor_list(graph, kernel, robust_param, plain_odometry=screened is not None)
-    fg = _factor_graph(factors)
-    screen = (_g2o_factor_list(graph), factors) if screened else None
-    runs = [_run(graph, fg, name, loss, screen) for name in names]
-    best = runs[0]  # the first start's run unless another reaches a clearly lower cost
-    for r in runs[1:]:
-        if r.cost < best.cost and not _agree(r.cost, best.cost):
-            best = r
-    verified = any(_agree(r.cost, best.cost) for r in runs if r is not best) if len(runs) > 1 else None
-    for r in runs:
-        log.info("g2o %s from %s: cost %.9g%s", robust, r.init, r.cost, " (kept)" if r is best else "")
-    poses = _poses_in_vertex_order(best.values, graph.ids)
-    certified = certificate.certify(graph, poses).certified if verify and plain else None
-    out = BatchResult(poses, fg.error(_g2o_values(graph.ids, graph.poses)), float(fg.error(best.values)),
-                      best.iterations, best.seconds, best.init, fg.error(_g2o_values(graph.ids, best.start)),
-                      verified, _classify(graph, poses, best.weights), certified)
-    log.info("g2o %s from %s: error %.6g -> %.6g, %d iterations, %.3f s",
-             robust, best.init, out.start_error, out.final_error, out.iterations, best.seconds)
-    return out
-
-
-def optimize_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0,
-                 init: str | None = None) -> np.ndarray:
-    """Optimised poses (N, 3) of a g2o graph (see ``solve_g2o``)."""
-    return solve_g2o(graph, robust, robust_param, init).poses
-
-
-def loop_metrics(inlier, injected) -> dict:
-    """Counts and rates of rejected loops against the injected false loops (both (M,) bool;
-    odometry edges count as kept inliers). Precision / recall are of the rejections."""
-    inlier, injected = np.asarray(inlier, bool), np.asarray(injected, bool)
-    rejected = ~inlier
-    hit = int(np.sum(rejected & injected))
-    true_loops = ~injected
-    return {
-        "loops_rejected": int(rejected.sum()),
-        "outliers_injected": int(injected.sum()),
-        "outliers_rejected": hit,
-        "true_rejected": int(np.sum(rejected & true_loops)),
-        "precision": hit / rejected.sum() if rejected.any() else 1.0,
-        "recall": hit / injected.sum() if injected.any() else 1.0,
-    }
 
 
 def replay_g2o(graph: g2o.PoseGraphFile, cfg: BackendConfig | None = None, gate: float | None = None,
@@ -785,35 +489,3 @@ def replay_g2o(graph: g2o.PoseGraphFile, cfg: BackendConfig | None = None, gate:
         if (every == 1 and added) or (every > 1 and ((v + 1) % every == 0 or v == n - 1)):
             pg.update()
     return pg
-
-
-def g2o_metrics(graph: g2o.PoseGraphFile, result: BatchResult, injected=None, reference=None) -> dict:
-    """metrics.json content of a batch solve: errors, iterations, time (s), verification,
-    loops kept / rejected, precision / recall against ``injected`` (M,) bool, and the
-    position RMSE (m, after SE(2) alignment) against ``reference`` poses (N, 3)."""
-    from slam2d.evaluation.trajectory import ate
-
-    loops = ~g2o.odometry_mask(graph)
-    out = {
-        "vertices": len(graph.ids), "edges": len(graph.i), "loops": int(loops.sum()),
-        "init": result.init, "initial_error": result.initial_error, "start_error": result.start_error,
-        "gtsam_error": result.final_error, "iterations": result.iterations, "seconds": result.seconds,
-        "verified": result.verified, "certified": result.certified,
-        "loops_rejected": int(np.sum(~result.inlier & loops)),
-    }
-    if injected is not None and np.any(injected):
-        out.update(loop_metrics(result.inlier, injected))
-        kept = result.inlier & ~np.asarray(injected, bool)
-        out["true_loops_kept"] = float(np.sum(kept & loops) / max(1, np.sum(loops & ~injected)))
-    if reference is not None:
-        out["rmse_to_reference"] = ate(result.poses, reference)["rmse"]
-    return out
-
-
-def reference_poses(graph: g2o.PoseGraphFile, reference: g2o.PoseGraphFile) -> np.ndarray:
-    """The ``reference`` graph's poses (N, 3) for ``graph``'s vertex ids; InputError if any is missing."""
-    rows = np.searchsorted(reference.ids, graph.ids)
-    rows = np.minimum(rows, len(reference.ids) - 1)
-    if not np.array_equal(reference.ids[rows], graph.ids):
-        raise InputError("--reference", "the reference lacks some of the graph's vertices")
-    return reference.poses[rows]

@@ -12,7 +12,7 @@ optimisation; ``gnc_params`` builds its parameters with the known inliers
 (prior and odometry factors) fixed.
 
 ``pc_dcs`` (batch only) screens the loops by pairwise consistency through the
-odometry before DCS (``pose_graph.solve_g2o``); ``param`` is DCS's Phi.
+odometry before DCS (``batch.solve_g2o``); ``param`` is DCS's Phi.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from slam2d.errors import InputError
 ROBUST_KERNELS = ("none", "huber", "cauchy", "dcs")
 GNC_LOSSES = ("gm", "tls")  # Geman-McClure, truncated least squares
 GNC_INLIER_PROBABILITY = 0.99  # chi-square probability mass an inlier residual stays within
+GNC_OUTLIER_WEIGHT = 0.5  # a loop whose final GNC weight is below this is rejected (online and batch)
 GNC_METHODS = {"gnc": "tls", "gnc_tls": "tls", "gnc_gm": "gm"}  # batch g2o method -> GNC loss
 SCREENED_METHODS = {"pc_dcs": "dcs"}  # batch method -> kernel of its loops after the consistency screen
 BATCH_METHODS = ROBUST_KERNELS + tuple(GNC_METHODS) + tuple(SCREENED_METHODS)  # ``solve_g2o(robust=...)``

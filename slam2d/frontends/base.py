@@ -45,10 +45,10 @@ class Frontend(Protocol):
 
 FRONTENDS = Registry("frontends", "frontend", key="frontend.name", options_key="frontend.options", builtins={
     "odometry": "slam2d.frontends.base",
-    "icp": "slam2d.frontends.icp",
-    "lines": "slam2d.frontends.lines",
-    "corners": "slam2d.frontends.corners",
-    "fuzzy_vertex": "slam2d.frontends.fuzzy_vertex",
+    "icp": "slam2d.frontends.icp.frontend",
+    "lines": "slam2d.frontends.lines.frontend",
+    "corners": "slam2d.frontends.corners.frontend",
+    "fuzzy_vertex": "slam2d.frontends.fuzzy_vertex.frontend",
     "fused": "slam2d.frontends.fused",
 })
 """The frontends by name (``frontend.name``); their options are ``frontend.options``."""

@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 from pydantic import Field, field_validator
 
 from slam2d import config as config_mod
-from slam2d.backend import pose_graph as pgm
+from slam2d.backend import batch
 from slam2d.config import OutputConfig, Section, folder_name
 from slam2d.datasets import g2o
 from slam2d.datasets.registry import resolve_data_path
@@ -63,8 +63,8 @@ def _optimize_into(work: Path, cfg: OptimizeConfig, graph_path: Path, reference:
     injected = np.zeros(len(graph.i), bool)
     if cfg.outliers:
         graph, injected = g2o.inject_outliers(graph, cfg.outliers, cfg.outlier_kind, cfg.seed)
-    ref = pgm.reference_poses(graph, g2o.read_g2o(reference)) if reference else None
-    result = pgm.solve_g2o(graph, cfg.robust, cfg.robust_param, cfg.init, cfg.verify)
+    ref = batch.reference_poses(graph, g2o.read_g2o(reference)) if reference else None
+    result = batch.solve_g2o(graph, cfg.robust, cfg.robust_param, cfg.init, cfg.verify)
     (work / "config.yaml").write_text(config_mod.dump(cfg.model_copy(update={"init": result.init})))
     g2o.write_g2o(work / "graph.g2o", g2o.PoseGraphFile(graph.ids, result.poses, graph.i, graph.j,
                                                          graph.measurements, graph.information))
@@ -73,7 +73,7 @@ def _optimize_into(work: Path, cfg: OptimizeConfig, graph_path: Path, reference:
         zip(graph.i.tolist(), graph.j.tolist(), (~g2o.odometry_mask(graph)).tolist(), injected.tolist(),
             result.inlier.tolist())]
     (work / "edges.csv").write_text("\n".join(rows) + "\n")
-    metrics = pgm.g2o_metrics(graph, result, injected if cfg.outliers else None, ref)
+    metrics = batch.g2o_metrics(graph, result, injected if cfg.outliers else None, ref)
     (work / "metrics.json").write_text(json_text(metrics) + "\n")
     _overlay_figure(work / "overlay.png", graph, result, ref)
     return metrics

@@ -1,0 +1,117 @@
+"""GTSAM keys, values and factors of a 2D pose graph: the only module that builds GTSAM factors.
+
+Keyframe (or g2o vertex) ``k`` is the gtsam key ``symbol('x', k)``, landmark ``n`` is
+``symbol('l', n)``. Poses are numpy ``(x, y, theta)`` (m, m, rad); information matrices are
+3x3 inverse covariances in the frame of the measurement (GTSAM's tangent space, order x, y,
+theta). The online graph (``pose_graph``) and the batch solver (``batch``) both build their
+factors here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from slam2d.backend import consistency
+from slam2d.backend import robust as rb
+from slam2d.datasets import g2o
+from slam2d.errors import InputError
+
+PRIOR_SIGMAS = np.array([1e-6, 1e-6, 1e-6])  # m, m, rad: anchors the first keyframe / vertex
+
+
+def pose_key(k: int) -> int:
+    """GTSAM key of keyframe ``k``."""
+    import gtsam
+
+    return gtsam.symbol("x", int(k))
+
+
+def landmark_key(n: int) -> int:
+    """GTSAM key of landmark ``n``."""
+    import gtsam
+
+    return gtsam.symbol("l", int(n))
+
+
+def gtsam_pose(p):
+    """gtsam.Pose2 of a pose ``p`` (3,) (m, m, rad)."""
+    import gtsam
+
+    return gtsam.Pose2(float(p[0]), float(p[1]), float(p[2]))
+
+
+def lm_params():
+    """Levenberg-Marquardt parameters: GTSAM's defaults."""
+    import gtsam
+
+    return gtsam.LevenbergMarquardtParams()
+
+
+def prior_factor(key: int, pose):
+    """Tight prior (``PRIOR_SIGMAS``) holding gtsam key ``key`` at the gtsam.Pose2 ``pose``."""
+    import gtsam
+
+    return gtsam.PriorFactorPose2(key, pose, gtsam.noiseModel.Diagonal.Sigmas(PRIOR_SIGMAS))
+
+
+def between_factor(i: int, j: int, delta, model):
+    """Between factor: pose of keyframe ``j`` seen from keyframe ``i`` is ``delta`` (3,), under the
+    gtsam noise model ``model``."""
+    import gtsam
+
+    return gtsam.BetweenFactorPose2(pose_key(i), pose_key(j), gtsam_pose(delta), model)
+
+
+def bearing_range_factor(key: int, landmark_id: int, bearing: float, range: float, model):
+    """Bearing (rad, keyframe frame) and range (m) of landmark ``landmark_id`` from keyframe ``key``,
+    under the gtsam noise model ``model`` (2-dimensional: bearing, range)."""
+    import gtsam
+
+    return gtsam.BearingRangeFactor2D(pose_key(key), landmark_key(landmark_id), gtsam.Rot2(float(bearing)),
+                                      float(range), model)
+
+
+def factor_graph(factors, keep=None):
+    """gtsam.NonlinearFactorGraph of ``factors`` (those where ``keep`` (bool) is set)."""
+    import gtsam
+
+    fg = gtsam.NonlinearFactorGraph()
+    for f in factors if keep is None else (f for f, k in zip(factors, keep) if k):
+        fg.add(f)
+    return fg
+
+
+def g2o_values(ids, poses):
+    """gtsam.Values with vertex ``ids[n]`` at ``poses[n]`` (N, 3)."""
+    import gtsam
+
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if len(poses) != len(ids):
+        raise InputError("g2o graph", f"{len(ids)} vertices but {len(poses)} poses")
+    values = gtsam.Values()
+    for k, p in zip(np.asarray(ids).tolist(), poses):
+        values.insert(pose_key(k), gtsam_pose(p))
+    return values
+
+
+def g2o_factor_list(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0,
+                    plain_odometry: bool = False) -> list:
+    """One gtsam between factor per edge of a g2o graph, under the ``robust`` kernel (odometry
+    edges without it when ``plain_odometry``)."""
+    import gtsam
+
+    consistency.edge_rows(graph)  # InputError for an edge to an unknown vertex
+    info = rb.check_information_stack(graph.information, lambda k: f"g2o edge {k} ({graph.i[k]} -> {graph.j[k]})")
+    kernel = rb.m_estimator(robust, robust_param)
+    plain = g2o.odometry_mask(graph) if plain_odometry else np.zeros(len(graph.i), bool)
+    factors = []
+    for a, b, m, inf, p in zip(graph.i.tolist(), graph.j.tolist(), graph.measurements.tolist(), info, plain):
+        model = rb.wrap(gtsam.noiseModel.Gaussian.Information(inf), None if p else kernel)
+        factors.append(between_factor(a, b, m, model))
+    return factors
+
+
+def g2o_factors(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0,
+                plain_odometry: bool = False):
+    """gtsam graph of a g2o file's edges (no prior); see ``g2o_factor_list``."""
+    return factor_graph(g2o_factor_list(graph, robust, robust_param, plain_odometry))
