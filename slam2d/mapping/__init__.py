@@ -1,3 +1,31 @@
-"""slam2d.mapping: the occupancy grid and the layers made of it (``mapping.base``)."""
+"""slam2d.mapping: the occupancy grid, its one loader, and the layers made of it (the registry in
+``mapping.base``)."""
+
+from __future__ import annotations
+
+import importlib
 
 from slam2d.mapping.base import MAP_LAYERS, MapLayer, register_layer  # noqa: F401
+
+_EXPORTS = {
+    "OccupancyGrid": "grid",
+    "load_map": "maps",
+    "build_grid": "occupancy",
+    "save_map_server": "export",
+    "load_map_server": "export",
+    "save_map_png": "export",
+    "extract_line_map": "geometric",
+    "LineMap": "line_map",
+    "QuadTree": "quadtree",
+    "region_graph": "topological",
+    "write_layers": "layers",
+}
+"""Public names imported on first use (so that importing the package stays light): name -> module."""
+
+__all__ = sorted([*_EXPORTS, "MAP_LAYERS", "MapLayer", "register_layer"])
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

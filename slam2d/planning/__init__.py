@@ -1,3 +1,37 @@
-"""slam2d.planning: global planners on grids (``planning.base``), smoothing and timing."""
+"""slam2d.planning: global planners on grids (the registry in ``planning.base``), planning on a map file,
+smoothing and time-optimal timing."""
+
+from __future__ import annotations
+
+import importlib
 
 from slam2d.planning.base import GLOBAL_PLANNERS, GlobalPlanner, register_planner  # noqa: F401
+
+_EXPORTS = {
+    "AStar": "astar",
+    "PlanResult": "astar",
+    "path_length": "astar",
+    "PlanningGrid": "grid",
+    "load_grid": "grid",
+    "load_movingai_map": "grid",
+    "load_scenarios": "grid",
+    "MapPlan": "query",
+    "plan_on_map": "query",
+    "plan_queries": "query",
+    "make_planner": "query",
+    "NoPathError": "query",
+    "HPAStar": "hierarchical",
+    "RoomGraphPlanner": "hierarchical",
+    "shortcut": "smoothing",
+    "TrajectoryLimits": "timing",
+    "time_parametrize": "timing",
+}
+"""Public names imported on first use (so that importing the package stays light): name -> module."""
+
+__all__ = sorted([*_EXPORTS, "GLOBAL_PLANNERS", "GlobalPlanner", "register_planner"])
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
