@@ -34,11 +34,11 @@ import numpy as np
 
 from slam2d.mapping.export import LOADED_LOG_ODDS
 from slam2d.mapping.geometric import extract_line_map
+from slam2d.mapping.grid import OccupancyGrid
 from slam2d.mapping.line_map import LineMap
 from slam2d.mapping.line_scores import chamfer, line_scores
 from slam2d.mapping.maps import load_map
 from slam2d.mapping.mesh import footprint_hausdorff, solids_watertight, wall_mesh
-from slam2d.mapping.grid import OccupancyGrid
 from slam2d.mapping.quadtree import QuadTree, decode_trinary, encode_trinary, trinary_values
 from slam2d.mapping.sparse import HashedGrid, Triplets, sparsity
 

@@ -33,8 +33,9 @@ from slam_radish import PUBLISHED, run
 
 from slam2d import geometry
 from slam2d.config import load as load_config
-from slam2d.datasets.registry import open_dataset, resolve_data_path
+from slam2d.datasets.registry import open_dataset
 from slam2d.evaluation.relations import _endpoints, _match, read_relations
+from slam2d.paths import resolve_data_path
 
 CONTRADICTED_M = 0.15  # m: a pose fitting the scans worse than this ...
 RATIO = 2.0  # ... and this many times worse than the other pose is contradicted by them

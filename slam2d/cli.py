@@ -451,7 +451,7 @@ def datasets_download(
 ) -> None:
     """Download data files from their public sources, resuming partial ones and checking sha256."""
     from slam2d.datasets.download import download
-    from slam2d.datasets.registry import data_root
+    from slam2d.paths import data_root
 
     with _stoppable("partial downloads kept as .part files, resumed next time"):
         try:

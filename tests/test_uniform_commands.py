@@ -96,3 +96,16 @@ def test_ablate_takes_set_and_grid_and_dry_runs(tmp_path):
     both.write_text(yaml.safe_dump({"base": "s.yaml", "config": {}, "grid": {"seed": [0]}}))
     out = CliRunner().invoke(app, ["ablate", str(both), "--dry-run"])
     assert out.exit_code == 2 and "'base' (a file) or 'config' (inline), not both" in out.output
+
+
+def test_data_paths_resolve_against_slam2d_data_everywhere(tmp_path, data_file, monkeypatch):
+    """A world PNG, a map and a pose graph named relative to SLAM2D_DATA are found from any folder."""
+    from slam2d.sim.world import load_world
+
+    data_file("rooms/office_a.png")
+    monkeypatch.chdir(tmp_path)
+    assert load_world("rooms/office_a.png").name
+    out = CliRunner().invoke(app, ["map", "rooms/office_a.png", "--layers", "sparse", "-o", str(tmp_path), "-q"])
+    assert out.exit_code == 0, out.output
+    out = CliRunner().invoke(app, ["dump-config", "--command", "optimize", "--set", "graph=posegraphs/intel.g2o"])
+    assert out.exit_code == 0 and "posegraphs/intel.g2o" in out.output

@@ -11,8 +11,8 @@ from pathlib import Path
 
 from slam2d.datasets import catalog
 from slam2d.datasets.catalog import DataFile
-from slam2d.datasets.registry import data_root
 from slam2d.errors import InputError
+from slam2d.paths import data_root
 
 CHUNK = 1 << 16
 TIMEOUT_S = 30.0

@@ -9,8 +9,8 @@ import numpy as np
 
 from slam2d.config import MappingConfig, read_yaml, short_repr
 from slam2d.errors import InputError
-from slam2d.mapping.image import read_grey
 from slam2d.mapping.grid import OccupancyGrid, logit
+from slam2d.mapping.image import read_grey
 
 __all__ = ["save_map_server", "load_map_server", "save_map_png", "downsample", "FREE", "OCCUPIED", "UNKNOWN"]
 

@@ -15,8 +15,8 @@ import numpy as np
 
 from slam2d.errors import InputError
 from slam2d.mapping.export import LOADED_LOG_ODDS, load_map_server
-from slam2d.mapping.image import read_grey
 from slam2d.mapping.grid import OccupancyGrid
+from slam2d.mapping.image import read_grey
 
 __all__ = ["load_map", "read_movingai_map", "FLOOR_PLAN_RESOLUTION", "FLOOR_PLAN_FREE_MIN", "FLOOR_PLAN_OCCUPIED_MAX",
            "MOVINGAI_PASSABLE"]

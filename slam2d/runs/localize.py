@@ -22,13 +22,14 @@ import numpy as np
 
 from slam2d import config as config_mod
 from slam2d import geometry
-from slam2d.datasets.registry import open_dataset, resolve_data_path
+from slam2d.datasets.registry import open_dataset
 from slam2d.errors import InputError
 from slam2d.evaluation.trajectory import read_tum, write_tum
 from slam2d.localization.config import LocalizeConfig
 from slam2d.localization.maps import KnownMap
 from slam2d.localization.mcl import ParticleFilter
 from slam2d.localization.scenario import PERIOD, Stream, Track, converged_at, false_convergence, replay, wander
+from slam2d.paths import resolve_data_path
 from slam2d.runs.results import json_text, live_view, results_folder
 from slam2d.sim.world import load_world
 from slam2d.types import Trajectory

@@ -10,10 +10,10 @@ from pydantic import Field, field_validator
 
 from slam2d import config as config_mod
 from slam2d.config import CommandConfig, MappingConfig
-from slam2d.datasets.registry import resolve_data_path
 from slam2d.errors import InputError
 from slam2d.mapping.layers import LAYERS, write_layers
 from slam2d.mapping.maps import load_map
+from slam2d.paths import resolve_data_path
 from slam2d.runs.results import json_text, results_folder
 
 __all__ = ["MapConfig", "run_map"]

@@ -16,8 +16,8 @@ from slam2d import config as config_mod
 from slam2d.backend import batch
 from slam2d.config import OutputConfig, Section, folder_name
 from slam2d.datasets import g2o
-from slam2d.datasets.registry import resolve_data_path
 from slam2d.errors import InputError
+from slam2d.paths import resolve_data_path
 from slam2d.runs.results import json_text, results_folder
 
 __all__ = ["OptimizeConfig", "run_optimize"]

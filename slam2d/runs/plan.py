@@ -12,8 +12,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from slam2d import config as config_mod
-from slam2d.datasets.registry import resolve_data_path
 from slam2d.errors import InputError
+from slam2d.paths import resolve_data_path
 from slam2d.planning.astar import PlanResult
 from slam2d.planning.query import MapPlan, NoPathError, plan_on_map, plan_queries
 from slam2d.planning.timing import TimedPath, plot_profile

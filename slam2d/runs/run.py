@@ -12,12 +12,13 @@ import numpy as np
 from slam2d import config as config_mod
 from slam2d import geometry
 from slam2d.config import ExperimentConfig
-from slam2d.datasets.registry import open_dataset, resolve_data_path
+from slam2d.datasets.registry import open_dataset
 from slam2d.evaluation.relations import read_relations, relations_frame, relations_metric
 from slam2d.evaluation.trajectory import ate, rpe, write_tum
 from slam2d.mapping.export import save_map_png, save_map_server
 from slam2d.mapping.layers import write_layers
 from slam2d.mapping.occupancy import build_grid, check_resolution
+from slam2d.paths import resolve_data_path
 from slam2d.pipeline import SlamPipeline
 from slam2d.runs.commands import resolved
 from slam2d.runs.results import json_text, live_view, peak_rss_mb, progress, results_folder

@@ -20,9 +20,9 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from slam2d import config as config_mod
-from slam2d.datasets.registry import resolve_data_path
 from slam2d.errors import InputError
 from slam2d.mapping.topological import save_graph
+from slam2d.paths import resolve_data_path
 from slam2d.runs.results import json_text, results_folder
 from slam2d.segmentation.rooms import RoomSegmentation, segment_map
 

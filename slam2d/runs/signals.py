@@ -7,7 +7,6 @@ import os
 import signal
 from contextlib import contextmanager
 
-
 _STOPPED = False  # whether SIGINT or SIGTERM has arrived in this process (in a sweep worker: no new variant)
 
 

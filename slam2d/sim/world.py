@@ -17,6 +17,7 @@ import numpy as np
 
 from slam2d import geometry
 from slam2d.errors import InputError
+from slam2d.paths import find_data_path
 
 __all__ = ["World", "Contact", "load_world"]
 
@@ -444,9 +445,9 @@ def _office_walls() -> list[tuple[float, float, float, float]]:
 
 
 def load_world(world: str, resolution: float = 0.05) -> World:
-    """A built-in world by name (``office``) or an occupancy PNG at that path."""
+    """A built-in world by name (``office``) or an occupancy PNG at that path (here, else under SLAM2D_DATA)."""
     if world == "office":
         return World.office()
-    return World.from_png(world, resolution)
+    return World.from_png(find_data_path(world), resolution)
 
 
