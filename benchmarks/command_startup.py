@@ -4,7 +4,7 @@ Each command runs ``--repeats`` times, interleaved with its peers (``python -c p
 ``python -c "import numpy"``) so that a loaded machine slows all alike; the table gives
 median wall and CPU seconds (the process and its children), and for the commands the
 work they report themselves (segmentation ``seconds`` and ``cpu_seconds``; planning
-``total_ms``, its figures included), so that wall minus work (CPU minus work CPU on a
+``total_ms``, the planning without its figures), so that wall minus work (CPU minus work CPU on a
 loaded machine) is the start-up, import and output overhead. The target: a command
 doing about half a second of work returns within 1.5 s.
 

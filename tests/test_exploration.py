@@ -563,7 +563,7 @@ def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped()
     inside; from the large room, or once the ways out are used up, there is none."""
     from types import SimpleNamespace
 
-    from slam2d.exploration.loop import MAX_RETRACES, _way_out
+    from slam2d.exploration.recovery import MAX_RETRACES, way_out
 
     state = np.full((60, 100), FREE, dtype=np.int8)  # 5 m x 3 m at 5 cm
     state[[0, -1], :] = state[:, [0, -1]] = OCCUPIED
@@ -577,7 +577,7 @@ def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped()
     est = [np.array([x, y, 0.0]) for x, y in np.vstack([straight, circle])]
     loop = SimpleNamespace(view=lambda: view, robot=SimpleNamespace(cfg=SimpleNamespace(radius=0.2)),
                            slam=SimpleNamespace(pose=est[-1]), retraces=0)  # fmt: skip
-    way = _way_out(loop, est)
+    way = way_out(loop, est)
     assert way is not None and loop.retraces == 1
     large = np.isfinite(geodesic(view.traversable(0.2), view.to_cell([2.0, 1.5]), view.resolution))
     end = view.to_cell(way[-1])
@@ -587,14 +587,14 @@ def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped()
     assert length < 1.2 * (est[-1][0] - way[-1][0])  # straight back: the loop in the small room is not retraced
     outside = SimpleNamespace(view=lambda: view, robot=loop.robot, slam=SimpleNamespace(pose=np.array([2.0, 1.5, 0.0])),
                               retraces=0)  # fmt: skip
-    assert _way_out(outside, [np.array([x, y, 0.0]) for x, y in straight[:30]]) is None  # not cut off
+    assert way_out(outside, [np.array([x, y, 0.0]) for x, y in straight[:30]]) is None  # not cut off
     loop.retraces = MAX_RETRACES
-    assert _way_out(loop, est) is None
+    assert way_out(loop, est) is None
 
 
 def test_pocket_cells_are_hidden_unknown_cells_walls_close_small_gaps_and_escape_turns_to_open_space():
     from slam2d.exploration.explorer import pocket_state
-    from slam2d.exploration.loop import _open_heading
+    from slam2d.exploration.recovery import open_heading
 
     state = np.full((40, 40), UNKNOWN, dtype=np.int8)
     state[5:35, 5:35] = FREE
@@ -613,7 +613,7 @@ def test_pocket_cells_are_hidden_unknown_cells_walls_close_small_gaps_and_escape
     gained = information_gain(view, [(0.05 * 20, 0.05 * 25)], 6.0, 360)[0]  # in the room, above the pocket
     assert gained >= 18  # sees its upper rows
     wall = np.column_stack([np.full(50, 0.25), np.linspace(-1, 1, 50)])  # a wall 5 cm in front of the disc
-    heading = _open_heading(wall, 0.2)
+    heading = open_heading(wall, 0.2)
     assert abs(abs(heading) - np.pi) < 0.5  # away from it
 
 
