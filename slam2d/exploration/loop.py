@@ -33,7 +33,9 @@ from slam2d.exploration.explorer import Explorer, Goal
 from slam2d.exploration.gridops import GridView, LiveClearance, geodesic, inside_polygon
 from slam2d.navigation import Navigator
 from slam2d.navigation.common import Command
-from slam2d.navigation.navigator import ACTIVE, REACHED, clearance, navigator_config
+from slam2d.navigation.config import navigator_config
+from slam2d.navigation.drive import clearance
+from slam2d.navigation.navigator import ACTIVE, REACHED
 from slam2d.sim import Robot
 from slam2d.sim.robot import RobotConfig
 from slam2d.sim.world import load_world
