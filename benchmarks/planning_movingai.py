@@ -37,7 +37,8 @@ import numpy as np
 
 from slam2d.planning.astar import SQRT2, AStar, check_path
 from slam2d.planning.grid import load_movingai_map, load_scenarios
-from slam2d.planning.hierarchical import HPAStar, RoomGraphPlanner
+from slam2d.planning.hierarchical import HPAStar
+from slam2d.planning.room_graph import RoomGraphPlanner
 
 DEFAULT_DATA = Path(os.environ.get("SLAM2D_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets"))
 MAPS = ("arena", "den312d", "16room_000")

@@ -593,7 +593,7 @@ def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped()
 
 
 def test_pocket_cells_are_hidden_unknown_cells_walls_close_small_gaps_and_escape_turns_to_open_space():
-    from slam2d.exploration.explorer import pocket_state
+    from slam2d.exploration.pockets import pocket_state
     from slam2d.exploration.recovery import open_heading
 
     state = np.full((40, 40), UNKNOWN, dtype=np.int8)
@@ -624,7 +624,7 @@ def test_pocket_state_is_a_closing_of_the_walls_by_a_square_and_hidden_cells_hav
 ):
     from scipy import ndimage
 
-    from slam2d.exploration.explorer import pocket_state
+    from slam2d.exploration.pockets import pocket_state
 
     rng = np.random.default_rng(wall_cells)
     state = rng.choice(np.array([FREE, OCCUPIED, UNKNOWN], dtype=np.int8), size=shape, p=[0.5, 0.1, 0.4])
@@ -760,8 +760,8 @@ def test_unknown_inside_furniture_keeps_no_candidate_open():
 def test_views_of_pockets_do_not_see_into_a_wall_block_through_a_gap_but_still_behind_a_desk():
     """Rays that entered a block of walls through a gap and ran along its unseen inner face kept robots
     looking after 99 %, a column of hidden cells at a time; the pocket behind a desk must stay."""
-    from slam2d.exploration.explorer import opaque_faces, pocket_state
     from slam2d.exploration.gridops import unknown_in_sight
+    from slam2d.exploration.pockets import opaque_faces, pocket_state
 
     state = np.full((60, 60), UNKNOWN, dtype=np.int8)
     state[10:50, 10:50] = FREE  # a room
@@ -791,9 +791,9 @@ def test_views_of_pockets_do_not_see_into_a_thick_wall_through_its_unseen_face()
     """A wall 7 cells thick seen as occupied from the far room only: from the near room, its inside is
     hidden behind free cells. Rays must not enter such a strip, no deeper than the robot's width (8 cells);
     a strip deeper than that still lets them in."""
-    from slam2d.exploration.explorer import opaque_faces, pocket_state
     from slam2d.exploration.frontiers import shallow_entries
     from slam2d.exploration.gridops import unknown_in_sight
+    from slam2d.exploration.pockets import opaque_faces, pocket_state
 
     state = np.full((40, 60), FREE, dtype=np.int8)
     state[[0, -1], :] = state[:, [0, -1]] = OCCUPIED
@@ -818,8 +818,8 @@ def test_views_of_pockets_leave_the_outside_to_the_frontiers_but_keep_a_pocket_a
     """Slivers of the outside between beams through a room's open end kept robots looking after 99 %;
     the space behind a desk at the outer wall, whose wall stretch is unseen, joins the outside unless the
     wall is bridged."""
-    from slam2d.exploration.explorer import pocket_state, without_outside
     from slam2d.exploration.gridops import unknown_in_sight
+    from slam2d.exploration.pockets import pocket_state, without_outside
 
     state = np.full((70, 90), UNKNOWN, dtype=np.int8)
     state[10:50, 10:60] = FREE  # a room ...

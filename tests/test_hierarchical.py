@@ -7,7 +7,8 @@ import pytest
 
 from slam2d.planning.astar import AStar, check_path
 from slam2d.planning.grid import PlanningGrid, load_movingai_map, load_scenarios
-from slam2d.planning.hierarchical import HPAStar, RoomGraphPlanner, entrances
+from slam2d.planning.hierarchical import HPAStar, entrances
+from slam2d.planning.room_graph import RoomGraphPlanner
 
 
 def assert_valid(free, result, start, goal):

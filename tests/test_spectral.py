@@ -12,13 +12,12 @@ from sklearn.metrics import silhouette_score
 import slam2d.segmentation.spectral as spectral
 from slam2d.errors import InputError
 from slam2d.segmentation.evaluate import score
+from slam2d.segmentation.labelling import label_free_cells, merge_open_boundaries
 from slam2d.segmentation.observations import virtual_observations
 from slam2d.segmentation.spectral import (
     SpectralConfig,
     binarise,
     choose_k,
-    label_free_cells,
-    merge_open_boundaries,
     random_walk_laplacian,
     row_normalise,
     second_order,

@@ -32,7 +32,9 @@ from slam2d.exploration.explorer import Explorer, Goal
 from slam2d.exploration.recovery import escape, retrace, way_out
 from slam2d.exploration.gridops import GridView, LiveClearance, inside_polygon
 from slam2d.navigation import Navigator
-from slam2d.navigation.navigator import ACTIVE, REACHED, clearance, navigator_config
+from slam2d.navigation.config import navigator_config
+from slam2d.navigation.drive import clearance
+from slam2d.navigation.navigator import ACTIVE, REACHED
 from slam2d.sim import Robot
 from slam2d.sim.robot import RobotConfig
 from slam2d.sim.world import load_world

@@ -2,8 +2,8 @@
 
 ``dwa`` (dynamic window, the default) and ``fsm`` (the 2016 thesis's avoidance
 state machine) turn a laser scan, a pose and the remaining path into a velocity
-command; ``navigator`` plans, replans, recovers and reports "unreachable";
-``run_navigation`` drives a :class:`slam2d.sim.Robot` to a goal.
+command; ``navigator`` plans, replans, recovers and reports "unreachable" (its
+parameters: ``config``); ``run_navigation`` (``drive``) drives a :class:`slam2d.sim.Robot` to a goal.
 """
 
 from slam2d.navigation.base import (
@@ -15,10 +15,12 @@ from slam2d.navigation.base import (
     register_recovery,
 )
 from slam2d.navigation.common import Command
+from slam2d.navigation.config import NavigatorConfig
+from slam2d.navigation.drive import NavigationResult, run_navigation
 from slam2d.navigation.dwa import DwaConfig, DynamicWindow
 from slam2d.navigation.fsm import AvoidanceStateMachine, FsmConfig
 from slam2d.navigation.maps import free_mask, world_grid
-from slam2d.navigation.navigator import NavigationResult, Navigator, NavigatorConfig, run_navigation
+from slam2d.navigation.navigator import Navigator
 
 __all__ = [
     "Command",

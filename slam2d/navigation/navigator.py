@@ -1,5 +1,6 @@
 """Goal -> velocity commands: global A* on the inflated map, a local planner, replanning,
-recovery, and "unreachable" as a result; ``run_navigation`` drives a simulated robot.
+recovery, and "unreachable" as a result (the parameters: :mod:`~slam2d.navigation.config`;
+a simulated run: :mod:`~slam2d.navigation.drive`).
 
 The map is an argument of every :meth:`Navigator.step` (a known grid now, the live
 SLAM grid later). The global path is grid A* (``slam2d.planning.astar``) on the map
@@ -22,32 +23,23 @@ turns to the goal heading if one was given.
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass, field
-from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, Field, ValidationError
+from pydantic import BaseModel
 from scipy import ndimage
 
 from slam2d import geometry
-from slam2d.config import Section
 from slam2d.navigation.base import LOCAL_PLANNERS, RECOVERY_BEHAVIOURS, register_recovery
 from slam2d.navigation.common import Command, approach_speed, in_robot_frame, point_along
-from slam2d.navigation.dwa import DwaConfig
-from slam2d.navigation.fsm import FsmConfig
+from slam2d.navigation.config import NavigatorConfig
 from slam2d.navigation.maps import free_mask, mark_points
 from slam2d.planning.astar import AStar
 from slam2d.planning.grid import PlanningGrid, around, refresh_clearance
-from slam2d.registry import Choice, validation_error
 from slam2d.sim.robot import RobotConfig
 
 __all__ = [
-    "NavigatorConfig",
     "Navigator",
-    "NavigationResult",
-    "run_navigation",
     "make_local_planner",
-    "navigator_config",
     "ACTIVE",
     "REACHED",
     "UNREACHABLE",
@@ -64,38 +56,6 @@ _EXPLAINING = np.array([(dr, dc) for dr in range(-_EXPLAINED_CELLS, _EXPLAINED_C
                         if abs(dr) + abs(dc) <= _EXPLAINED_CELLS])  # the offsets (rows, cols) of those cells
 _FINAL_GAP = 0.01  # m kept between the robot's disc and any point on the final approach
 GOAL_PADDING = 1.0  # m of free cells kept around a goal beyond a map whose unknown cells are free
-
-
-class NavigatorConfig(Section):
-    """Global planning, goal tolerances, recovery and the time budget of a navigation run."""
-
-    planner: Annotated[str, Choice("local_planners")] = Field(
-        "dwa", description="local planner: dwa, fsm (its parameters: the section of that name)")
-    recovery: Annotated[str, Choice("recovery_behaviours")] = Field(
-        "backoff", description="what a recovery does (slam2d.navigation.base.RECOVERY_BEHAVIOURS)")
-    period: float = Field(0.1, gt=0, description="s, control period")
-    inflation_margin: float = Field(0.05, ge=0, description="m; a cell where the disc comes this close costs `tight_weight`")
-    tight_weight: float = Field(20.0, ge=0, description="extra step cost at the radius (lethal), falling to 0 over the margin")
-    wall_distance: float = Field(0.3, gt=0, description="m beyond the margin over which a soft cost falls to 0")
-    wall_weight: float = Field(1.0, ge=0, description="extra step cost at the margin's edge (1 = double)")
-    unknown_free: bool = Field(False, description="occupancy maps: unknown cells are free for planning")
-    goal_tolerance: float = Field(0.03, gt=0, description="m")
-    yaw_tolerance: float = Field(0.035, gt=0, description="rad, when the goal has a heading")
-    final_approach: float = Field(0.2, ge=0, description="m from the goal where a point controller takes over")
-    stuck_time: float = Field(6.0, gt=0, description="s without `progress` m of progress -> recovery")
-    progress: float = Field(0.2, gt=0, description="m")
-    blocked_time: float = Field(1.5, gt=0, description="s the local planner reports blocked -> recovery")
-    max_recoveries: int = Field(4, ge=0, description="recoveries in a row without 1 m of progress")
-    mark_range: float = Field(2.5, gt=0, description="m, laser points put into the map when replanning after a block")
-    backoff: float = Field(0.3, ge=0, description="m backed off in a recovery (if the rear is clear)")
-    off_path: float = Field(1.0, gt=0, description="m from the path that triggers a replan")
-    max_time: float = Field(300.0, gt=0, description="s of simulated time, the budget of a run")
-    blocked_goal_reach: float = Field(
-        1.5, ge=0, description="m; on a map being built (unknown_free) a goal the map blocks is approached "
-        "to the nearest free cell within this, replanning at every new map, before it is unreachable"
-    )
-    dwa: DwaConfig = DwaConfig()
-    fsm: FsmConfig = FsmConfig()
 
 
 def make_local_planner(name: str, robot: RobotConfig, cfg: NavigatorConfig):
@@ -487,9 +447,6 @@ def _nearest_free(grid: PlanningGrid, xy, within: float):
     return np.array([rows[r, c], cols[r, c]])
 
 
-# --------------------------------------------------------------------------- the simulated run
-
-
 def _reaching(free: np.ndarray, res: float, origin, point, margin: float):
     """``free`` (H, W) padded with free cells so that ``point`` (x, y) m and ``margin`` m around it
     lie inside; the new origin (x, y) m of cell (0, 0)."""
@@ -502,117 +459,3 @@ def _reaching(free: np.ndarray, res: float, origin, point, margin: float):
         return free, tuple(origin)
     padded = np.pad(free, ((before[0], after[0]), (before[1], after[1])), constant_values=True)
     return padded, tuple(origin - res * before[::-1])
-
-
-@dataclass(eq=False)
-class NavigationResult:
-    """One navigation run: ``success``, ``status`` (reached / unreachable / timeout), ``reason``,
-    ``time`` (s), ``path_length`` travelled and ``optimal_length`` of the grid path (m),
-    ``collisions`` (contact events), ``min_clearance`` (m between the robot's disc and walls or
-    obstacles), ``replans``, ``recoveries``, ``goal_error`` (m) and ``heading_error`` (rad) at the
-    end, the true ``trajectory`` (N, 3), ``commands`` (N - 1, 2), ``stamps`` (N,) s, the planned
-    ``paths``, the local planner's mean ``planner_hz`` and the navigator's ``events``
-    (time s, "replan" / "recovery", why)."""
-
-    success: bool
-    status: str
-    reason: str
-    time: float
-    path_length: float
-    optimal_length: float
-    collisions: int
-    min_clearance: float
-    replans: int
-    recoveries: int
-    goal_error: float
-    heading_error: float
-    trajectory: np.ndarray
-    commands: np.ndarray
-    stamps: np.ndarray
-    paths: list = field(default_factory=list)
-    planner_hz: float = float("nan")
-    steps: int = 0
-    events: list = field(default_factory=list)
-
-    @property
-    def length_ratio(self) -> float:
-        """Travelled path length over the optimal grid path length."""
-        return self.path_length / self.optimal_length if self.optimal_length > 0 else float("nan")
-
-    def metrics(self) -> dict:
-        """The scalar fields (for metrics.json)."""
-        keys = ("success", "status", "reason", "time", "path_length", "optimal_length", "collisions", "min_clearance",
-                "replans", "recoveries", "goal_error", "heading_error", "planner_hz", "steps")  # fmt: skip
-        return {k: getattr(self, k) for k in keys} | {"length_ratio": self.length_ratio}
-
-
-def clearance(world, robot) -> float:
-    """Distance (m) between the robot's disc and the nearest wall, world bound or moving obstacle."""
-    x, y = robot.pose[:2]
-    (x0, y0), (x1, y1) = world.bounds
-    d = min(float(world.distance(robot.pose[:2])[0]), x - x0, x1 - x, y - y0, y1 - y)
-    centres, radii = robot.obstacle_circles()
-    if len(radii):
-        d = min(d, float((np.hypot(centres[:, 0] - x, centres[:, 1] - y) - radii).min()))
-    return d - robot.cfg.radius
-
-
-def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: NavigatorConfig | None = None,
-                   *, pose_source=None, max_steps: int | None = None) -> NavigationResult:  # fmt: skip
-    """Drives ``robot`` (a :class:`slam2d.sim.Robot` in ``world``) to ``goal`` (x, y[, theta]).
-
-    ``map_grid`` is a planning or occupancy grid, or a callable ``(StepResult) -> grid``
-    asked at every step (a live map). ``pose_source(StepResult) -> pose`` is the pose the
-    navigator uses (default: the true pose). Stops when the goal is reached or
-    unreachable, after ``config.max_time`` s of simulated time, or after ``max_steps``.
-    """
-    cfg = (config or NavigatorConfig()).model_copy(update={"planner": planner})
-    nav = Navigator(goal, robot.cfg, cfg)
-    step = robot.step(0.0, 0.0, 0.0)
-    start_pose = step.pose.copy()
-    poses, commands, stamps = [step.pose], [], [step.scan.stamp]
-    collisions, in_contact, min_clear = 0, False, clearance(world, robot)
-    limit = max_steps if max_steps is not None else int(np.ceil(cfg.max_time / cfg.period)) + 1
-    for _ in range(limit):
-        grid = map_grid(step) if callable(map_grid) else map_grid
-        pose = step.pose if pose_source is None else pose_source(step)
-        cmd = nav.step(pose, step.velocity, step.scan.points_in_base(), grid, step.scan.stamp)
-        if nav.status != ACTIVE:
-            break
-        step = robot.step(cmd.v, cmd.w, cfg.period)
-        poses.append(step.pose)
-        commands.append((cmd.v, cmd.w))
-        stamps.append(step.scan.stamp)
-        collisions += int(step.collision and not in_contact)
-        in_contact = step.collision
-        min_clear = min(min_clear, clearance(world, robot))
-    else:
-        nav._finish(TIMEOUT, f"step budget of {limit} steps used up")
-    return _result(nav, start_pose, np.array(poses), np.array(commands).reshape(-1, 2), np.array(stamps),
-                   collisions, min_clear)  # fmt: skip
-
-
-def _result(nav: Navigator, start, traj, commands, stamps, collisions, min_clear) -> NavigationResult:
-    end, goal = traj[-1], nav.goal
-    heading = float(abs(geometry.wrap_angle(goal[2] - end[2]))) if len(goal) == 3 else 0.0
-    hz = 1.0 / float(np.mean(nav.planner_seconds)) if nav.planner_seconds else float("nan")
-    optimal = nav.optimal_length(start) if nav._grid is not None else float("inf")
-    return NavigationResult(
-        success=nav.status == REACHED, status=nav.status, reason=nav.reason, time=float(stamps[-1] - stamps[0]),
-        path_length=float(np.linalg.norm(np.diff(traj[:, :2], axis=0), axis=1).sum()),
-        optimal_length=optimal, collisions=collisions, min_clearance=float(min_clear),
-        replans=nav.replans, recoveries=nav.recoveries,
-        goal_error=float(np.hypot(*(end[:2] - goal[:2]))), heading_error=heading,
-        trajectory=traj, commands=commands, stamps=stamps, paths=nav.paths, planner_hz=hz,
-        steps=len(commands), events=nav.events,
-    )  # fmt: skip
-
-
-def navigator_config(options: dict[str, Any], slam: bool, section: str = "navigation.options"):
-    """The NavigatorConfig of ``options`` from the config's ``section`` (named in an error); ``slam``: the map
-    is being built (unknown cells plan as free unless the options say otherwise)."""
-    merged = {"unknown_free": slam, **options}  # a map being built is mostly unknown: plan through it
-    try:
-        return NavigatorConfig.model_validate(merged)
-    except ValidationError as err:
-        raise validation_error(err, section, model=NavigatorConfig) from None

@@ -21,7 +21,7 @@ _EXPORTS = {
     "make_planner": "query",
     "NoPathError": "query",
     "HPAStar": "hierarchical",
-    "RoomGraphPlanner": "hierarchical",
+    "RoomGraphPlanner": "room_graph",
     "shortcut": "smoothing",
     "TrajectoryLimits": "timing",
     "time_parametrize": "timing",

@@ -30,7 +30,7 @@ from slam2d.evaluation.trajectory import write_tum
 from slam2d.localization import KnownMap
 from slam2d.localization.base import LOCALIZERS
 from slam2d.navigation import Navigator, run_navigation, world_grid
-from slam2d.navigation.navigator import navigator_config
+from slam2d.navigation.config import navigator_config
 from slam2d.runs.results import jsonable, results_folder
 from slam2d.sim import Robot
 from slam2d.sim.obstacles import scatter_wanderers

@@ -5,7 +5,9 @@
 - :mod:`~slam2d.segmentation.similarity`: Hausdorff, nearest-neighbour,
   feature-point and virtual-visibility similarity of observations;
 - :mod:`~slam2d.segmentation.spectral`: spectral clustering with a
-  silhouette-chosen k, and labels for every free cell (``segment_spectral``);
+  silhouette-chosen k (``segment_spectral``);
+- :mod:`~slam2d.segmentation.labelling`: labels for every free cell from the
+  clustered observations, and merging of segments cut where there is no doorway;
 - :mod:`~slam2d.segmentation.base`: the measures and methods by name, and ``segment``, which runs one;
 - :mod:`~slam2d.segmentation.evaluate`: per-room recall / precision against
   ground-truth room images (Bormann et al., ICRA 2016).
@@ -35,7 +37,7 @@ _EXPORTS = {
     "SegmentationResult": "spectral",
     "segment_spectral": "spectral",
     "spectral_clusters": "spectral",
-    "label_free_cells": "spectral",
+    "label_free_cells": "labelling",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -1,0 +1,120 @@
+"""A simulated navigation run: :func:`run_navigation` has a
+:class:`~slam2d.navigation.navigator.Navigator` drive a :class:`slam2d.sim.Robot` to a goal and
+measures the run (:class:`NavigationResult`, :func:`clearance`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from slam2d import geometry
+from slam2d.navigation.config import NavigatorConfig
+from slam2d.navigation.navigator import ACTIVE, REACHED, TIMEOUT, Navigator
+
+__all__ = ["NavigationResult", "clearance", "run_navigation"]
+
+
+@dataclass(eq=False)
+class NavigationResult:
+    """One navigation run: ``success``, ``status`` (reached / unreachable / timeout), ``reason``,
+    ``time`` (s), ``path_length`` travelled and ``optimal_length`` of the grid path (m),
+    ``collisions`` (contact events), ``min_clearance`` (m between the robot's disc and walls or
+    obstacles), ``replans``, ``recoveries``, ``goal_error`` (m) and ``heading_error`` (rad) at the
+    end, the true ``trajectory`` (N, 3), ``commands`` (N - 1, 2), ``stamps`` (N,) s, the planned
+    ``paths``, the local planner's mean ``planner_hz`` and the navigator's ``events``
+    (time s, "replan" / "recovery", why)."""
+
+    success: bool
+    status: str
+    reason: str
+    time: float
+    path_length: float
+    optimal_length: float
+    collisions: int
+    min_clearance: float
+    replans: int
+    recoveries: int
+    goal_error: float
+    heading_error: float
+    trajectory: np.ndarray
+    commands: np.ndarray
+    stamps: np.ndarray
+    paths: list = field(default_factory=list)
+    planner_hz: float = float("nan")
+    steps: int = 0
+    events: list = field(default_factory=list)
+
+    @property
+    def length_ratio(self) -> float:
+        """Travelled path length over the optimal grid path length."""
+        return self.path_length / self.optimal_length if self.optimal_length > 0 else float("nan")
+
+    def metrics(self) -> dict:
+        """The scalar fields (for metrics.json)."""
+        keys = ("success", "status", "reason", "time", "path_length", "optimal_length", "collisions", "min_clearance",
+                "replans", "recoveries", "goal_error", "heading_error", "planner_hz", "steps")  # fmt: skip
+        return {k: getattr(self, k) for k in keys} | {"length_ratio": self.length_ratio}
+
+
+def clearance(world, robot) -> float:
+    """Distance (m) between the robot's disc and the nearest wall, world bound or moving obstacle."""
+    x, y = robot.pose[:2]
+    (x0, y0), (x1, y1) = world.bounds
+    d = min(float(world.distance(robot.pose[:2])[0]), x - x0, x1 - x, y - y0, y1 - y)
+    centres, radii = robot.obstacle_circles()
+    if len(radii):
+        d = min(d, float((np.hypot(centres[:, 0] - x, centres[:, 1] - y) - radii).min()))
+    return d - robot.cfg.radius
+
+
+def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: NavigatorConfig | None = None,
+                   *, pose_source=None, max_steps: int | None = None) -> NavigationResult:  # fmt: skip
+    """Drives ``robot`` (a :class:`slam2d.sim.Robot` in ``world``) to ``goal`` (x, y[, theta]).
+
+    ``map_grid`` is a planning or occupancy grid, or a callable ``(StepResult) -> grid``
+    asked at every step (a live map). ``pose_source(StepResult) -> pose`` is the pose the
+    navigator uses (default: the true pose). Stops when the goal is reached or
+    unreachable, after ``config.max_time`` s of simulated time, or after ``max_steps``.
+    """
+    cfg = (config or NavigatorConfig()).model_copy(update={"planner": planner})
+    nav = Navigator(goal, robot.cfg, cfg)
+    step = robot.step(0.0, 0.0, 0.0)
+    start_pose = step.pose.copy()
+    poses, commands, stamps = [step.pose], [], [step.scan.stamp]
+    collisions, in_contact, min_clear = 0, False, clearance(world, robot)
+    limit = max_steps if max_steps is not None else int(np.ceil(cfg.max_time / cfg.period)) + 1
+    for _ in range(limit):
+        grid = map_grid(step) if callable(map_grid) else map_grid
+        pose = step.pose if pose_source is None else pose_source(step)
+        cmd = nav.step(pose, step.velocity, step.scan.points_in_base(), grid, step.scan.stamp)
+        if nav.status != ACTIVE:
+            break
+        step = robot.step(cmd.v, cmd.w, cfg.period)
+        poses.append(step.pose)
+        commands.append((cmd.v, cmd.w))
+        stamps.append(step.scan.stamp)
+        collisions += int(step.collision and not in_contact)
+        in_contact = step.collision
+        min_clear = min(min_clear, clearance(world, robot))
+    else:
+        nav._finish(TIMEOUT, f"step budget of {limit} steps used up")
+    return _result(nav, start_pose, np.array(poses), np.array(commands).reshape(-1, 2), np.array(stamps),
+                   collisions, min_clear)  # fmt: skip
+
+
+def _result(nav: Navigator, start, traj, commands, stamps, collisions, min_clear) -> NavigationResult:
+    end, goal = traj[-1], nav.goal
+    heading = float(abs(geometry.wrap_angle(goal[2] - end[2]))) if len(goal) == 3 else 0.0
+    hz = 1.0 / float(np.mean(nav.planner_seconds)) if nav.planner_seconds else float("nan")
+    optimal = nav.optimal_length(start) if nav._grid is not None else float("inf")
+    return NavigationResult(
+        success=nav.status == REACHED, status=nav.status, reason=nav.reason, time=float(stamps[-1] - stamps[0]),
+        path_length=float(np.linalg.norm(np.diff(traj[:, :2], axis=0), axis=1).sum()),
+        optimal_length=optimal, collisions=collisions, min_clearance=float(min_clear),
+        replans=nav.replans, recoveries=nav.recoveries,
+        goal_error=float(np.hypot(*(end[:2] - goal[:2]))), heading_error=heading,
+        trajectory=traj, commands=commands, stamps=stamps, paths=nav.paths, planner_hz=hz,
+        steps=len(commands), events=nav.events,
+    )  # fmt: skip
