@@ -18,7 +18,7 @@ from slam2d.errors import InputError
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="2D laser SLAM research framework.")
 
 CONFIG_ARG = typer.Argument(None, help="experiment YAML; omitted: the built-in simulator default")
-SET_OPT = typer.Option([], "--set", "-s", help="override a config key, e.g. --set frontend.name=odometry")
+SET_OPT = typer.Option([], "--set", "-s", help="override a config key, e.g. --set seed=1 (dump-config lists the keys)")
 QUIET_OPT = typer.Option(False, "--quiet", "-q", help="no progress bars, warnings and errors only")
 PLUGIN_OPT = typer.Option([], "--plugin", "-p", help="Python file or module to import first (its frontends)")
 
@@ -368,7 +368,7 @@ def explore(
         target = _viz_target(viz, viz_save)
         cfg = _command_config("explore", _config_file(config, config_opt), set_, {
             "exploration.strategy": strategy, "output.root": root})
-        folder = run_explore(cfg, target)
+        folder = run_explore(cfg, quiet, target)
     typer.echo(f"results: {folder}")
 
 
@@ -389,7 +389,7 @@ def localize(
     with _command(quiet):
         target = _viz_target(viz, viz_save)
         cfg = _command_config("localize", config, set_, {"map": map_path, "dataset": dataset, "output.root": root})
-        folder = run_localize(cfg, target)
+        folder = run_localize(cfg, quiet, target)
     typer.echo(f"results: {folder}")
 
 

@@ -14,8 +14,8 @@ from slam2d.registry import Registry, resolve_config
 @dataclass(frozen=True)
 class Command:
     """A command: its config model and runner (``"module:name"``, imported when used) and the metrics its
-    tables show first (dotted keys of its metrics.json). The runner takes a config of the model and
-    returns the results folder it wrote."""
+    tables show first (dotted keys of its metrics.json). The runner takes a config of the model (and
+    ``quiet``: no progress output) and returns the results folder it wrote."""
 
     model: str
     runner: str
@@ -91,7 +91,7 @@ def run_command(cfg, quiet: bool = False) -> Path:
         command = COMMANDS.get(name)
         if type(cfg) is command.config_model():
             runner = _named(command.runner)
-            return runner(cfg, quiet=quiet) if name == "run" else runner(cfg)
+            return runner(cfg, quiet=quiet)
     raise TypeError(f"not a command config: {type(cfg).__name__}")
 
 

@@ -18,7 +18,7 @@ from slam2d.evaluation.trajectory import write_tum
 from slam2d.exploration.config import ExploreConfig
 from slam2d.exploration.loop import ExplorationRun, explore, resolved
 from slam2d.mapping.export import save_map_server
-from slam2d.runs.results import jsonable, live_view, results_folder
+from slam2d.runs.results import json_text, live_view, progress_bar, results_folder
 from slam2d.types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -27,17 +27,18 @@ log = logging.getLogger(__name__)
 GIF_FRAMES = 80
 
 
-def run_explore(cfg: ExploreConfig, viz: str | Path | None = None) -> Path:
+def run_explore(cfg: ExploreConfig, quiet: bool = False, viz: str | Path | None = None) -> Path:
     """Run ``cfg``'s exploration; return the results folder. ``viz``: ``"viewer"`` or ``FILE.rrd``, the
     robot, goals, map and frontiers streamed to rerun (:class:`slam2d.viz.ExploreView`)."""
     cfg = resolved(cfg)
     with results_folder(cfg.output.root, cfg.name) as (work, published):
         log.info("slam2d explore '%s' (%s) -> %s", cfg.name, cfg.exploration.strategy, cfg.output.root)
         (work / "config.yaml").write_text(config_mod.dump(cfg))
-        with live_view(viz, cfg.name, "explore", cfg.mapping) as view:
-            run = explore(cfg, view=view)
+        with live_view(viz, cfg.name, "explore", cfg.mapping) as view, \
+                progress_bar("exploring (simulated s)", cfg.exploration.max_time, quiet) as advance:
+            run = explore(cfg, lambda now, coverage: advance(now, f"coverage {100 * coverage:.0f} %"), view)
         _write(work, cfg, run)
-        (work / "metrics.json").write_text(json.dumps(jsonable(run.metrics), indent=2))
+        (work / "metrics.json").write_text(json_text(run.metrics))
         m = run.metrics
         log.info("%s: coverage %.1f %% in %.0f s, %.1f m (%.0f s wall)", m["stop_reason"], 100 * m["coverage"],
                  m["time"], m["distance"], m["wall_s"])  # fmt: skip

@@ -42,7 +42,7 @@ __all__ = ["localize", "log_stream", "metrics_of", "run_localize"]
 KNOWN_MAP_RESOLUTION = 0.05  # m per pixel of a floor-plan image unless `resolution` says otherwise
 
 
-def run_localize(cfg: LocalizeConfig, viz: str | Path | None = None) -> Path:
+def run_localize(cfg: LocalizeConfig, quiet: bool = False, viz: str | Path | None = None) -> Path:
     """Localise on ``cfg.map`` with the scans of ``cfg.dataset`` (None: the simulated robot) into a new
     results folder under ``cfg.output.root``; return it. ``viz``: ``"viewer"`` or ``FILE.rrd``, the
     particles streamed to rerun (:class:`slam2d.viz.ParticleView`)."""

@@ -12,7 +12,6 @@ velocity profile, an animation of the run and ``metrics.json``.
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from dataclasses import dataclass
@@ -31,7 +30,7 @@ from slam2d.localization import KnownMap
 from slam2d.localization.base import LOCALIZERS
 from slam2d.navigation import Navigator, run_navigation, world_grid
 from slam2d.navigation.config import navigator_config
-from slam2d.runs.results import jsonable, results_folder
+from slam2d.runs.results import json_text, results_folder
 from slam2d.sim import Robot
 from slam2d.sim.obstacles import scatter_wanderers
 from slam2d.sim.robot import RobotConfig
@@ -53,7 +52,7 @@ class NavigateConfig(ExperimentConfig):
     name: str = Field("navigate", description="results folder name: no '/' or '\\', no leading '.'")
 
 
-def run_navigate(cfg: ExperimentConfig) -> Path:
+def run_navigate(cfg: ExperimentConfig, quiet: bool = False) -> Path:
     """Run ``cfg``'s navigation; return the results folder."""
     goal = cfg.navigation.goal
     if goal is None:  # before any folder is made
@@ -73,7 +72,7 @@ def _navigate_into(cfg: ExperimentConfig, out: Path) -> dict[str, Any]:
     if cfg.output.figures:
         _figures(out, run.world, run.result, run.estimate, run.grid, np.asarray(cfg.navigation.goal, float),
                  run.recorder, cfg.navigation.animation)  # fmt: skip
-    (out / "metrics.json").write_text(json.dumps(jsonable(run.metrics), indent=2))
+    (out / "metrics.json").write_text(json_text(run.metrics))
     return run.metrics
 
 

@@ -22,7 +22,7 @@ from slam2d.runs.results import json_text, results_folder
 __all__ = ["run_plan", "write_plan"]
 
 
-def run_plan(cfg) -> Path:
+def run_plan(cfg, quiet: bool = False) -> Path:
     """Run a :class:`~slam2d.planning.config.PlanConfig` into a new results folder under
     ``cfg.output.root``; return the folder. One query (start, goal): the path, its timing and figures
     (NoPathError when there is none, leaving no folder); ``queries`` > 0: :func:`plan_queries`."""

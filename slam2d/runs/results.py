@@ -152,6 +152,18 @@ def progress(source, quiet: bool):
         yield lambda: bar.advance(task)
 
 
+@contextmanager
+def progress_bar(description: str, total: float | None, quiet: bool):
+    """Yield ``update(done, note="")``: the bar at ``done`` of ``total`` (None: unknown), ``note`` beside its
+    description; a no-op when ``quiet``."""
+    if quiet:
+        yield lambda done, note="": None
+        return
+    with Progress("[progress.description]{task.description}", BarColumn(), TimeRemainingColumn()) as bar:
+        task = bar.add_task(description, total=total)
+        yield lambda done, note="": bar.update(task, completed=done, description=f"{description} {note}".strip())
+
+
 def peak_rss_mb() -> float:
     """Peak resident memory (MB) of this process plus its largest finished child (the frontend worker)."""
     kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss + resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss

@@ -29,7 +29,7 @@ from slam2d.segmentation.rooms import RoomSegmentation, segment_map
 __all__ = ["run_segment", "write_segmentation", "save_labels_png", "save_rooms_png", "room_colours"]
 
 
-def run_segment(cfg) -> Path:
+def run_segment(cfg, quiet: bool = False) -> Path:
     """Run a :class:`~slam2d.segmentation.config.SegmentConfig` into a new results folder under
     ``cfg.output.root`` (resolved config, labels, figures, metrics, log); return the folder."""
     if cfg.map is None:
