@@ -145,12 +145,18 @@ def ablate(
     set_: list[str] = typer.Option([], "--set", "-s", help="override a key of the base config, e.g. --set seed=1"),
     grid: list[str] = typer.Option([], "--grid", "-g", help="a grid axis, e.g. --grid frontend.name=icp,lines"),
     dry_run: bool = typer.Option(False, "--dry-run", help="check every variant and list them; run nothing"),
+    root: Optional[Path] = typer.Option(None, "--out", "-o", help="the sweep folder is created under this "
+                                        "(the base config's output.root)"),
     quiet: bool = QUIET_OPT,
 ) -> None:
     """Run every variant of a sweep in parallel; write one table (Markdown + CSV)."""
+    from slam2d.runs.results import output_root
     from slam2d.runs.sweep import SweepStopped, read_sweep, run_sweep
 
     with _command(quiet, "no sweep folder written"):
+        if root is not None:
+            output_root(root, "--out")  # its error names the option
+            set_ = [*set_, f"output.root={root}"]
         if dry_run:
             checked = read_sweep(sweep, set_, grid)
             for v in checked.variants:

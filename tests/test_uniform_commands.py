@@ -22,6 +22,8 @@ def test_every_command_takes_the_same_options_and_dumps_its_config(command):
     assert helped.exit_code == 0, helped.output
     for option in ("--config", "--set", "--out", "--quiet"):
         assert option in helped.output, f"{command} lacks {option}"
+    swept = runner.invoke(app, ["ablate", "--help"], env={"COLUMNS": "200"})
+    assert all(option in swept.output for option in ("--set", "--grid", "--out", "--quiet", "--dry-run"))
     dumped = runner.invoke(app, ["dump-config", "--command", command, "--set", "output.root=elsewhere"])
     assert dumped.exit_code == 0, dumped.output
     assert yaml.safe_load(dumped.output)["output"]["root"] == "elsewhere"
@@ -90,6 +92,11 @@ def test_ablate_takes_set_and_grid_and_dry_runs(tmp_path):
     assert out.exit_code == 0, out.output
     assert "4 variants checked; nothing run" in out.output and "name=odometry" in out.output
     assert not (tmp_path / "res").exists()
+    ran = CliRunner().invoke(app, ["ablate", str(sweep), "--set", "frontend.name=odometry", "--set", "seed=2",
+                                   "--grid", "seed=0", "--out", str(tmp_path / "res"), "-q"])
+    assert ran.exit_code == 0, ran.output
+    (folder,) = (tmp_path / "res").glob("ablate-s-*")
+    assert (folder / "table.md").is_file() and len(list((folder / "runs").iterdir())) == 1
     bad = CliRunner().invoke(app, ["ablate", str(sweep), "--dry-run", "--grid", "frontend.name=odometry,nope"])
     assert bad.exit_code == 2 and "unknown frontend 'nope'" in bad.output
     both = tmp_path / "both.yaml"
