@@ -102,12 +102,13 @@ def test_rpe_identical_and_rigidly_moved():
 
 
 def test_rpe_scaled_estimate():
-    # straight line at 0.1 m steps, estimate 10 % too long: 1 m pairs err by 0.1 m
-    ref = np.column_stack([np.arange(30) * 0.1, np.zeros(30), np.zeros(30)])
+    # straight line at 0.15 m steps, estimate 10 % too long: pairs 1.05 m apart (7 steps) err by 0.105 m;
+    # near the end no pose lies within 10 % of 1.05 m further on, so only 30 - 7 pairs are kept
+    ref = np.column_stack([np.arange(30) * 0.15, np.zeros(30), np.zeros(30)])
     est = ref * [1.1, 1.0, 1.0]
-    m = rpe(est, ref, delta_m=0.95)
-    assert m["trans_mean"] == pytest.approx(0.1) and m["rot_mean_deg"] == 0.0
-    assert m["pairs"] == 20
+    m = rpe(est, ref, delta_m=1.05)
+    assert m["trans_mean"] == pytest.approx(0.105) and m["rot_mean_deg"] == 0.0
+    assert m["pairs"] == 23
 
 
 def test_rpe_no_pairs():

@@ -13,6 +13,8 @@ from slam2d.types import Trajectory
 __all__ = ["write_tum", "read_tum", "align_se2", "ate", "rpe"]
 
 TUM_HEADER = "# timestamp x y z qx qy qz qw"
+RPE_DELTA_TOLERANCE = 0.1
+"""A pair of the RPE is kept when its distance travelled is within this share of ``delta_m`` (evo's default)."""
 
 
 def write_tum(path, traj: Trajectory) -> Path:
@@ -127,9 +129,9 @@ def ate(est, ref, align: bool = True) -> dict[str, float]:
 def rpe(est, ref, delta_m: float = 1.0) -> dict[str, float]:
     """Relative pose error over pairs ``delta_m`` metres apart along ``ref``.
 
-    Every i is paired with the first j whose travelled distance along the
-    reference exceeds that of i by at least ``delta_m`` (evo's all-pairs mode);
-    the error is between(between(ref_i, ref_j), between(est_i, est_j)).
+    Pairs as ``evo_rpe --delta D --delta_unit m --all_pairs --pairs_from_reference``
+    picks them (:func:`_pairs_by_distance`); the error is between(between(ref_i,
+    ref_j), between(est_i, est_j)), as evo's relative pose error.
     Returns trans_rmse, trans_mean (m), rot_rmse_deg, rot_mean_deg and pairs;
     the errors are NaN when no pair exists (``pairs`` = 0).
     """
@@ -150,13 +152,23 @@ def rpe(est, ref, delta_m: float = 1.0) -> dict[str, float]:
     }
 
 
-def _pairs_by_distance(ref: np.ndarray, delta_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Index pairs (i, j): j is the first pose at least ``delta_m`` m further along ``ref``."""
+def _pairs_by_distance(ref: np.ndarray, delta_m: float, tolerance: float = RPE_DELTA_TOLERANCE
+                       ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Index pairs (i, j) as evo's all-pairs mode picks them: for each i, the later pose j whose distance
+    travelled along ``ref`` from i is nearest ``delta_m`` (the earlier of two as near), kept when within
+    ``tolerance`` · ``delta_m`` of it."""
     if delta_m <= 0:
         raise ValueError(f"delta_m must be positive, got {delta_m}")
     steps = np.hypot(*np.diff(ref[:, :2], axis=0).T)
     dist = np.concatenate([[0.0], np.cumsum(steps)])
-    j = np.searchsorted(dist, dist + delta_m, side="left")
-    i = np.arange(len(ref))
-    keep = j < len(ref)
+    i = np.arange(len(ref) - 1)
+    target = dist[i] + delta_m
+    above = np.searchsorted(dist, target, side="left")  # first pose at or beyond the target (> i)
+    below = np.searchsorted(dist, dist[np.maximum(above - 1, 0)], side="left")  # first pose of the last value short
+    below = np.maximum(below, i + 1)
+    has_below = above - 1 > i
+    gap_above = np.where(above < len(ref), np.abs(dist[np.minimum(above, len(ref) - 1)] - target), np.inf)
+    gap_below = np.where(has_below, np.abs(dist[below] - target), np.inf)
+    j = np.where(gap_below <= gap_above, below, above)
+    keep = np.minimum(gap_below, gap_above) <= tolerance * delta_m
     return i[keep], j[keep]
