@@ -11,8 +11,8 @@ table from each run's ``metrics.json``:
 - CPU ms per scan (``cpu_ms_per_scan``: CPU time of the run's reading,
   frontend and back end over the scans, the frontend worker's included); the wall-clock figure
   (``timings_s.slam``) goes to the CSV;
-- loop closures accepted (``slam.loop closures kept``: added and kept after
-  the final optimisation) and rejected (``slam.loop closures rejected``: by the
+- loop closures accepted (``slam.loop_closures_kept``: added and kept after
+  the final optimisation) and rejected (``slam.loop_closures_rejected``: by the
   matcher's score or points, or removed as inconsistent);
 - odometry fallbacks (``frontend_fallbacks``: scans after the first answered
   with confidence 0), and their share of the scans.
@@ -58,11 +58,11 @@ def _row(name: str, cfg, folder: Path) -> dict[str, Any]:
         row["ate_m"], row["odometry_ate_m"] = m["ate"]["rmse"], m["odometry_ate"]["rmse"]
     row["cpu_ms_per_scan"] = m["cpu_ms_per_scan"]
     row["wall_ms_per_scan"] = 1000.0 * m["timings_s"]["slam"] / m["scans"]
-    row["loops_accepted"] = m["slam"].get("loop closures kept")
-    row["loops_rejected"] = m["slam"].get("loop closures rejected")
+    row["loops_accepted"] = m["slam"].get("loop_closures_kept")
+    row["loops_rejected"] = m["slam"].get("loop_closures_rejected")
     row["fallbacks"] = m["frontend_fallbacks"]
     row["fallback_share"] = m["frontend_fallbacks"] / max(m["scans"] - 1, 1)
-    row["frontend_stats"] = {k[len("frontend "):]: v for k, v in m["slam"].items() if k.startswith("frontend ")}
+    row["frontend_stats"] = {k[len("frontend_"):]: v for k, v in m["slam"].items() if k.startswith("frontend_")}
     row["folder"] = str(folder)
     return row
 

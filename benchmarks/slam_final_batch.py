@@ -44,8 +44,8 @@ def main(argv: list[str]) -> None:
             m = run(log, [*overrides, "output.figures=false"], plugins, env)
             r, slam = m["relations"], m["slam"]
             print(f"| {log} | {name} | {r['trans_abs_mean']:.4f} ± {r['trans_abs_std']:.4f} "
-                  f"| {r['rot_abs_mean']:.3f} ± {r['rot_abs_std']:.3f} | {slam['loop closures added']} "
-                  f"| {slam['loop closures removed as inconsistent']} |", flush=True)
+                  f"| {r['rot_abs_mean']:.3f} ± {r['rot_abs_std']:.3f} | {slam['loop_closures_added']} "
+                  f"| {slam['loop_closures_removed_as_inconsistent']} |", flush=True)
 
 
 if __name__ == "__main__":

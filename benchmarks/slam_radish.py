@@ -79,7 +79,7 @@ def main(argv: list[str]) -> None:
             f"| {r['trans_sq_mean']:.5f} ± {r['trans_sq_std']:.5f} "
             f"| {r['rot_abs_mean']:.3f} ± {r['rot_abs_std']:.3f} | {r['rot_sq_mean']:.3f} ± {r['rot_sq_std']:.3f} "
             f"| {o['trans_abs_mean']:.3f} | {p['graph mapping']} | {p['Cartographer']} | {p['carto_rot']} "
-            f"| {slam.get('loop closures kept', 0)} / {slam.get('loop closures rejected', 0)} "
+            f"| {slam.get('loop_closures_kept', 0)} / {slam.get('loop_closures_rejected', 0)} "
             f"| {wall:.1f} [{min(walls):.1f}–{max(walls):.1f}] | {single:.1f} | {m['cpu_ms_per_scan'] * m['scans'] / 1000:.1f} "
             f"| {p['log_s'] / wall:.0f} ({carto}) | {m['peak_rss_mb']:.0f} |",
             flush=True,

@@ -2,6 +2,7 @@
 
 import csv
 import json
+import re
 
 import pytest
 import yaml
@@ -29,6 +30,8 @@ def test_run_writes_complete_results_folder(tmp_path):
     assert metrics["scans"] == 40
     assert metrics["ate"]["rmse"] >= 0 and "odometry_ate" in metrics
     assert metrics["cpu_ms_per_scan"] > 0 and 0 <= metrics["frontend_fallbacks"] < 40
+    counted = [*metrics["slam"], *metrics["skipped"]]  # snake_case keys: usable as columns and selectors
+    assert "keyframes" in " ".join(counted) and all(re.fullmatch(r"[0-9A-Za-z_]+", k) for k in counted), counted
     # the resolved config reproduces the run's config
     assert config.load(folder / "config.yaml") == resolved(small_cfg(tmp_path))
     assert len([l for l in (folder / "trajectory.tum").read_text().splitlines() if not l.startswith("#")]) == 40

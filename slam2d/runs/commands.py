@@ -42,7 +42,7 @@ for _name, _command in {
     "run": Command("slam2d.config:ExperimentConfig", "slam2d.runs.run:run_experiment", (
         "relations.trans_abs_mean", "relations.trans_abs_std", "relations.rot_abs_mean", "relations.rot_abs_std",
         "odometry_relations.trans_abs_mean", "ate.rmse", "odometry_ate.rmse", "rpe.trans_rmse", "rpe.rot_rmse_deg",
-        "cpu_ms_per_scan", "slam.loop closures kept", "slam.loop closures rejected", "frontend_fallbacks", "scans",
+        "cpu_ms_per_scan", "slam.loop_closures_kept", "slam.loop_closures_rejected", "frontend_fallbacks", "scans",
         "runtime_s", "peak_rss_mb"), 'SLAM on a dataset: trajectory, map, graph, ATE/RPE and the relations metric.'),
     "segment": Command("slam2d.segmentation.config:SegmentConfig", "slam2d.runs.segment:run_segment", (
         "recall", "precision", "rooms_found", "rooms_gt", "rooms", "k", "seconds", "cpu_seconds"), 'Rooms of a map: labels, region graph, recall and precision against a ground truth.'),

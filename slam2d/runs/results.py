@@ -11,6 +11,7 @@ from __future__ import annotations
 import itertools
 import json
 import logging
+import re
 import resource
 import shutil
 import tempfile
@@ -82,6 +83,12 @@ def new_folder(parent: Path, stem: str) -> Path:
         except FileExistsError:
             continue
     raise AssertionError("unreachable")
+
+
+def snake_keys(counts) -> dict:
+    """``counts`` (a mapping of free-text reasons, e.g. ``"loop closures kept"``) with keys in snake_case
+    (``loop_closures_kept``): every run of characters other than letters, digits and ``_`` becomes one ``_``."""
+    return {re.sub(r"[^0-9A-Za-z_]+", "_", str(k)).strip("_"): v for k, v in dict(counts).items()}
 
 
 def json_text(obj) -> str:

@@ -21,7 +21,7 @@ from slam2d.mapping.occupancy import build_grid, check_resolution
 from slam2d.paths import resolve_data_path
 from slam2d.pipeline import SlamPipeline
 from slam2d.runs.commands import resolved
-from slam2d.runs.results import json_text, live_view, peak_rss_mb, progress, results_folder
+from slam2d.runs.results import json_text, live_view, peak_rss_mb, progress, results_folder, snake_keys
 from slam2d.runs.signals import check_stop
 from slam2d.types import Trajectory
 
@@ -55,9 +55,9 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | N
 
     metrics: dict[str, Any] = {
         "scans": len(result.scans),
-        "skipped": dict(result.skipped),
+        "skipped": snake_keys(result.skipped),
         "invalid_beams": getattr(source, "invalid_beams", 0),
-        "slam": result.stats,
+        "slam": snake_keys(result.stats),
         "frontend_fallbacks": result.fallbacks,
         "cpu_ms_per_scan": 1000.0 * result.cpu_s / len(result.scans),
     }
