@@ -467,6 +467,32 @@ def datasets_download(
     typer.echo(f"verified: {len(paths)} file(s) in {to or data_root()}")
 
 
+@app.command()
+def compare(
+    runs: list[Path] = typer.Argument(..., help="results folders of any command, or sweep folders (their runs)"),
+    metric: list[str] = typer.Option([], "--metric", "-m", help="a metric column (dotted key of metrics.json); "
+                                     "default: the commands' main metrics"),
+    root: Optional[Path] = typer.Option(None, "--out", "-o", help="also write table.md/.csv/.tex and "
+                                        "trajectories.png into a new folder under this"),
+    quiet: bool = QUIET_OPT,
+) -> None:
+    """Several runs side by side: one table of their metrics, their trajectories overlaid (as evo_res)."""
+    from slam2d.evaluation.tables import to_markdown
+    from slam2d.runs.compare import compare_rows, run_folders, write_comparison
+    from slam2d.runs.results import results_folder
+
+    with _command(quiet):
+        folders = run_folders(runs)
+        if root is None:
+            table = to_markdown(*compare_rows(folders, metric))
+        else:
+            with results_folder(root, "compare", "--out") as (work, published):
+                table = write_comparison(folders, work, metric)
+    typer.echo(table, nl=False)
+    if root is not None:
+        typer.echo(f"results: {published[0]}")
+
+
 def main() -> None:
     """The ``slam2d`` command. A stopped command exits 130 at once (its clean-up is done): letting
     the interpreter finish could end the process as by SIGINT instead, when the interrupt arrived

@@ -29,8 +29,8 @@ from slam2d.exploration.coverage import (
     truth_map,
 )
 from slam2d.exploration.explorer import Explorer, Goal
-from slam2d.exploration.recovery import escape, retrace, way_out
 from slam2d.exploration.gridops import GridView, LiveClearance, inside_polygon
+from slam2d.exploration.recovery import escape, retrace, way_out
 from slam2d.navigation import Navigator
 from slam2d.navigation.config import navigator_config
 from slam2d.navigation.drive import clearance
