@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
-from slam2d.evaluation.tables import _fmt, columns_of
+from slam2d.evaluation.tables import format_value, columns_of
 
 FIRST_FIGURES = ("map.png", "rooms.png", "path.png", "velocity.png")
 """Figures shown first when a variant's folder has them; other PNGs follow by name."""
@@ -104,7 +104,7 @@ def _head(names: Sequence[str]) -> str:
 
 def _cell(value: Any, col: str, link: str = "") -> str:
     """A table cell: numbers right-aligned with their full value in ``data-num`` (for sorting)."""
-    text = html.escape(_fmt(value))
+    text = html.escape(format_value(value))
     if link:
         text = f'<a href="{link}">{text}</a>'
     if _is_number(value):

@@ -38,7 +38,8 @@ def columns_of(rows: Sequence[dict[str, Any]], leading: Sequence[str] = ("varian
     return cols + tail
 
 
-def _fmt(value: Any) -> str:
+def format_value(value: Any) -> str:
+    """A table cell: floats to 4 significant digits, None empty."""
     if isinstance(value, float):
         return f"{value:.4g}"
     return "" if value is None else str(value)
@@ -47,7 +48,7 @@ def _fmt(value: Any) -> str:
 def to_markdown(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> str:
     lines = ["| " + " | ".join(columns) + " |", "|" + "|".join("---" for _ in columns) + "|"]
     for row in rows:
-        lines.append("| " + " | ".join(_fmt(row.get(c)) for c in columns) + " |")
+        lines.append("| " + " | ".join(format_value(row.get(c)) for c in columns) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -56,7 +57,7 @@ def to_latex(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> str:
         return s.replace("_", r"\_").replace("%", r"\%").replace("&", r"\&")
 
     lines = [r"\begin{tabular}{" + "l" * len(columns) + "}", r"\hline", " & ".join(map(esc, columns)) + r" \\", r"\hline"]
-    lines += [" & ".join(esc(_fmt(r.get(c))) for c in columns) + r" \\" for r in rows]
+    lines += [" & ".join(esc(format_value(r.get(c))) for c in columns) + r" \\" for r in rows]
     lines += [r"\hline", r"\end{tabular}"]
     return "\n".join(lines) + "\n"
 

@@ -23,6 +23,7 @@ import numpy as np
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
 from slam2d.errors import InputError
+from slam2d.runs.report import write_run_report
 from slam2d.runs.signals import check_stop
 
 log = logging.getLogger("slam2d")
@@ -41,6 +42,8 @@ def results_folder(root: str | Path, name: str, key: str = "output.root"):
         with log_to(work / "run.log"):
             yield work, published
         check_stop()  # a signal whose exception was swallowed still leaves no folder
+        if (work / "metrics.json").is_file():
+            write_run_report(work, name)
         published.append(_publish(work, root, name))
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)

@@ -8,13 +8,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
 from slam2d import config as config_mod
 from slam2d import geometry
 from slam2d.config import ExperimentConfig
 from slam2d.datasets.registry import open_dataset
 from slam2d.evaluation.relations import read_relations, relations_frame, relations_metric
-from slam2d.evaluation.trajectory import ate, rpe, write_tum
+from slam2d.evaluation.trajectory import align_se2, ate, rpe, write_tum
 from slam2d.mapping.export import save_map_png, save_map_server
 from slam2d.mapping.layers import write_layers
 from slam2d.mapping.occupancy import build_grid, check_resolution
@@ -109,7 +111,6 @@ def _evaluate(cfg: ExperimentConfig, result, relations) -> dict[str, Any]:
 
 
 def _write_outputs(cfg: ExperimentConfig, result, out: Path) -> None:
-
     write_tum(out / "trajectory.tum", Trajectory(result.stamps, result.poses))
     write_tum(out / "odometry.tum", Trajectory(result.stamps, result.odometry))
     if result.ground_truth is not None:
@@ -119,13 +120,41 @@ def _write_outputs(cfg: ExperimentConfig, result, out: Path) -> None:
     grid = build_grid(result.poses, result.scans, cfg.mapping)
     save_map_server(grid, out / "map", cfg.mapping)
     if set(cfg.mapping.layers) - {"grid"}:
-
         write_layers(grid, out, cfg.mapping, cfg.output.figures)
     if cfg.output.figures:
         trajectories = {"estimate": result.poses, "odometry": result.odometry}
         if result.ground_truth is not None:
             trajectories["ground truth"] = result.ground_truth
         save_map_png(grid, out / "map.png", trajectories, title=cfg.name)
+        if result.ground_truth is not None:
+            ape_figure(out / "ape.png", result.stamps, result.poses, result.ground_truth, cfg.evaluation.align)
+
+
+def ape_figure(path: Path, stamps, estimate, truth, align: bool = True) -> None:
+    """APE (m, position error against ground truth, after the SE(2) alignment of the ATE when ``align``) over
+    time, and the trajectory coloured by it (as evo_ape's plots)."""
+    if align:
+        estimate = geometry.compose(align_se2(estimate, truth), estimate)
+    err = np.hypot(*(estimate[:, :2] - truth[:, :2]).T)
+    fig = Figure(figsize=(12, 4.8))
+    FigureCanvasAgg(fig)
+    over_time, along = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.2, 1]})
+    t = np.asarray(stamps) - stamps[0]
+    over_time.plot(t, err, lw=0.8, color="tab:blue")
+    for value, style in ((np.sqrt(np.mean(err**2)), "--"), (np.median(err), ":")):
+        over_time.axhline(value, color="tab:red", lw=0.8, ls=style)
+    over_time.set_xlabel("time (s)")
+    over_time.set_ylabel("APE (m)")
+    over_time.set_title(f"APE: RMSE {np.sqrt(np.mean(err**2)):.4f} m (dashed), median {np.median(err):.4f} m (dotted)",
+                        fontsize="small")
+    along.plot(truth[:, 0], truth[:, 1], color="0.75", lw=2.0, zorder=1, label="ground truth")
+    dots = along.scatter(estimate[:, 0], estimate[:, 1], c=err, s=3, cmap="viridis", zorder=2)
+    fig.colorbar(dots, ax=along, label="APE (m)")
+    along.set_aspect("equal")
+    along.set_xlabel("x (m)")
+    along.set_ylabel("y (m)")
+    along.legend(loc="best", fontsize="small")
+    fig.savefig(path, dpi=110, bbox_inches="tight")
 
 
 def _log_summary(metrics: dict[str, Any]) -> None:

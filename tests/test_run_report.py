@@ -1,0 +1,48 @@
+"""Every command's results folder holds report.html: main metrics, figures embedded, every metric, the config;
+a SLAM run with ground truth adds the APE figure (over time and along the trajectory)."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from PIL import Image
+from test_report import _dom
+
+from slam2d import config
+from slam2d.runs.run import run_experiment
+from slam2d.runs.segment import run_segment
+from slam2d.segmentation.config import SegmentConfig
+
+
+@pytest.fixture(scope="module")
+def run_folder(tmp_path_factory):
+    root = tmp_path_factory.mktemp("run")
+    return run_experiment(config.load(None, ["dataset.max_scans=60", f"output.root={root}"]), quiet=True)
+
+
+def test_a_run_report_holds_its_metrics_figures_and_config(run_folder):
+    page = (run_folder / "report.html").read_text()
+    for section in ("main-metrics", "figures", "all-metrics", "config"):
+        assert f'<section id="{section}">' in page, section
+    assert re.search(r"<th>ate\.rmse</th><td class=\"num\">0\.0\d+</td>", page)
+    assert 'alt="ape.png"' in page and 'alt="map.png"' in page and "data:image/png;base64," in page
+    assert "frontend:" in page  # the resolved config
+    with Image.open(run_folder / "ape.png") as im:
+        assert im.size[0] > 800
+
+
+def test_the_run_report_renders_in_a_browser(run_folder, tmp_path):
+    dom = _dom((run_folder / "report.html").as_uri(), tmp_path)
+    assert "Main metrics" in dom and dom.count("<figure>") >= 2 and "ate.rmse" in dom
+
+
+def test_other_commands_write_a_report_too(tmp_path):
+    plan = tmp_path / "plan.png"
+    img = Image.new("L", (60, 40), 255)
+    img.paste(0, (0, 0, 60, 1))
+    img.save(plan)
+    folder = run_segment(SegmentConfig(map=str(plan), segmentation={"method": "morphological"},
+                                       output={"root": str(tmp_path)}))
+    page = (folder / "report.html").read_text()
+    assert "<th>rooms</th>" in page and 'alt="rooms.png"' in page
