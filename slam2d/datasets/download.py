@@ -64,9 +64,11 @@ def download(names: list[str], to: Path | None = None, quiet: bool = False) -> l
 def _progress(quiet: bool):
     if quiet:
         return nullcontext(None)
+    from rich.console import Console
     from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TransferSpeedColumn
 
-    return Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn())
+    return Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
+                    console=Console(stderr=True))  # stdout carries the results only
 
 
 def _part(path: Path) -> Path:

@@ -19,6 +19,7 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
+from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
 from slam2d.errors import InputError
@@ -135,6 +136,11 @@ def live_view(viz: str | Path | None, name: str, kind: str, *args):
         view.close()
 
 
+def progress_console() -> Console:
+    """Where progress bars are drawn: stderr (stdout carries the results only)."""
+    return Console(stderr=True)
+
+
 @contextmanager
 def progress(source, quiet: bool):
     """Yield a callable that advances a progress bar by one scan."""
@@ -146,7 +152,8 @@ def progress(source, quiet: bool):
     except (TypeError, NotImplementedError):
         total = None
     with Progress(
-        "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn()
+        "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+        console=progress_console(),
     ) as bar:
         task = bar.add_task(getattr(source, "name", "scans"), total=total)
         yield lambda: bar.advance(task)
@@ -159,7 +166,8 @@ def progress_bar(description: str, total: float | None, quiet: bool):
     if quiet:
         yield lambda done, note="": None
         return
-    with Progress("[progress.description]{task.description}", BarColumn(), TimeRemainingColumn()) as bar:
+    with Progress("[progress.description]{task.description}", BarColumn(), TimeRemainingColumn(),
+                  console=progress_console()) as bar:
         task = bar.add_task(description, total=total)
         yield lambda done, note="": bar.update(task, completed=done, description=f"{description} {note}".strip())
 

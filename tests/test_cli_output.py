@@ -1,0 +1,83 @@
+"""What the command line prints where: the log and progress on stderr, on stdout the results line only
+(or with ``--json`` one JSON object), so that ``$(slam2d run ...)`` and ``slam2d run --json | jq`` work."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+from typer.testing import CliRunner
+
+from slam2d.cli import app
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _slam2d(*args: str) -> subprocess.CompletedProcess:
+    """``slam2d ARGS`` in a subprocess (this checkout's slam2d), stdout and stderr apart."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, "-m", "slam2d.cli", *args], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=600)
+
+
+def _floor_plan(tmp_path: Path) -> Path:
+    """Two 6 m x 6 m rooms (0.05 m/px) joined by a door, as a floor-plan PNG."""
+    free = np.zeros((130, 255), bool)
+    free[5:125, 5:125] = True
+    free[5:125, 130:250] = True
+    free[51:69, 125:130] = True
+    Image.fromarray(np.where(free, 255, 0).astype(np.uint8)).save(tmp_path / "plan.png")
+    return tmp_path / "plan.png"
+
+
+def test_run_json_is_one_object_and_plain_stdout_one_line(tmp_path):
+    done = _slam2d("run", "-q", "--json", "--set", "dataset.max_scans=5", "-o", str(tmp_path / "json"))
+    assert done.returncode == 0, done.stderr[-2000:]
+    out = json.loads(done.stdout)
+    assert set(out) == {"folder", "metrics"} and Path(out["folder"]).is_dir()
+    assert out["metrics"]["scans"] == 5 and "ate.rmse" in out["metrics"]  # dotted keys, flattened
+    written = json.loads((Path(out["folder"]) / "metrics.json").read_text())
+    assert out["metrics"]["ate.rmse"] == written["ate"]["rmse"]
+
+    done = _slam2d("run", "--set", "dataset.max_scans=5", "-o", str(tmp_path / "plain"))
+    assert done.returncode == 0, done.stderr[-2000:]
+    (line,) = done.stdout.splitlines()
+    assert line.startswith("results: ") and Path(line.removeprefix("results: ")).is_dir()
+    assert "scans processed" in done.stderr and "done in" in done.stderr  # the log, on stderr
+
+
+def test_metrics_echo_on_stderr_json_on_stdout(tmp_path):
+    plan = _floor_plan(tmp_path)
+    runner = CliRunner()
+    plain = runner.invoke(app, ["segment", str(plan), "--method", "morphological", "-o", str(tmp_path)])
+    assert plain.exit_code == 0, plain.output
+    assert plain.stdout.splitlines() == [line for line in plain.stdout.splitlines() if line.startswith("results: ")]
+    assert len(plain.stdout.splitlines()) == 1 and "rooms=" in plain.stderr
+    as_json = runner.invoke(app, ["map", str(plan), "--layers", "sparse,lines", "--json", "-o", str(tmp_path)])
+    assert as_json.exit_code == 0, as_json.output
+    out = json.loads(as_json.stdout)
+    assert Path(out["folder"]).name.startswith("map-")
+    assert {"sparse.bytes", "lines.bytes"} <= set(out["metrics"]) and "mesh.bytes" not in out["metrics"]
+
+
+def test_ablate_json(tmp_path):
+    plan = _floor_plan(tmp_path)
+    sweep = tmp_path / "sweep.yaml"
+    sweep.write_text(f"command: segment\nconfig: {{map: {plan}}}\n"
+                     "grid: {segmentation.method: [morphological, distance]}\n")
+    runner = CliRunner()
+    dry = runner.invoke(app, ["ablate", str(sweep), "--dry-run", "--json"])
+    assert dry.exit_code == 0, dry.output
+    assert [v["overrides"] for v in json.loads(dry.stdout)["variants"]] == [
+        {"segmentation.method": "morphological"}, {"segmentation.method": "distance"}]
+    ran = runner.invoke(app, ["ablate", str(sweep), "--json", "-j", "1", "-o", str(tmp_path / "out")])
+    assert ran.exit_code == 0, ran.output
+    out = json.loads(ran.stdout)
+    assert Path(out["table_md"]).is_file() and Path(out["table_csv"]).is_file()
+    assert Path(out["folder"]).is_dir() and out["failed"] == []
+    assert "| variant" in ran.stderr  # the table itself, for a reader, on stderr
