@@ -25,6 +25,22 @@ JSON_OPT = typer.Option(False, "--json", help="print one JSON object on stdout: 
                         "metrics")
 
 
+def _version(shown: bool) -> None:
+    if shown:
+        from slam2d import __version__
+
+        typer.echo(f"slam2d {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                 help="print the version of slam2d and exit"),
+) -> None:
+    """2D laser SLAM research framework."""
+
+
 def _setup_logging(quiet: bool) -> None:
     """The log on stderr (stdout carries the results only)."""
     from rich.console import Console

@@ -81,3 +81,16 @@ def test_ablate_json(tmp_path):
     assert Path(out["table_md"]).is_file() and Path(out["table_csv"]).is_file()
     assert Path(out["folder"]).is_dir() and out["failed"] == []
     assert "| variant" in ran.stderr  # the table itself, for a reader, on stderr
+
+
+def test_version():
+    from slam2d import __version__
+
+    done = CliRunner().invoke(app, ["--version"])
+    assert done.exit_code == 0 and done.stdout == f"slam2d {__version__}\n"
+    code = ("import sys\nfrom slam2d.cli import main\nsys.argv = ['slam2d', '--version']\n"
+            "try:\n    main()\nexcept SystemExit as done:\n    assert not done.code, done.code\n"
+            "heavy = {'numpy', 'gtsam', 'matplotlib', 'scipy'} & {m.split('.')[0] for m in sys.modules}\n"
+            "assert not heavy, heavy\n")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout == f"slam2d {__version__}\n", done.stderr[-2000:]
