@@ -504,11 +504,18 @@ app.add_typer(datasets_app, name="datasets")
 @datasets_app.command("list")
 def datasets_list(
     root: Optional[Path] = typer.Option(None, "--root", help="data folder to check (default: $SLAM2D_DATA)"),
+    fmt: Optional[str] = typer.Option(None, "--format", help="table, plain (tab-separated, header first) or json "
+                                      "(default: table on a terminal, else plain)"),
 ) -> None:
     """List every data file: size, sha256, licence, source, purpose, and whether it is here and verified."""
+    import sys
+
     from slam2d.datasets.download import print_catalogue
 
-    print_catalogue(root)
+    try:
+        print_catalogue(root, fmt or ("table" if sys.stdout.isatty() else "plain"))
+    except InputError as err:
+        _fail(err)
 
 
 @datasets_app.command("download")
