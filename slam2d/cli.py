@@ -414,7 +414,7 @@ def navigate(
         extra = [f"navigation.goal=[{goal}]"] if goal else []
         cfg = _command_config("navigate", _config_file(config, config_opt), [*set_, *extra], {"output.root": root},
                               plugin)
-        folder = run_navigate(cfg)
+        folder = run_navigate(cfg, quiet)
     _results("navigate", folder, as_json)
 
 

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import subprocess
@@ -10,6 +12,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from PIL import Image
 from typer.testing import CliRunner
 
@@ -94,3 +97,68 @@ def test_version():
             "assert not heavy, heavy\n")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and done.stdout == f"slam2d {__version__}\n", done.stderr[-2000:]
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_bars_on_a_terminal_only_never_quiet(monkeypatch):
+    from slam2d.runs.results import progress_bar, shows_progress
+
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    assert not shows_progress(False) and not shows_progress(True)
+    with progress_bar("working", 10, False) as update:
+        update(10)
+    assert sys.stderr.getvalue() == ""
+    monkeypatch.setattr(sys, "stderr", _Terminal())
+    assert shows_progress(False) and not shows_progress(True)
+    with progress_bar("working", 10, True) as update:
+        update(10)
+    assert sys.stderr.getvalue() == ""
+    with progress_bar("working", 10, False) as update:
+        update(10)
+    assert "working" in sys.stderr.getvalue()
+
+
+class _Bars:
+    """Stands in for ``progress_bar``: records each bar's description, total and updates."""
+
+    def __init__(self):
+        self.bars: list[tuple[str, float | None, bool, list]] = []
+
+    @contextlib.contextmanager
+    def __call__(self, description, total, quiet):
+        done: list = []
+        self.bars.append((description, total, quiet, done))
+        yield lambda value, note="": done.append(value)
+
+
+def test_localize_and_navigate_show_progress_results_unchanged(monkeypatch, tmp_path):
+    from slam2d import config
+    from slam2d.localization.config import LocalizeConfig
+    from slam2d.runs import localize, navigate
+
+    def metrics(folder: Path) -> dict:
+        m = json.loads((folder / "metrics.json").read_text())
+        return {k: v for k, v in m.items() if not k.endswith(("_ms_median", "wall_s", "real_time_factor", "hz"))}
+
+    cfg = LocalizeConfig(map="office", seconds=4, output={"root": str(tmp_path), "figures": False})
+    quiet = metrics(localize.run_localize(cfg, quiet=True))
+    bars = _Bars()
+    monkeypatch.setattr(localize, "progress_bar", bars)
+    shown = metrics(localize.run_localize(cfg))
+    ((description, total, was_quiet, done),) = bars.bars
+    assert description.startswith("localising") and not was_quiet and done == list(range(1, total + 1))
+    assert shown == quiet
+
+    cfg = config.load(None, [f"output.root={tmp_path}", "navigation.goal=[10.0, 4.5]", "navigation.slam=false",
+                             "output.figures=false"])
+    quiet = metrics(navigate.run_navigate(cfg, quiet=True))
+    monkeypatch.setattr(navigate, "progress_bar", bars)
+    shown = metrics(navigate.run_navigate(cfg))
+    description, total, was_quiet, done = bars.bars[-1]
+    assert description.startswith("navigating") and total == 300 and not was_quiet
+    assert done == sorted(done) and done[0] == 0 and done[-1] == pytest.approx(shown["time"], abs=0.2)
+    assert shown == quiet

@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import http.client
 import json
+import sys
 import urllib.error
 import urllib.request
 from contextlib import nullcontext
@@ -63,7 +64,7 @@ def download(names: list[str], to: Path | None = None, quiet: bool = False) -> l
 
 
 def _progress(quiet: bool):
-    if quiet:
+    if quiet or not sys.stderr.isatty():  # a progress bar on a terminal only
         return nullcontext(None)
     from rich.console import Console
     from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TransferSpeedColumn

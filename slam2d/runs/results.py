@@ -13,6 +13,7 @@ import json
 import logging
 import resource
 import shutil
+import sys
 import tempfile
 from contextlib import contextmanager
 from datetime import datetime
@@ -141,10 +142,15 @@ def progress_console() -> Console:
     return Console(stderr=True)
 
 
+def shows_progress(quiet: bool) -> bool:
+    """Progress bars are drawn on a terminal only (stderr), and never when ``quiet``."""
+    return not quiet and sys.stderr.isatty()
+
+
 @contextmanager
 def progress(source, quiet: bool):
-    """Yield a callable that advances a progress bar by one scan."""
-    if quiet:
+    """Yield a callable that advances a progress bar by one scan (None: no bar, see :func:`shows_progress`)."""
+    if not shows_progress(quiet):
         yield None
         return
     try:
@@ -162,8 +168,8 @@ def progress(source, quiet: bool):
 @contextmanager
 def progress_bar(description: str, total: float | None, quiet: bool):
     """Yield ``update(done, note="")``: the bar at ``done`` of ``total`` (None: unknown), ``note`` beside its
-    description; a no-op when ``quiet``."""
-    if quiet:
+    description; a no-op when ``quiet`` or stderr is not a terminal."""
+    if not shows_progress(quiet):
         yield lambda done, note="": None
         return
     with Progress("[progress.description]{task.description}", BarColumn(), TimeRemainingColumn(),
