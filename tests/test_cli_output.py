@@ -162,3 +162,15 @@ def test_localize_and_navigate_show_progress_results_unchanged(monkeypatch, tmp_
     assert description.startswith("navigating") and total == 300 and not was_quiet
     assert done == sorted(done) and done[0] == 0 and done[-1] == pytest.approx(shown["time"], abs=0.2)
     assert shown == quiet
+
+
+def test_install_script_installs_what_the_quick_start_uses():
+    """The Quick start's --viz needs the viz extra, installed by default; Ray stays optional."""
+    import re
+
+    script = (ROOT / "scripts" / "install.sh").read_text()
+    (default,) = re.findall(r"\$\{SLAM2D_EXTRAS:-([a-z,]+)\}", script)
+    assert {"dev", "viz"} <= set(default.split(",")) and "ray" not in default.split(",")
+    readme = (ROOT / "README.md").read_text()
+    assert "bash scripts/install.sh && .venv/bin/slam2d run\n" in readme
+    assert "--executor ray" in readme and "SLAM2D_EXTRAS=dev,viz,ray bash scripts/install.sh" in readme
