@@ -15,4 +15,6 @@ fi
 PYTHON=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PYTHON" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q -c constraints.txt -e ".[${SLAM2D_EXTRAS:-dev}]"  # CI adds ray: SLAM2D_EXTRAS=dev,ray
+# dev: the tests; viz: --viz of the Quick start. Ray is optional (slam2d ablate --executor ray):
+# SLAM2D_EXTRAS=dev,viz,ray bash scripts/install.sh, as CI does.
+.venv/bin/python -m pip install -q -c constraints.txt -e ".[${SLAM2D_EXTRAS:-dev,viz}]"

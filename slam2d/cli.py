@@ -21,14 +21,35 @@ CONFIG_ARG = typer.Argument(None, help="experiment YAML; omitted: the built-in s
 SET_OPT = typer.Option([], "--set", "-s", help="override a config key, e.g. --set seed=1 (dump-config lists the keys)")
 QUIET_OPT = typer.Option(False, "--quiet", "-q", help="no progress bars, warnings and errors only")
 PLUGIN_OPT = typer.Option([], "--plugin", "-p", help="Python file or module to import first (its frontends)")
+JSON_OPT = typer.Option(False, "--json", help="print one JSON object on stdout: the results folder and its main "
+                        "metrics")
+
+
+def _version(shown: bool) -> None:
+    if shown:
+        from slam2d import __version__
+
+        typer.echo(f"slam2d {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                 help="print the version of slam2d and exit"),
+) -> None:
+    """2D laser SLAM research framework."""
 
 
 def _setup_logging(quiet: bool) -> None:
+    """The log on stderr (stdout carries the results only)."""
+    from rich.console import Console
     from rich.logging import RichHandler
 
     logger = logging.getLogger("slam2d")
     logger.handlers[:] = [h for h in logger.handlers if not isinstance(h, RichHandler)]
-    handler = RichHandler(show_path=False, show_time=False, level=logging.WARNING if quiet else logging.INFO)
+    handler = RichHandler(console=Console(stderr=True), show_path=False, show_time=False,
+                          level=logging.WARNING if quiet else logging.INFO)
     logger.addHandler(handler)
     logger.setLevel(logging.INFO)
     logger.propagate = False
@@ -115,16 +136,36 @@ def _command_config(command: str, config: Optional[Path], set_: list[str], flags
 
 
 def _echo_metrics(folder: Path, keys: tuple[str, ...], digits: int = 4) -> None:
+    """Some metrics of ``folder`` on one line, on stderr (stdout carries the results only)."""
     metrics = json.loads((folder / "metrics.json").read_text())
     typer.echo(" ".join(f"{k}={metrics[k]:.{digits}g}" if isinstance(metrics[k], float) else f"{k}={metrics[k]}"
-                        for k in keys if metrics.get(k) is not None))  # fmt: skip
+                        for k in keys if metrics.get(k) is not None), err=True)  # fmt: skip
+
+
+def main_metrics(command: str, folder: Path) -> dict:
+    """The main metrics of ``command`` (see ``slam2d.runs.commands``) present in ``folder``'s metrics.json,
+    by dotted key."""
+    from slam2d.evaluation.tables import flatten_metrics
+    from slam2d.runs.commands import command_of
+
+    path = folder / "metrics.json"
+    flat = flatten_metrics(json.loads(path.read_text())) if path.is_file() else {}
+    return {k: flat[k] for k in command_of(command).main_metrics if k in flat}
+
+
+def _results(command: str, folder: Path, as_json: bool) -> None:
+    """The command's stdout: ``results: FOLDER``, or with ``--json`` one JSON object (folder, main metrics)."""
+    if as_json:
+        typer.echo(json.dumps({"folder": str(folder), "metrics": main_metrics(command, folder)}))
+    else:
+        typer.echo(f"results: {folder}")
 
 
 @app.command()
 def run(
     config: Optional[Path] = CONFIG_ARG, config_opt: Optional[Path] = CONFIG_OPT, set_: list[str] = SET_OPT,
     root: Optional[Path] = OUT_SET_OPT, plugin: list[str] = PLUGIN_OPT, quiet: bool = QUIET_OPT,
-    viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT,
+    viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT, as_json: bool = JSON_OPT,
 ) -> None:
     """Run one experiment; print the results folder."""
     from slam2d.runs.run import run_experiment
@@ -133,7 +174,7 @@ def run(
         target = _viz_target(viz, viz_save)
         cfg = _command_config("run", _config_file(config, config_opt), set_, {"output.root": root}, plugin)
         folder = run_experiment(cfg, quiet=quiet, viz=target)
-    typer.echo(f"results: {folder}")
+    _results("run", folder, as_json)
 
 
 @app.command()
@@ -148,6 +189,8 @@ def ablate(
     root: Optional[Path] = typer.Option(None, "--out", "-o", help="the sweep folder is created under this "
                                         "(the base config's output.root)"),
     quiet: bool = QUIET_OPT,
+    as_json: bool = typer.Option(False, "--json", help="print one JSON object on stdout: the sweep folder, its "
+                                 "tables and failed variants (with --dry-run: the variants)"),
 ) -> None:
     """Run every variant of a sweep in parallel; write one table (Markdown + CSV)."""
     from slam2d.runs.results import output_root
@@ -159,6 +202,10 @@ def ablate(
             set_ = [*set_, f"output.root={root}"]
         if dry_run:
             checked = read_sweep(sweep, set_, grid)
+            if as_json:
+                typer.echo(json.dumps({"variants": [{"name": v.name, "overrides": v.overrides}
+                                                    for v in checked.variants]}, default=str))
+                return
             for v in checked.variants:
                 typer.echo(f"{v.name}: " + ", ".join(f"{k}={val}" for k, val in v.overrides.items()))
             typer.echo(f"{len(checked.variants)} variants checked; nothing run")
@@ -170,9 +217,14 @@ def ablate(
             _stopped(f"{stop.finished} of {stop.total} variants finished in {stop.folder}; "
                      f"resume with: slam2d ablate {sweep} --resume {stop.folder}")
     if not quiet:
-        typer.echo((folder / "table.md").read_text())
+        typer.echo((folder / "table.md").read_text(), err=as_json)
     failed = [r["variant"] for r in rows if r["error"]]
-    typer.echo(f"table: {folder / 'table.md'} and {folder / 'table.csv'}; report: {folder / 'report.html'}")
+    if as_json:
+        typer.echo(json.dumps({"folder": str(folder), "table_md": str(folder / "table.md"),
+                               "table_csv": str(folder / "table.csv"), "report": str(folder / "report.html"),
+                               "failed": failed}))
+    else:
+        typer.echo(f"table: {folder / 'table.md'} and {folder / 'table.csv'}; report: {folder / 'report.html'}")
     if failed:
         typer.secho(f"{len(failed)} of {len(rows)} variants failed: {', '.join(failed)}", fg="red", err=True)
         raise typer.Exit(1)
@@ -211,6 +263,7 @@ def segment(
     set_: list[str] = SET_OPT,
     root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT,
+    as_json: bool = JSON_OPT,
 ) -> None:
     """Split a map into rooms: colour image, topological graph, metrics (a config, or the map and flags)."""
     from slam2d.runs.segment import run_segment
@@ -220,8 +273,9 @@ def segment(
             "map": map_path, "segmentation.method": method, "segmentation.similarity": similarity,
             "ground_truth": ground_truth, "output.root": root})
         folder = run_segment(cfg)
-    _echo_metrics(folder, ("rooms", "k", "recall", "precision", "seconds"))
-    typer.echo(f"results: {folder}")
+    if not as_json:
+        _echo_metrics(folder, ("rooms", "k", "recall", "precision", "seconds"))
+    _results("segment", folder, as_json)
 
 
 def _xy(text: str | None, name: str):
@@ -248,6 +302,7 @@ def plan(
     set_: list[str] = SET_OPT,
     root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT,
+    as_json: bool = JSON_OPT,
 ) -> None:
     """Plan a path (A* or hierarchical), smooth it, time it with toppra; write figures. With
     planning.queries > 0: many seeded queries against A* (suboptimality, speed-up)."""
@@ -264,9 +319,10 @@ def plan(
         except NoPathError as err:
             typer.secho(f"no path: {err}", fg="red", err=True)
             raise typer.Exit(1) from None
-    _echo_metrics(folder, ("length_m", "duration_s", "nodes_expanded", "plan_ms", "queries", "failures",
-                           "mean_subopt_pct", "median_speedup"))
-    typer.echo(f"results: {folder}")
+    if not as_json:
+        _echo_metrics(folder, ("length_m", "duration_s", "nodes_expanded", "plan_ms", "queries", "failures",
+                               "mean_subopt_pct", "median_speedup"))
+    _results("plan", folder, as_json)
 
 
 @app.command("map")
@@ -279,6 +335,7 @@ def map_layers(
     set_: list[str] = SET_OPT,
     root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT,
+    as_json: bool = JSON_OPT,
 ) -> None:
     """Make mapping layers (sparse, quadtree, line map, wall mesh) of an existing map."""
     from slam2d.runs.map import run_map
@@ -289,9 +346,10 @@ def map_layers(
         cfg = _command_config("map", config, set_, {
             "map": map_path, "layers": _layer_names(layers), "wall_height": wall_height, "output.root": root})
         folder = run_map(cfg)
-    stats = json.loads((folder / "metrics.json").read_text())
-    typer.echo(" ".join(f"{k}={v['bytes']}B" for k, v in stats.items() if "bytes" in v))
-    typer.echo(f"results: {folder}")
+    if not as_json:
+        stats = json.loads((folder / "metrics.json").read_text())
+        typer.echo(" ".join(f"{k}={v['bytes']}B" for k, v in stats.items() if "bytes" in v), err=True)
+    _results("map", folder, as_json)
 
 
 def _layer_names(text: str | None) -> list[str] | None:
@@ -325,6 +383,7 @@ def optimize(
     set_: list[str] = SET_OPT,
     root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT,
+    as_json: bool = JSON_OPT,
 ) -> None:
     """Optimise a pose graph in one batch: optimised g2o, overlay figure, metrics."""
     from slam2d.runs.optimize import run_optimize
@@ -335,9 +394,10 @@ def optimize(
             "outliers": outliers, "outlier_kind": outlier_kind, "seed": seed, "reference": reference,
             "verify": verify, "output.root": root})
         folder = run_optimize(cfg)
-    _echo_metrics(folder, ("gtsam_error", "iterations", "seconds", "verified", "certified", "loops_rejected",
-                           "precision", "recall", "rmse_to_reference"), digits=6)
-    typer.echo(f"results: {folder}")
+    if not as_json:
+        _echo_metrics(folder, ("gtsam_error", "iterations", "seconds", "verified", "certified", "loops_rejected",
+                               "precision", "recall", "rmse_to_reference"), digits=6)
+    _results("optimize", folder, as_json)
 
 
 @app.command()
@@ -345,7 +405,7 @@ def navigate(
     config: Optional[Path] = CONFIG_ARG, config_opt: Optional[Path] = CONFIG_OPT,
     goal: Optional[str] = typer.Option(None, help="x,y[,heading] in m (rad); overrides navigation.goal"),
     set_: list[str] = SET_OPT, root: Optional[Path] = OUT_SET_OPT, plugin: list[str] = PLUGIN_OPT,
-    quiet: bool = QUIET_OPT,
+    quiet: bool = QUIET_OPT, as_json: bool = JSON_OPT,
 ) -> None:
     """Drive the simulated robot to a goal (online SLAM on by default); print the results folder."""
     from slam2d.runs.navigate import run_navigate
@@ -354,8 +414,8 @@ def navigate(
         extra = [f"navigation.goal=[{goal}]"] if goal else []
         cfg = _command_config("navigate", _config_file(config, config_opt), [*set_, *extra], {"output.root": root},
                               plugin)
-        folder = run_navigate(cfg)
-    typer.echo(f"results: {folder}")
+        folder = run_navigate(cfg, quiet)
+    _results("navigate", folder, as_json)
 
 
 @app.command()
@@ -366,6 +426,7 @@ def explore(
     ),
     set_: list[str] = SET_OPT, root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT, viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT,
+    as_json: bool = JSON_OPT,
 ) -> None:
     """Explore the simulated world with SLAM in the loop until no goal is left; print the results folder."""
     from slam2d.runs.explore import run_explore
@@ -375,7 +436,7 @@ def explore(
         cfg = _command_config("explore", _config_file(config, config_opt), set_, {
             "exploration.strategy": strategy, "output.root": root})
         folder = run_explore(cfg, quiet, target)
-    typer.echo(f"results: {folder}")
+    _results("explore", folder, as_json)
 
 
 @app.command()
@@ -388,6 +449,7 @@ def localize(
     set_: list[str] = SET_OPT,
     root: Optional[Path] = OUT_SET_OPT,
     quiet: bool = QUIET_OPT, viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT,
+    as_json: bool = JSON_OPT,
 ) -> None:
     """Monte Carlo localisation on a known map: estimate vs truth, errors, particle clouds, metrics."""
     from slam2d.runs.localize import run_localize
@@ -396,7 +458,7 @@ def localize(
         target = _viz_target(viz, viz_save)
         cfg = _command_config("localize", config, set_, {"map": map_path, "dataset": dataset, "output.root": root})
         folder = run_localize(cfg, quiet, target)
-    typer.echo(f"results: {folder}")
+    _results("localize", folder, as_json)
 
 
 @app.command()
@@ -442,11 +504,18 @@ app.add_typer(datasets_app, name="datasets")
 @datasets_app.command("list")
 def datasets_list(
     root: Optional[Path] = typer.Option(None, "--root", help="data folder to check (default: $SLAM2D_DATA)"),
+    fmt: Optional[str] = typer.Option(None, "--format", help="table, plain (tab-separated, header first) or json "
+                                      "(default: table on a terminal, else plain)"),
 ) -> None:
     """List every data file: size, sha256, licence, source, purpose, and whether it is here and verified."""
+    import sys
+
     from slam2d.datasets.download import print_catalogue
 
-    print_catalogue(root)
+    try:
+        print_catalogue(root, fmt or ("table" if sys.stdout.isatty() else "plain"))
+    except InputError as err:
+        _fail(err)
 
 
 @datasets_app.command("download")

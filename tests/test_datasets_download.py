@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import re
 import socket
 import threading
@@ -135,13 +136,30 @@ def test_unknown_name_lists_folders():
 def test_list_shows_names_and_status(served, tmp_path, monkeypatch):
     monkeypatch.setenv("COLUMNS", "200")
     runner = CliRunner()
-    before = runner.invoke(app, ["datasets", "list", "--root", str(tmp_path)])
+    before = runner.invoke(app, ["datasets", "list", "--root", str(tmp_path), "--format", "table"])
     assert before.exit_code == 0 and NAME in before.stdout and "missing" in before.stdout
     assert "CC0-1.0" in before.stdout and hashlib.sha256(PAYLOAD).hexdigest()[:16] in before.stdout
     fetched = runner.invoke(app, ["datasets", "download", "all", "--to", str(tmp_path)])  # with progress bar
     assert fetched.exit_code == 0 and f"verified: 1 file(s) in {tmp_path}" in fetched.stdout
     after = runner.invoke(app, ["datasets", "list", "--root", str(tmp_path)])
     assert "verified" in after.stdout and "missing" not in after.stdout
+
+
+def test_list_plain_and_json_for_scripts(served, tmp_path):
+    runner = CliRunner()
+    plain = runner.invoke(app, ["datasets", "list", "--root", str(tmp_path)])  # stdout not a terminal: plain
+    assert plain.exit_code == 0, plain.output
+    header, line = plain.stdout.splitlines()
+    assert header.split("\t") == ["file", "size", "sha256", "status", "licence", "source", "url", "purpose"]
+    host = f"127.0.0.1:{served.server_port}"
+    assert line.split("\t") == [NAME, str(len(PAYLOAD)), hashlib.sha256(PAYLOAD).hexdigest(), "missing", "CC0-1.0",
+                                host, f"http://{host}/small.bin", "download tests"]
+    listed = runner.invoke(app, ["datasets", "list", "--root", str(tmp_path), "--format", "json"])
+    assert listed.exit_code == 0, listed.output
+    assert json.loads(listed.stdout) == [dict(zip(header.split("\t"), [*line.split("\t")[:1], len(PAYLOAD),
+                                                                        *line.split("\t")[2:]]))]
+    bad = runner.invoke(app, ["datasets", "list", "--format", "yaml"])
+    assert bad.exit_code == 2 and "--format" in bad.output
 
 
 def test_catalogue_matches_the_data(data_file):

@@ -20,10 +20,10 @@ def test_every_command_takes_the_same_options_and_dumps_its_config(command):
     runner = CliRunner()
     helped = runner.invoke(app, [command, "--help"], env={"COLUMNS": "200"})
     assert helped.exit_code == 0, helped.output
-    for option in ("--config", "--set", "--out", "--quiet"):
+    for option in ("--config", "--set", "--out", "--quiet", "--json"):
         assert option in helped.output, f"{command} lacks {option}"
     swept = runner.invoke(app, ["ablate", "--help"], env={"COLUMNS": "200"})
-    assert all(option in swept.output for option in ("--set", "--grid", "--out", "--quiet", "--dry-run"))
+    assert all(option in swept.output for option in ("--set", "--grid", "--out", "--quiet", "--dry-run", "--json"))
     dumped = runner.invoke(app, ["dump-config", "--command", command, "--set", "output.root=elsewhere"])
     assert dumped.exit_code == 0, dumped.output
     assert yaml.safe_load(dumped.output)["output"]["root"] == "elsewhere"

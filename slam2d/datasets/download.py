@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import hashlib
 import http.client
+import json
+import sys
 import urllib.error
 import urllib.request
 from contextlib import nullcontext
@@ -62,11 +64,13 @@ def download(names: list[str], to: Path | None = None, quiet: bool = False) -> l
 
 
 def _progress(quiet: bool):
-    if quiet:
+    if quiet or not sys.stderr.isatty():  # a progress bar on a terminal only
         return nullcontext(None)
+    from rich.console import Console
     from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TransferSpeedColumn
 
-    return Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn())
+    return Progress(TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
+                    console=Console(stderr=True))  # stdout carries the results only
 
 
 def _part(path: Path) -> Path:
@@ -125,8 +129,34 @@ def _verify(entry: DataFile, part: Path) -> None:
         raise InputError(entry.name, f"sha256 mismatch: expected {entry.sha256}, got {got} (download deleted)")
 
 
-def print_catalogue(root: Path | None = None) -> None:
-    """Print the catalogue as a table, with each file's status under ``root`` (default: the data root)."""
+COLUMNS = ("file", "size", "sha256", "status", "licence", "source", "url", "purpose")
+"""The fields of :func:`catalogue_rows` (and the columns of the ``plain`` format)."""
+FORMATS = ("table", "plain", "json")
+"""How :func:`print_catalogue` prints: a table to read, tab-separated lines or JSON for scripts."""
+
+
+def catalogue_rows(root: Path | None = None) -> list[dict]:
+    """Every catalogued file with its status under ``root`` (default: the data root): file, size (bytes),
+    sha256, status, licence, source, url, purpose."""
+    root = Path(root).expanduser() if root is not None else data_root()
+    return [dict(zip(COLUMNS, (e.name, e.size, e.sha256, status(e, root), e.licence, e.source, e.url, e.purpose)))
+            for e in catalog.CATALOGUE]
+
+
+def print_catalogue(root: Path | None = None, fmt: str = "table") -> None:
+    """Print the catalogue, with each file's status under ``root`` (default: the data root): as a table,
+    ``plain`` (tab-separated, one file a line, the header first) or ``json`` (a list of objects)."""
+    if fmt not in FORMATS:
+        raise InputError("--format", f"unknown format '{fmt}' (one of {', '.join(FORMATS)})")
+    rows = catalogue_rows(root)
+    if fmt == "json":
+        print(json.dumps(rows, indent=2))
+        return
+    if fmt == "plain":
+        print("\t".join(COLUMNS))
+        for row in rows:
+            print("\t".join(" ".join(str(v).split()) for v in row.values()))  # no tab or newline in a field
+        return
     from rich.console import Console
     from rich.table import Table
 
@@ -134,9 +164,9 @@ def print_catalogue(root: Path | None = None) -> None:
     table = Table(title=f"data files under {root}")
     for column in ("file", "size", "sha256", "status", "licence", "source", "what for"):
         table.add_column(column, no_wrap=column in ("file", "size", "status"), overflow="fold")
-    for entry in catalog.CATALOGUE:
-        table.add_row(entry.name, _size(entry.size), entry.sha256[:16], status(entry, root),
-                      entry.licence, entry.source, entry.purpose)
+    for row in rows:
+        table.add_row(row["file"], _size(row["size"]), row["sha256"][:16], row["status"], row["licence"],
+                      row["source"], row["purpose"])
     Console().print(table)
 
 

@@ -121,10 +121,11 @@ class Track:
 SNAPSHOT_PARTICLES = 400  # particles kept per snapshot (an even subset)
 
 
-def replay(pf: ParticleFilter, stream: Stream, snapshot_at=(), view=None) -> Track:
+def replay(pf: ParticleFilter, stream: Stream, snapshot_at=(), view=None, progress=None) -> Track:
     """Feed every scan of ``stream`` to ``pf`` (initialised). At the scan indices ``snapshot_at``
     (or at every update for ``"updates"``) keep up to SNAPSHOT_PARTICLES particles, their weights
-    and the estimate. ``view`` (a :class:`slam2d.viz.ParticleView`) logs each scan's step."""
+    and the estimate. ``view`` (a :class:`slam2d.viz.ParticleView`) logs each scan's step;
+    ``progress(done)``, if given, is told the scans done after each."""
     import time
 
     n = len(stream.scans)
@@ -142,6 +143,8 @@ def replay(pf: ParticleFilter, stream: Stream, snapshot_at=(), view=None) -> Tra
         if (updated and snapshot_at == "updates") or (snapshot_at != "updates" and i in snapshot_at):
             keep = np.linspace(0, len(pf.particles) - 1, min(SNAPSHOT_PARTICLES, len(pf.particles))).astype(int)
             snaps[i] = (pf.particles[keep].copy(), np.exp(pf.log_w[keep]), est[i].copy())
+        if progress is not None:
+            progress(i + 1)
     err = np.hypot(*(est[:, :2] - stream.truth[:, :2]).T)
     head = np.abs(geometry.wrap_angle(est[:, 2] - stream.truth[:, 2]))
     return Track(est, err, head, count, share, sd, np.array(ms), snaps)

@@ -166,7 +166,9 @@ def save_map_png(
 ) -> Path:
     """Figure of the map (grey: black occupied, white free) with trajectories (N, 3) overlaid.
 
-    Axes in metres, equal aspect, one colour per trajectory and a legend. The
+    Axes in metres, equal aspect, one colour per trajectory and a legend; each trajectory is drawn
+    above those after it, and thinner, so the first (the estimate) lies on the others and a trajectory
+    it covers (the ground truth) still shows at its edges (:func:`draw_trajectories`). The
     grid is drawn :func:`downsample`-d to no more pixels than the axes have
     and at most :data:`MAX_FIGURE_PX` on its long side.
     """
@@ -181,9 +183,7 @@ def save_map_png(
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     _draw_grid(ax, grid)
-    for name, poses in (trajectories or {}).items():
-        p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-        ax.plot(p[:, 0], p[:, 1], linewidth=1.0, label=name)
+    draw_trajectories(ax, trajectories or {})
     if trajectories:
         ax.legend(loc="best", fontsize="small")
     ax.set_xlabel("x (m)")
@@ -193,6 +193,18 @@ def save_map_png(
         ax.set_title(title)
     fig.savefig(path, bbox_inches="tight")
     return path
+
+
+def draw_trajectories(ax, trajectories: Mapping[str, np.ndarray]) -> list:
+    """Plot the trajectories (N, 3) on ``ax`` in their order of the mapping (the legend's), each above
+    and thinner than those after it; return the lines."""
+    lines = []
+    n = len(trajectories)
+    for i, (name, poses) in enumerate(trajectories.items()):
+        p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        (line,) = ax.plot(p[:, 0], p[:, 1], linewidth=1.0 + 0.6 * i, zorder=2.0 + (n - i) / (n + 1), label=name)
+        lines.append(line)
+    return lines
 
 
 def _draw_grid(ax, grid: OccupancyGrid) -> None:

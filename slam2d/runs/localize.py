@@ -30,7 +30,7 @@ from slam2d.localization.maps import KnownMap
 from slam2d.localization.mcl import ParticleFilter
 from slam2d.localization.scenario import PERIOD, Stream, Track, converged_at, false_convergence, replay, wander
 from slam2d.paths import resolve_data_path
-from slam2d.runs.results import json_text, live_view, results_folder
+from slam2d.runs.results import json_text, live_view, progress_bar, results_folder
 from slam2d.sim.world import load_world
 from slam2d.types import Trajectory
 
@@ -52,7 +52,7 @@ def run_localize(cfg: LocalizeConfig, quiet: bool = False, viz: str | Path | Non
     dataset = _dataset(cfg.dataset)
     name = cfg.name or "localize"
     with results_folder(cfg.output.root, name) as (work, published), live_view(viz, name, "localize", known) as view:
-        metrics = localize(known, cfg, work, map_path=map_path, dataset=dataset, view=view)
+        metrics = localize(known, cfg, work, map_path=map_path, dataset=dataset, view=view, quiet=quiet)
         log.info("position RMSE %.3f m, heading RMSE %.2f deg, median %d particles, %.1f ms per update",
                  metrics["position_rmse"], metrics["heading_rmse_deg"], metrics["particles_median"],
                  metrics["update_ms_median"])  # fmt: skip
@@ -76,8 +76,9 @@ def _dataset(path: str | None):
 
 
 def localize(known: KnownMap, cfg: LocalizeConfig, out: Path, map_path: Path | None = None,
-             dataset=None, view=None) -> dict[str, Any]:  # fmt: skip
-    """One run into the folder ``out`` (``view``: a live view of the filter, or None); returns the metrics."""
+             dataset=None, view=None, quiet: bool = False) -> dict[str, Any]:  # fmt: skip
+    """One run into the folder ``out`` (``view``: a live view of the filter, or None; a progress bar on a
+    terminal unless ``quiet``); returns the metrics."""
 
     loc, mcl = cfg.localization, cfg.filter_config()
     resolved = cfg.model_copy(update={"localization": loc.model_copy(update={"mcl": mcl.model_dump()})})
@@ -94,7 +95,8 @@ def localize(known: KnownMap, cfg: LocalizeConfig, out: Path, map_path: Path | N
         if not np.isfinite(np.asarray(start, dtype=np.float64)).all():
             raise InputError("initial_pose", "tracking needs an initial pose (no reference pose at the first scan)")
         pf.init_pose(start)
-    track = replay(pf, stream, "updates" if cfg.output.figures else (), view)
+    with progress_bar("localising (scans)", len(stream.scans), quiet) as advance:
+        track = replay(pf, stream, "updates" if cfg.output.figures else (), view, advance)
     metrics = metrics_of(stream, track, pf)
     metrics["reference"] = truth_name
     _write_results(out, stream, track, metrics, known, cfg)

@@ -30,7 +30,7 @@ from slam2d.localization import KnownMap
 from slam2d.localization.base import LOCALIZERS
 from slam2d.navigation import Navigator, run_navigation, world_grid
 from slam2d.navigation.config import navigator_config
-from slam2d.runs.results import json_text, results_folder
+from slam2d.runs.results import json_text, progress_bar, results_folder
 from slam2d.sim import Robot
 from slam2d.sim.obstacles import scatter_wanderers
 from slam2d.sim.robot import RobotConfig
@@ -59,15 +59,17 @@ def run_navigate(cfg: ExperimentConfig, quiet: bool = False) -> Path:
         raise InputError("navigation.goal", "a goal is needed: --goal x,y or navigation.goal in the config")
     with results_folder(cfg.output.root, cfg.name) as (work, published):
         log.info("slam2d navigate '%s' to %s -> %s", cfg.name, goal, cfg.output.root)
-        metrics = _navigate_into(cfg, work)
+        total = navigator_config(cfg.navigation.options, cfg.navigation.slam).max_time
+        with progress_bar("navigating (simulated s)", total, quiet) as advance:
+            metrics = _navigate_into(cfg, work, advance)
         log.info("%s in %.1f s simulated (%.1f s wall): %s", metrics["status"], metrics["time"],
                  metrics["wall_s"], metrics["reason"])  # fmt: skip
     return published[0]
 
 
-def _navigate_into(cfg: ExperimentConfig, out: Path) -> dict[str, Any]:
+def _navigate_into(cfg: ExperimentConfig, out: Path, progress=None) -> dict[str, Any]:
     (out / "config.yaml").write_text(config_mod.dump(cfg))
-    run = simulate(cfg)
+    run = simulate(cfg, progress)
     _write_trajectories(out, run.result, run.estimate)
     if cfg.output.figures:
         _figures(out, run.world, run.result, run.estimate, run.grid, np.asarray(cfg.navigation.goal, float),
@@ -89,8 +91,9 @@ class NavigationRun:
     metrics: dict[str, Any]
 
 
-def simulate(cfg: ExperimentConfig) -> NavigationRun:
-    """One closed-loop run of ``cfg`` (no files written)."""
+def simulate(cfg: ExperimentConfig, progress=None) -> NavigationRun:
+    """One closed-loop run of ``cfg`` (no files written); ``progress(seconds)``, if given, is told the
+    simulated time at every step."""
 
     t0 = time.perf_counter()
     nav, sim = cfg.navigation, cfg.dataset.simulator
@@ -107,7 +110,7 @@ def simulate(cfg: ExperimentConfig) -> NavigationRun:
     people = scatter_wanderers(world, nav.people, rng, speed=nav.people_speed, keep_clear=keep)
     robot = Robot(world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), obstacles=people, seed=cfg.seed)
     truth = world_grid(world)
-    record = _Recorder(robot)
+    record = _Recorder(robot, progress)
     online = None
     if nav.slam:
 
@@ -140,8 +143,9 @@ def simulate(cfg: ExperimentConfig) -> NavigationRun:
 class _Recorder:
     """Feeds each step's scan to online SLAM (once) and keeps the estimates and the people's positions."""
 
-    def __init__(self, robot):
+    def __init__(self, robot, progress=None):
         self.robot = robot
+        self.progress = progress
         self.estimates: list[np.ndarray] = []
         self.people: list[np.ndarray] = []
 
@@ -149,6 +153,8 @@ class _Recorder:
         """The ``map_grid`` callable for :func:`run_navigation`."""
 
         def map_grid(step):
+            if self.progress is not None:
+                self.progress(step.scan.stamp)
             self.people.append(np.array([o.centre for o in self.robot.obstacles]).reshape(-1, 2))
             if online is None:
                 return fixed

@@ -61,7 +61,7 @@ def write_plan(plan: MapPlan, out: Path, figures: bool = True) -> dict:
             plot_profile(plan.timed, out / "velocity.png")
     if figures:
         _plot_path(plan.grid, plan.free, plan.result, plan.waypoints, plan.timed, plan.start, plan.goal,
-                   out / "path.png", metrics["planner"])
+                   out / "path.png", metrics["planner"], path_title(plan.result, metrics.get("length_m")))
     names = {"metrics": "metrics.json", **({"path": "path.png"} if figures else {})}
     if plan.timed is not None:
         names.update(trajectory="trajectory.csv", **({"velocity": "velocity.png"} if figures else {}))
@@ -76,8 +76,19 @@ def _write_trajectory(path: Path, timed: TimedPath) -> None:
     np.savetxt(path, data, delimiter=",", fmt="%.6f", header=header, comments="")
 
 
-def _plot_path(grid, free, result: PlanResult, waypoints, timed, start, goal, path: Path, planner: str) -> None:
-    """The map (black blocked, grey inflation margin, white free) with the paths and end points."""
+def path_title(result: PlanResult, length_m: float | None) -> str:
+    """The title of path.png: the shortened path's length (the metric ``length_m``, what ``slam2d plan``
+    prints), the grid path's, nodes expanded and planning time; or why there is no path."""
+    if not result.found:
+        return result.reason
+    return (f"{length_m:.2f} m (grid path {result.length_m:.2f} m), {result.expanded} nodes, "
+            f"{1e3 * result.seconds:.1f} ms")
+
+
+def _plot_path(grid, free, result: PlanResult, waypoints, timed, start, goal, path: Path, planner: str,
+               title: str) -> str:
+    """The map (black blocked, grey inflation margin, white free) with the paths and end points, under
+    ``title``; return the title drawn."""
     x0, x1, y0, y1 = grid.extent
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
     fig = Figure(figsize=(8.0, float(np.clip(8.0 * aspect, 3.0, 16.0))), dpi=150)
@@ -97,9 +108,6 @@ def _plot_path(grid, free, result: PlanResult, waypoints, timed, start, goal, pa
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
-    if result.found:
-        title = f"{result.length_m:.2f} m, {result.expanded} nodes, {1e3 * result.seconds:.1f} ms"
-    else:
-        title = result.reason
     ax.set_title(title, fontsize="small")
     fig.savefig(path, bbox_inches="tight")
+    return ax.get_title()

@@ -14,12 +14,14 @@ import logging
 import re
 import resource
 import shutil
+import sys
 import tempfile
 from contextlib import contextmanager
 from datetime import datetime
 from pathlib import Path
 
 import numpy as np
+from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
 from slam2d.errors import InputError
@@ -145,10 +147,20 @@ def live_view(viz: str | Path | None, name: str, kind: str, *args):
         view.close()
 
 
+def progress_console() -> Console:
+    """Where progress bars are drawn: stderr (stdout carries the results only)."""
+    return Console(stderr=True)
+
+
+def shows_progress(quiet: bool) -> bool:
+    """Progress bars are drawn on a terminal only (stderr), and never when ``quiet``."""
+    return not quiet and sys.stderr.isatty()
+
+
 @contextmanager
 def progress(source, quiet: bool):
-    """Yield a callable that advances a progress bar by one scan."""
-    if quiet:
+    """Yield a callable that advances a progress bar by one scan (None: no bar, see :func:`shows_progress`)."""
+    if not shows_progress(quiet):
         yield None
         return
     try:
@@ -156,7 +168,8 @@ def progress(source, quiet: bool):
     except (TypeError, NotImplementedError):
         total = None
     with Progress(
-        "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn()
+        "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+        console=progress_console(),
     ) as bar:
         task = bar.add_task(getattr(source, "name", "scans"), total=total)
         yield lambda: bar.advance(task)
@@ -165,11 +178,12 @@ def progress(source, quiet: bool):
 @contextmanager
 def progress_bar(description: str, total: float | None, quiet: bool):
     """Yield ``update(done, note="")``: the bar at ``done`` of ``total`` (None: unknown), ``note`` beside its
-    description; a no-op when ``quiet``."""
-    if quiet:
+    description; a no-op when ``quiet`` or stderr is not a terminal."""
+    if not shows_progress(quiet):
         yield lambda done, note="": None
         return
-    with Progress("[progress.description]{task.description}", BarColumn(), TimeRemainingColumn()) as bar:
+    with Progress("[progress.description]{task.description}", BarColumn(), TimeRemainingColumn(),
+                  console=progress_console()) as bar:
         task = bar.add_task(description, total=total)
         yield lambda done, note="": bar.update(task, completed=done, description=f"{description} {note}".strip())
 

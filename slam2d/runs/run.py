@@ -122,7 +122,7 @@ def _write_outputs(cfg: ExperimentConfig, result, out: Path) -> None:
     if set(cfg.mapping.layers) - {"grid"}:
         write_layers(grid, out, cfg.mapping, cfg.output.figures)
     if cfg.output.figures:
-        trajectories = {"estimate": result.poses, "odometry": result.odometry}
+        trajectories = {"estimate": result.poses, "odometry": result.odometry}  # the estimate drawn on top
         if result.ground_truth is not None:
             trajectories["ground truth"] = result.ground_truth
         save_map_png(grid, out / "map.png", trajectories, title=cfg.name)

@@ -31,7 +31,7 @@ from slam2d.evaluation.tables import check_summary, flatten_metrics, summarize, 
 from slam2d.plugins import resolve
 from slam2d.runs import signals
 from slam2d.runs.commands import command_of, resolved, run_command
-from slam2d.runs.results import new_folder, output_root
+from slam2d.runs.results import new_folder, output_root, progress_console, shows_progress
 
 log = logging.getLogger("slam2d")
 
@@ -301,9 +301,8 @@ def _execute(cfgs: list[ExperimentConfig], workers: int, executor: str, quiet: b
     """Yield (index, (folder, metrics, error)) as variants finish, with a progress bar unless ``quiet``."""
     outcomes = _execute_ray(cfgs) if executor == "ray" else _execute_local(cfgs, workers)
     bar = nullcontext(None)
-    if not quiet:
-
-        bar = Progress()
+    if shows_progress(quiet):
+        bar = Progress(console=progress_console())
     with bar as progress:
         task = progress.add_task("variants", total=len(cfgs)) if progress else None
         for item in outcomes:
