@@ -105,6 +105,7 @@ def test_wrong_checksum_fails_and_leaves_no_file(server, monkeypatch, tmp_path):
     assert "\n" not in message and NAME in message
     assert wrong in message and hashlib.sha256(PAYLOAD).hexdigest() in message
     assert not (tmp_path / NAME).exists() and not (tmp_path / (NAME + ".part")).exists()
+    assert not (tmp_path / NAME).parent.exists()  # no empty folder left behind
 
 
 def _closed_port() -> int:

@@ -78,28 +78,38 @@ def _part(path: Path) -> Path:
 
 
 def _fetch(entry: DataFile, path: Path, advance) -> None:
-    """Fetch ``entry`` into ``path.part`` (resuming it by an HTTP Range), verify it, rename it to ``path``."""
+    """Fetch ``entry`` into ``path.part`` (resuming it by an HTTP Range), verify it, rename it to ``path``.
+    A failed fetch keeps the bytes received, and removes the folders it made if they stayed empty."""
     part = _part(path)
+    made = [p for p in part.parents if not p.exists()]  # innermost first
     try:
         part.parent.mkdir(parents=True, exist_ok=True)
         part.touch()
     except OSError as err:
         raise InputError(part, f"cannot write ({err.strerror}); choose another folder with --to") from None
+    try:
+        _fetch_into(entry, part, advance)
+    except InputError:
+        if part.is_file() and part.stat().st_size == 0:
+            part.unlink()
+        for folder in made:
+            if folder.is_dir() and not any(folder.iterdir()):
+                folder.rmdir()
+        raise
+    part.replace(path)
+
+
+def _fetch_into(entry: DataFile, part: Path, advance) -> None:
+    """The bytes of ``entry`` completed in ``part`` and verified."""
     have = part.stat().st_size
     if have > entry.size:
         part.unlink()
         have = 0
     if have < entry.size:
-        try:
-            _receive(entry, part, have, advance)
-        except InputError:
-            if part.stat().st_size == 0:
-                part.unlink()
-            raise
+        _receive(entry, part, have, advance)
     else:
         advance(have)
     _verify(entry, part)
-    part.replace(path)
 
 
 def _receive(entry: DataFile, part: Path, have: int, advance) -> None:
