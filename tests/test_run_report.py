@@ -3,8 +3,11 @@ a SLAM run with ground truth adds the APE figure (over time and along the trajec
 
 from __future__ import annotations
 
+import json
 import re
+from pathlib import Path
 
+import numpy as np
 import pytest
 from PIL import Image
 from test_report import _dom
@@ -46,3 +49,15 @@ def test_other_commands_write_a_report_too(tmp_path):
                                        output={"root": str(tmp_path)}))
     page = (folder / "report.html").read_text()
     assert "<th>rooms</th>" in page and 'alt="rooms.png"' in page
+
+
+def test_a_run_with_relations_writes_their_errors_and_histogram(tmp_path, data_file):
+    data_file("radish/mit-csail.clf")
+    cfg = config.load(Path(__file__).parents[1] / "experiments/csail.yaml",
+                      ["dataset.max_scans=500", f"output.root={tmp_path}"])
+    folder = run_experiment(cfg, quiet=True)
+    table = np.loadtxt(folder / "relations.csv", delimiter=",", skiprows=1, ndmin=2)
+    metrics = json.loads((folder / "metrics.json").read_text())["relations"]
+    assert len(table) == metrics["matched"] > 10
+    assert np.mean(table[:, 2]) == pytest.approx(metrics["trans_abs_mean"], rel=1e-5)  # the metric's own errors
+    assert 'alt="relations.png"' in (folder / "report.html").read_text()

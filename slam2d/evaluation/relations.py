@@ -18,7 +18,7 @@ from slam2d import geometry
 from slam2d.errors import InputError, read_text
 from slam2d.evaluation.trajectory import _parse_row
 
-__all__ = ["Relations", "read_relations", "relations_metric", "relations_frame", "format_relations"]
+__all__ = ["Relations", "read_relations", "relations_metric", "relation_errors", "relations_frame", "format_relations"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,17 +78,11 @@ def _mean_std(values: np.ndarray) -> tuple[float, float]:
     return mean, std
 
 
-def relations_metric(stamps, poses, relations: Relations, tolerance: float = 1e-3) -> dict:
-    """Relations metric of the trajectory ``(stamps (N,) s, poses (N, 3))``.
-
-    Each relation endpoint is matched to the nearest trajectory stamp; a
-    relation with an endpoint farther than ``tolerance`` s from every stamp is
-    not scored and counted in ``unmatched``. For the others the error is
-    ``compose(between(p1, p2), inverse(delta))``; its translation norm (m) and
-    |angle| (deg) are summarised as mean and sample std (n - 1) of the absolute
-    and squared values: ``trans_abs_*`` (m), ``trans_sq_*`` (m^2),
-    ``rot_abs_*`` (deg), ``rot_sq_*`` (deg^2), plus ``matched``, ``unmatched``.
-    """
+def relation_errors(stamps, poses, relations: Relations, tolerance: float = 1e-3
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Errors of the relations scored on the trajectory ``(stamps (N,) s, poses (N, 3))``: translation (m) and
+    |angle| (deg) of ``compose(between(p1, p2), inverse(delta))``, and which relations (a mask (M,): both ends
+    within ``tolerance`` s of a stamp, each matched to the nearest)."""
     stamps = np.asarray(stamps, dtype=np.float64).reshape(-1)
     poses = geometry.as_pose(poses).reshape(-1, 3)
     if len(stamps) != len(poses):
@@ -98,8 +92,21 @@ def relations_metric(stamps, poses, relations: Relations, tolerance: float = 1e-
     i1, i2, ok = _endpoints(stamps, relations, tolerance)
     p1, p2 = poses[i1[ok]], poses[i2[ok]]
     err = geometry.compose(geometry.between(p1, p2), geometry.inverse(relations.delta[ok]))
-    trans = np.hypot(err[:, 0], err[:, 1])
-    rot = np.rad2deg(np.abs(err[:, 2]))
+    return np.hypot(err[:, 0], err[:, 1]), np.rad2deg(np.abs(err[:, 2])), ok
+
+
+def relations_metric(stamps, poses, relations: Relations, tolerance: float = 1e-3) -> dict:
+    """Relations metric of the trajectory ``(stamps (N,) s, poses (N, 3))``.
+
+    Each relation endpoint is matched to the nearest trajectory stamp; a
+    relation with an endpoint farther than ``tolerance`` s from every stamp is
+    not scored and counted in ``unmatched``. For the others the error
+    (:func:`relation_errors`): its translation norm (m) and |angle| (deg) are
+    summarised as mean and sample std (n - 1) of the absolute and squared
+    values: ``trans_abs_*`` (m), ``trans_sq_*`` (m^2), ``rot_abs_*`` (deg),
+    ``rot_sq_*`` (deg^2), plus ``matched``, ``unmatched``.
+    """
+    trans, rot, ok = relation_errors(stamps, poses, relations, tolerance)
     out: dict = {}
     for name, values in (("trans_abs", trans), ("trans_sq", trans**2), ("rot_abs", rot), ("rot_sq", rot**2)):
         out[f"{name}_mean"], out[f"{name}_std"] = _mean_std(values)

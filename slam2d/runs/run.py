@@ -15,7 +15,7 @@ from slam2d import config as config_mod
 from slam2d import geometry
 from slam2d.config import ExperimentConfig
 from slam2d.datasets.registry import open_dataset
-from slam2d.evaluation.relations import read_relations, relations_frame, relations_metric
+from slam2d.evaluation.relations import read_relations, relation_errors, relations_frame, relations_metric
 from slam2d.evaluation.trajectory import align_se2, ate, rpe, write_tum
 from slam2d.mapping.export import save_map_png, save_map_server
 from slam2d.mapping.layers import write_layers
@@ -66,6 +66,8 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | N
     metrics.update(_evaluate(cfg, result, relations))
     t_eval = time.perf_counter()
     _write_outputs(cfg, result, out)
+    if relations is not None:
+        _write_relations(out, cfg, result, relations, metrics["relations"]["frame"])
     t_end = time.perf_counter()
     metrics["timings_s"] = {"slam": t_slam - t0, "evaluation": t_eval - t_slam, "outputs": t_end - t_eval}
     metrics["runtime_s"] = t_end - t0
@@ -84,7 +86,6 @@ def _load_relations(cfg: ExperimentConfig):
 
 def _evaluate(cfg: ExperimentConfig, result, relations) -> dict[str, Any]:
     """ATE/RPE against ground truth, relations metric; each also for raw odometry."""
-
     ev = cfg.evaluation
     out: dict[str, Any] = {}
     if result.ground_truth is not None:
@@ -92,7 +93,6 @@ def _evaluate(cfg: ExperimentConfig, result, relations) -> dict[str, Any]:
             out[f"{label}ate"] = ate(est, result.ground_truth, align=ev.align)
             out[f"{label}rpe"] = rpe(est, result.ground_truth, delta_m=ev.rpe_delta)
     if relations is not None:
-
         mounts = np.array([s.sensor_pose for s in result.scans])
         frame, evidence = relations_frame(result.stamps, result.odometry, mounts, relations, ev.relation_tolerance)
         log.info("relations scored in the %s frame (odometry on short turns: %s)", frame, evidence)
@@ -128,6 +128,38 @@ def _write_outputs(cfg: ExperimentConfig, result, out: Path) -> None:
         save_map_png(grid, out / "map.png", trajectories, title=cfg.name)
         if result.ground_truth is not None:
             ape_figure(out / "ape.png", result.stamps, result.poses, result.ground_truth, cfg.evaluation.align)
+
+
+def _write_relations(out: Path, cfg: ExperimentConfig, result, relations, frame: str) -> None:
+    """relations.csv (every scored relation: its stamps and the errors of the estimate and of odometry) and
+    relations.png (their histograms), scored in ``frame`` as the metric is."""
+    mounts = np.array([s.sensor_pose for s in result.scans])
+    errors = {}
+    for label, est in (("estimate", result.poses), ("odometry", result.odometry)):
+        poses = geometry.compose(est, mounts) if frame == "laser" else est
+        errors[label] = relation_errors(result.stamps, poses, relations, cfg.evaluation.relation_tolerance)
+    ok = errors["estimate"][2]
+    table = np.column_stack([relations.t1[ok], relations.t2[ok], *errors["estimate"][:2], *errors["odometry"][:2]])
+    np.savetxt(out / "relations.csv", table, delimiter=",", fmt="%.6f", comments="",
+               header="t1_s,t2_s,trans_m,rot_deg,odometry_trans_m,odometry_rot_deg")
+    if not cfg.output.figures or not ok.any():
+        return
+    fig = Figure(figsize=(11, 4))
+    FigureCanvasAgg(fig)
+    for ax, k, unit in zip(fig.subplots(1, 2), (0, 1), ("translational error (m)", "rotational error (deg)")):
+        top = max(1.05 * float(errors["estimate"][k].max()), 1e-9)  # odometry beyond it: the last bin
+        bins = np.linspace(0.0, top, 60)
+        for label, colour in (("odometry", "0.6"), ("estimate", "tab:blue")):
+            ax.hist(np.clip(errors[label][k], 0, top), bins=bins, color=colour, alpha=0.7, label=label)
+        ax.set_yscale("log")
+        ax.set_xlabel(unit)
+        ax.set_ylabel("relations")
+        ax.legend(fontsize="small")
+    worst = np.argsort(errors["estimate"][0])[::-1][:3]
+    fig.suptitle(f"{int(ok.sum())} relations ({frame} frame); worst: " + ", ".join(
+        f"{errors['estimate'][0][w]:.3f} m at {relations.t1[ok][w]:.1f}-{relations.t2[ok][w]:.1f} s" for w in worst),
+        fontsize="small")  # fmt: skip
+    fig.savefig(out / "relations.png", dpi=110, bbox_inches="tight")
 
 
 def ape_figure(path: Path, stamps, estimate, truth, align: bool = True) -> None:
