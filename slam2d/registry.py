@@ -35,7 +35,7 @@ from slam2d.errors import InputError, short_repr
 
 __all__ = [
     "ROLES", "Registry", "Choice", "role", "roles", "catalog", "options_model", "resolve_config",
-    "validation_error", "check_choices",
+    "validation_error", "check_choices", "lazy_exports",
 ]
 
 ROLES = {
@@ -267,6 +267,18 @@ class Registry:
             except ImportError as err:
                 out[name] = f"(cannot be imported: {err})"
         return out
+
+
+def lazy_exports(package: str, exports: Mapping[str, str]):
+    """A package's module ``__getattr__`` giving each public name of ``exports`` (name -> submodule) from
+    its submodule, imported on first use, so that importing the package stays light."""
+
+    def attribute(name: str):
+        if name in exports:
+            return getattr(import_module(f"{package}.{exports[name]}"), name)
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+
+    return attribute
 
 
 def role(name: str) -> Registry:

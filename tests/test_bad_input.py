@@ -459,7 +459,7 @@ def test_16_bit_floor_plans_and_worlds_are_scaled_not_clipped(tmp_path):
 def test_an_error_a_signal_caused_is_reported_as_stopped(tmp_path, monkeypatch):
     import typer
 
-    from slam2d import cli
+    from slam2d.cli import common as cli
     from slam2d.runs.results import results_folder
 
     monkeypatch.setattr(signals, "_STOPPED", True)  # a signal arrived; its exception became another one

@@ -8,16 +8,15 @@ import copy
 
 import numpy as np
 import pytest
+from evo.core import metrics as evo_metrics
+from evo.core.metrics import APE, RPE, PoseRelation, Unit
+from evo.tools import file_interface
 
 from slam2d import config
 from slam2d.datasets.registry import open_dataset
 from slam2d.evaluation.trajectory import ate, read_tum, rpe, write_tum
 from slam2d.pipeline import SlamPipeline
 from slam2d.types import Trajectory
-
-evo_metrics = pytest.importorskip("evo.core.metrics")
-from evo.core.metrics import APE, RPE, PoseRelation, Unit  # noqa: E402
-from evo.tools import file_interface  # noqa: E402
 
 
 def _evo(ref_path, est_path, delta: float) -> dict[str, float]:

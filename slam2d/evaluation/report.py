@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
-from slam2d.evaluation.tables import format_value, columns_of
+from slam2d.evaluation.tables import columns_of, format_value
 
 FIRST_FIGURES = ("map.png", "rooms.png", "path.png", "velocity.png")
 """Figures shown first when a variant's folder has them; other PNGs follow by name."""

@@ -4,9 +4,8 @@ SLAM in the loop (``slam2d explore`` writes its results). Strategies register in
 
 from __future__ import annotations
 
-import importlib
-
 from slam2d.exploration.base import EXPLORATION_STRATEGIES, Strategy, register_strategy  # noqa: F401
+from slam2d.registry import lazy_exports
 
 _EXPORTS = {
     "ExploreConfig": "config",
@@ -22,8 +21,4 @@ _EXPORTS = {
 
 __all__ = sorted([*_EXPORTS, "EXPLORATION_STRATEGIES", "Strategy", "register_strategy"])
 
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

@@ -3,9 +3,8 @@
 
 from __future__ import annotations
 
-import importlib
-
 from slam2d.mapping.base import MAP_LAYERS, MapLayer, register_layer  # noqa: F401
+from slam2d.registry import lazy_exports
 
 _EXPORTS = {
     "OccupancyGrid": "grid",
@@ -24,8 +23,4 @@ _EXPORTS = {
 
 __all__ = sorted([*_EXPORTS, "MAP_LAYERS", "MapLayer", "register_layer"])
 
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

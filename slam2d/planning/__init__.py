@@ -3,9 +3,8 @@ smoothing and time-optimal timing."""
 
 from __future__ import annotations
 
-import importlib
-
 from slam2d.planning.base import GLOBAL_PLANNERS, GlobalPlanner, register_planner  # noqa: F401
+from slam2d.registry import lazy_exports
 
 _EXPORTS = {
     "AStar": "astar",
@@ -30,8 +29,4 @@ _EXPORTS = {
 
 __all__ = sorted([*_EXPORTS, "GLOBAL_PLANNERS", "GlobalPlanner", "register_planner"])
 
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

@@ -17,7 +17,7 @@ Submodules import lazily, so ``import slam2d.segmentation`` stays cheap.
 
 from __future__ import annotations
 
-import importlib
+from slam2d.registry import lazy_exports
 
 _EXPORTS = {
     "SEGMENTATION_METHODS": "base",
@@ -42,8 +42,4 @@ _EXPORTS = {
 
 __all__ = sorted(_EXPORTS)
 
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

@@ -1,164 +1,37 @@
-"""The slam2d command line: run, ablate, dump-config, segment, plan, optimize, frontends.
-
-Heavy imports happen inside the commands so that ``slam2d --help`` is instant.
-"""
+"""The commands that run an experiment into a results folder: run, ablate, dump-config, segment, plan,
+map, optimize, navigate, explore, localize."""
 
 from __future__ import annotations
 
 import json
-import logging
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Optional
 
 import typer
 
+from slam2d.cli.common import (
+    CONFIG_ARG,
+    CONFIG_OPT,
+    JSON_OPT,
+    OUT_SET_OPT,
+    PLUGIN_OPT,
+    QUIET_OPT,
+    SET_OPT,
+    VIZ_OPT,
+    VIZ_SAVE_OPT,
+    _command,
+    _command_config,
+    _config_file,
+    _echo_metrics,
+    _fail,
+    _layer_names,
+    _results,
+    _stopped,
+    _viz_target,
+    _xy,
+    app,
+)
 from slam2d.errors import InputError
-
-app = typer.Typer(add_completion=False, no_args_is_help=True, help="2D laser SLAM research framework.")
-
-CONFIG_ARG = typer.Argument(None, help="experiment YAML; omitted: the built-in simulator default")
-SET_OPT = typer.Option([], "--set", "-s", help="override a config key, e.g. --set seed=1 (dump-config lists the keys)")
-QUIET_OPT = typer.Option(False, "--quiet", "-q", help="no progress bars, warnings and errors only")
-PLUGIN_OPT = typer.Option([], "--plugin", "-p", help="Python file or module to import first (its frontends)")
-JSON_OPT = typer.Option(False, "--json", help="print one JSON object on stdout: the results folder and its main "
-                        "metrics")
-
-
-def _version(shown: bool) -> None:
-    if shown:
-        from slam2d import __version__
-
-        typer.echo(f"slam2d {__version__}")
-        raise typer.Exit()
-
-
-@app.callback()
-def _main(
-    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
-                                 help="print the version of slam2d and exit"),
-) -> None:
-    """2D laser SLAM research framework."""
-
-
-def _setup_logging(quiet: bool) -> None:
-    """The log on stderr (stdout carries the results only)."""
-    from rich.console import Console
-    from rich.logging import RichHandler
-
-    logger = logging.getLogger("slam2d")
-    logger.handlers[:] = [h for h in logger.handlers if not isinstance(h, RichHandler)]
-    handler = RichHandler(console=Console(stderr=True), show_path=False, show_time=False,
-                          level=logging.WARNING if quiet else logging.INFO)
-    logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
-    logger.propagate = False
-
-
-def _fail(err: Exception) -> None:
-    typer.secho(f"error: {err}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(2)
-
-
-def _stopped(what: str) -> None:
-    """Report a SIGINT / SIGTERM; exit 130 as shells do."""
-    typer.secho(f"stopped: {what}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(130)
-
-
-@contextmanager
-def _stoppable(what: str):
-    """SIGINT or SIGTERM in the block: "stopped: WHAT" and exit 130, whatever error the signal became."""
-    from slam2d.runs.signals import stop_on_signals, stopped
-
-    try:
-        with stop_on_signals():
-            yield
-    except (typer.Exit, SystemExit):
-        raise
-    except BaseException:
-        if not stopped():
-            raise
-        _stopped(what)
-
-
-@contextmanager
-def _command(quiet: bool, what: str = "no results folder written"):
-    """A command's frame: logging set up; bad input -> "error: ..." and exit 2; a signal -> "stopped: WHAT", 130."""
-    _setup_logging(quiet)
-    with _stoppable(what):
-        try:
-            yield
-        except InputError as err:
-            _fail(err)
-
-
-VIZ_OPT = typer.Option(False, "--viz", help="stream the run to the rerun viewer (the \\[viz] extra)")
-VIZ_SAVE_OPT = typer.Option(None, "--viz-save", help="record the live view to FILE.rrd instead")
-
-
-def _viz_target(viz: bool, viz_save: Optional[Path]):
-    """What the live view streams to: ``"viewer"``, the ``.rrd`` file, or None (no view)."""
-    if viz and viz_save:
-        raise InputError("--viz-save", "give --viz (a live viewer) or --viz-save FILE.rrd, not both")
-    return viz_save or ("viewer" if viz else None)
-
-
-CONFIG_OPT = typer.Option(None, "--config", "-c", help="the command's YAML config (slam2d dump-config --command ...)")
-OUT_SET_OPT = typer.Option(None, "--out", "-o", help="results folders are created under this (output.root)")
-
-
-def _config_file(positional: Optional[Path], option: Optional[Path]) -> Optional[Path]:
-    """The config file given positionally or with ``-c`` (not both)."""
-    if positional is not None and option is not None:
-        raise InputError("--config", f"give the config once: {positional} or -c {option}")
-    return positional if positional is not None else option
-
-
-def _command_config(command: str, config: Optional[Path], set_: list[str], flags: dict, plugins: list[str] = ()):
-    """The config of ``command`` from ``config`` (or defaults), ``--set`` overrides, then the short
-    flags given (``flags``: dotted key -> value or None), then ``--plugin`` files or modules."""
-    from slam2d import config as config_mod
-    from slam2d.plugins import load_plugins
-    from slam2d.runs.commands import command_model
-    from slam2d.runs.results import output_root
-
-    if flags.get("output.root") is not None:
-        output_root(flags["output.root"], "--out")  # its error names the option
-    plugins = [str(Path(p).resolve()) if p.endswith(".py") else p for p in plugins]
-    load_plugins(plugins)  # before the config: a name a plugin registers is then known when it is checked
-    overrides = dict(map(config_mod.parse_override, set_))
-    overrides.update({k: str(v) if isinstance(v, Path) else v for k, v in flags.items() if v is not None})
-    cfg = config_mod.load(config, overrides, command_model(command))
-    if plugins:
-        cfg.plugins = [*cfg.plugins, *plugins]
-    return cfg
-
-
-def _echo_metrics(folder: Path, keys: tuple[str, ...], digits: int = 4) -> None:
-    """Some metrics of ``folder`` on one line, on stderr (stdout carries the results only)."""
-    metrics = json.loads((folder / "metrics.json").read_text())
-    typer.echo(" ".join(f"{k}={metrics[k]:.{digits}g}" if isinstance(metrics[k], float) else f"{k}={metrics[k]}"
-                        for k in keys if metrics.get(k) is not None), err=True)  # fmt: skip
-
-
-def main_metrics(command: str, folder: Path) -> dict:
-    """The main metrics of ``command`` (see ``slam2d.runs.commands``) present in ``folder``'s metrics.json,
-    by dotted key."""
-    from slam2d.evaluation.tables import flatten_metrics
-    from slam2d.runs.commands import command_of
-
-    path = folder / "metrics.json"
-    flat = flatten_metrics(json.loads(path.read_text())) if path.is_file() else {}
-    return {k: flat[k] for k in command_of(command).main_metrics if k in flat}
-
-
-def _results(command: str, folder: Path, as_json: bool) -> None:
-    """The command's stdout: ``results: FOLDER``, or with ``--json`` one JSON object (folder, main metrics)."""
-    if as_json:
-        typer.echo(json.dumps({"folder": str(folder), "metrics": main_metrics(command, folder)}))
-    else:
-        typer.echo(f"results: {folder}")
 
 
 @app.command()
@@ -278,16 +151,6 @@ def segment(
     _results("segment", folder, as_json)
 
 
-def _xy(text: str | None, name: str):
-    if text is None:
-        return None
-    try:
-        x, y = (float(v) for v in text.split(","))
-    except ValueError:
-        raise InputError(f"--{name}", f"expected x,y in metres, got '{text}'") from None
-    return [x, y]
-
-
 @app.command()
 def plan(
     map_path: Optional[Path] = typer.Argument(None, help="map.yaml, Moving AI .map, or floor-plan PNG (0.05 m/px) "
@@ -350,18 +213,6 @@ def map_layers(
         stats = json.loads((folder / "metrics.json").read_text())
         typer.echo(" ".join(f"{k}={v['bytes']}B" for k, v in stats.items() if "bytes" in v), err=True)
     _results("map", folder, as_json)
-
-
-def _layer_names(text: str | None) -> list[str] | None:
-    from slam2d.mapping.layers import LAYERS
-
-    if text is None:
-        return None
-    names = [n.strip() for n in text.split(",") if n.strip()]
-    unknown = [n for n in names if n not in LAYERS]
-    if unknown or not names:
-        raise InputError("--layers", f"unknown layer '{unknown[0] if unknown else ''}' (one of {', '.join(LAYERS)})")
-    return names
 
 
 @app.command()
@@ -459,126 +310,3 @@ def localize(
         cfg = _command_config("localize", config, set_, {"map": map_path, "dataset": dataset, "output.root": root})
         folder = run_localize(cfg, quiet, target)
     _results("localize", folder, as_json)
-
-
-@app.command()
-def plugins(
-    role: Optional[str] = typer.Argument(None, help="one role (e.g. exploration_strategies); default: every role"),
-    plugin: list[str] = PLUGIN_OPT,
-) -> None:
-    """List every swappable part by role: its names and what each is (with those of --plugin files)."""
-    from slam2d import registry
-    from slam2d.plugins import load_plugins
-
-    try:
-        load_plugins(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin)
-        roles = registry.roles()
-        if role is not None and role not in roles:
-            raise InputError("role", f"unknown role '{role}' (available: {', '.join(roles)})")
-        for name in [role] if role else roles:
-            typer.echo(f"{name}:")
-            for entry, about in registry.role(name).catalog().items():
-                typer.echo(f"  {entry:<22} {about}")
-    except InputError as err:
-        _fail(err)
-
-
-@app.command()
-def frontends(plugin: list[str] = PLUGIN_OPT) -> None:
-    """List the registered frontends (with those of --plugin files or modules)."""
-    from slam2d.frontends import available_frontends
-    from slam2d.plugins import load_plugins
-
-    try:
-        load_plugins(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin)
-    except InputError as err:
-        _fail(err)
-    for name in available_frontends():
-        typer.echo(name)
-
-
-datasets_app = typer.Typer(no_args_is_help=True, help="The public data files: list them, download them.")
-app.add_typer(datasets_app, name="datasets")
-
-
-@datasets_app.command("list")
-def datasets_list(
-    root: Optional[Path] = typer.Option(None, "--root", help="data folder to check (default: $SLAM2D_DATA)"),
-    fmt: Optional[str] = typer.Option(None, "--format", help="table, plain (tab-separated, header first) or json "
-                                      "(default: table on a terminal, else plain)"),
-) -> None:
-    """List every data file: size, sha256, licence, source, purpose, and whether it is here and verified."""
-    import sys
-
-    from slam2d.datasets.download import print_catalogue
-
-    try:
-        print_catalogue(root, fmt or ("table" if sys.stdout.isatty() else "plain"))
-    except InputError as err:
-        _fail(err)
-
-
-@datasets_app.command("download")
-def datasets_download(
-    names: list[str] = typer.Argument(..., help="files (radish/intel.bag), folders (radish, rooms...) or all"),
-    to: Optional[Path] = typer.Option(None, "--to", help="download here (default: $SLAM2D_DATA)"),
-    quiet: bool = QUIET_OPT,
-) -> None:
-    """Download data files from their public sources, resuming partial ones and checking sha256."""
-    from slam2d.datasets.download import download
-    from slam2d.paths import data_root
-
-    with _stoppable("partial downloads kept as .part files, resumed next time"):
-        try:
-            paths = download(names, to, quiet=quiet)
-        except InputError as err:
-            _fail(err)
-    typer.echo(f"verified: {len(paths)} file(s) in {to or data_root()}")
-
-
-@app.command()
-def compare(
-    runs: list[Path] = typer.Argument(..., help="results folders of any command, or sweep folders (their runs)"),
-    metric: list[str] = typer.Option([], "--metric", "-m", help="a metric column (dotted key of metrics.json); "
-                                     "default: the commands' main metrics"),
-    root: Optional[Path] = typer.Option(None, "--out", "-o", help="also write table.md/.csv/.tex and "
-                                        "trajectories.png into a new folder under this"),
-    quiet: bool = QUIET_OPT,
-) -> None:
-    """Several runs side by side: one table of their metrics, their trajectories overlaid (as evo_res)."""
-    from slam2d.evaluation.tables import to_markdown
-    from slam2d.runs.compare import compare_rows, run_folders, write_comparison
-    from slam2d.runs.results import results_folder
-
-    with _command(quiet):
-        folders = run_folders(runs)
-        if root is None:
-            table = to_markdown(*compare_rows(folders, metric))
-        else:
-            with results_folder(root, "compare", "--out") as (work, published):
-                table = write_comparison(folders, work, metric)
-    typer.echo(table, nl=False)
-    if root is not None:
-        typer.echo(f"results: {published[0]}")
-
-
-def main() -> None:
-    """The ``slam2d`` command. A stopped command exits 130 at once (its clean-up is done): letting
-    the interpreter finish could end the process as by SIGINT instead, when the interrupt arrived
-    in code CPython itself ran (it then re-raises the signal at exit)."""
-    import os
-    import sys
-
-    try:
-        app()
-    except SystemExit as done:
-        if done.code != 130:
-            raise
-        logging.shutdown()
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(130)
-
-
-if __name__ == "__main__":
-    main()

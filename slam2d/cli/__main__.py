@@ -1,0 +1,5 @@
+"""``python -m slam2d.cli``: the slam2d command."""
+
+from slam2d.cli import main
+
+main()
