@@ -46,6 +46,7 @@ class SlamResult:
     skipped: Counter = field(default_factory=Counter)
     stats: dict[str, Any] = field(default_factory=dict)
     graph: Any = None  # the back end's pose graph (the PoseGraph of 'pose_graph'), if it has one
+    keyframes: np.ndarray | None = None  # (N,) keyframe key each scan hangs off, if the back end has keyframes
 
     @property
     def fallbacks(self) -> int:
@@ -231,4 +232,5 @@ class SlamPipeline:
             skipped=Counter(getattr(scans, "skipped", {})),
             stats=dict(backend.summary()),
             graph=backend.graph,
+            keyframes=backend.scan_anchors()[0] if hasattr(backend, "scan_anchors") else None,
         )

@@ -1,11 +1,18 @@
-"""slam2d compare: several runs (or a sweep's) in one table with their trajectories overlaid."""
+"""slam2d compare: several runs (or a sweep's) in one table with their trajectories overlaid and their error
+distributions side by side."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
 import yaml
 from typer.testing import CliRunner
 
 from slam2d.cli import app
+from slam2d.runs.compare import position_errors
 
 
 def _run(tmp_path, *sets):
@@ -26,6 +33,12 @@ def test_compare_tables_runs_and_sweeps_and_overlays_their_trajectories(tmp_path
     assert first.startswith("| calm-") and second.startswith("| noisy-")
     (folder,) = (tmp_path / "cmp").glob("compare-*")
     assert (folder / "trajectories.png").stat().st_size > 1000 and (folder / "table.csv").is_file()
+    assert (folder / "errors.png").stat().st_size > 1000
+    page = (folder / "report.html").read_text()
+    assert '<section id="table">' in page and 'alt="errors.png"' in page and "<th>calm-" in page
+    errors = position_errors(Path(a))
+    ate = json.loads((Path(a) / "metrics.json").read_text())["ate"]["rmse"]
+    assert len(errors) == 20 and np.sqrt(np.mean(errors**2)) == pytest.approx(ate, rel=1e-6)
     only = runner.invoke(app, ["compare", a, b, "--metric", "scans"])
     assert only.exit_code == 0 and only.output.splitlines()[0] == "| run | scans |"
     bad = runner.invoke(app, ["compare", a, "--metric", "no.such"])

@@ -1,5 +1,6 @@
 """Every command's results folder holds report.html: main metrics, figures embedded, every metric, the config;
-a SLAM run with ground truth adds the APE figure (over time and along the trajectory)."""
+a SLAM run with ground truth adds the APE figure (over time and along the trajectory), one with loop closures
+their timeline."""
 
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from slam2d.segmentation.config import SegmentConfig
 @pytest.fixture(scope="module")
 def run_folder(tmp_path_factory):
     root = tmp_path_factory.mktemp("run")
-    return run_experiment(config.load(None, ["dataset.max_scans=60", f"output.root={root}"]), quiet=True)
+    return run_experiment(config.load(None, ["dataset.max_scans=300", f"output.root={root}"]), quiet=True)
 
 
 def test_a_run_report_holds_its_metrics_figures_and_config(run_folder):
@@ -33,6 +34,15 @@ def test_a_run_report_holds_its_metrics_figures_and_config(run_folder):
     assert "frontend:" in page  # the resolved config
     with Image.open(run_folder / "ape.png") as im:
         assert im.size[0] > 800
+
+
+def test_a_run_lists_and_draws_its_loop_closures(run_folder):
+    loops = np.loadtxt(run_folder / "loops.csv", delimiter=",", skiprows=1, ndmin=2)
+    slam = json.loads((run_folder / "metrics.json").read_text())["slam"]
+    assert len(loops) == slam["loop_closures_added"] > 0
+    assert int(loops[:, 4].sum()) == slam["loop_closures_kept"]
+    assert (loops[:, 2] < loops[:, 3]).all()  # closed from a later keyframe to an earlier one, times in s
+    assert 'alt="loops.png"' in (run_folder / "report.html").read_text()
 
 
 def test_the_run_report_renders_in_a_browser(run_folder, tmp_path):

@@ -327,6 +327,11 @@ class PoseGraph:
             information=np.array([e.information for e in edges]).reshape(-1, 3, 3),
         )
 
+    def loop_edges(self) -> np.ndarray:
+        """Every loop added, in order, as rows (i, j, kept): keyframe keys and 1 if still in the graph."""
+        rows = [(f.i, f.j, int(a)) for f, a in zip(self._factors, self._active) if f.kind == "loop"]
+        return np.array(rows, dtype=int).reshape(-1, 3)
+
     def write_g2o(self, path) -> None:
         """Write ``to_g2o()`` to ``path``."""
         g2o.write_g2o(path, self.to_g2o())

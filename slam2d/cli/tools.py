@@ -91,11 +91,12 @@ def compare(
     runs: list[Path] = typer.Argument(..., help="results folders of any command, or sweep folders (their runs)"),
     metric: list[str] = typer.Option([], "--metric", "-m", help="a metric column (dotted key of metrics.json); "
                                      "default: the commands' main metrics"),
-    root: Optional[Path] = typer.Option(None, "--out", "-o", help="also write table.md/.csv/.tex and "
-                                        "trajectories.png into a new folder under this"),
+    root: Optional[Path] = typer.Option(None, "--out", "-o", help="also write table.md/.csv/.tex, "
+                                        "trajectories.png, errors.png and report.html into a new folder under this"),
     quiet: bool = QUIET_OPT,
 ) -> None:
-    """Several runs side by side: one table of their metrics, their trajectories overlaid (as evo_res)."""
+    """Several runs side by side: one table of their metrics, their trajectories overlaid and their error
+    distributions (as evo_res)."""
     from slam2d.evaluation.tables import to_markdown
     from slam2d.runs.compare import compare_rows, run_folders, write_comparison
     from slam2d.runs.results import results_folder

@@ -44,8 +44,7 @@ def results_folder(root: str | Path, name: str, key: str = "output.root"):
         with log_to(work / "run.log"):
             yield work, published
         check_stop()  # a signal whose exception was swallowed still leaves no folder
-        if (work / "metrics.json").is_file():
-            write_run_report(work, name)
+        write_run_report(work, name)
         published.append(_publish(work, root, name))
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)

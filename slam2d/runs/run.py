@@ -8,23 +8,33 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from slam2d import config as config_mod
 from slam2d import geometry
 from slam2d.config import ExperimentConfig
 from slam2d.datasets.registry import open_dataset
-from slam2d.evaluation.relations import read_relations, relation_errors, relations_frame, relations_metric
-from slam2d.evaluation.trajectory import align_se2, ate, rpe, write_tum
+from slam2d.evaluation.relations import (
+    read_relations,
+    relations_frame,
+    relations_metric,
+)
+from slam2d.evaluation.trajectory import ate, rpe, write_tum
 from slam2d.mapping.export import save_map_png, save_map_server
 from slam2d.mapping.layers import write_layers
 from slam2d.mapping.occupancy import build_grid, check_resolution
 from slam2d.paths import resolve_data_path
 from slam2d.pipeline import SlamPipeline
 from slam2d.runs.commands import resolved
-from slam2d.runs.results import json_text, live_view, peak_rss_mb, progress, results_folder, snake_keys
+from slam2d.runs.results import (
+    json_text,
+    live_view,
+    peak_rss_mb,
+    progress,
+    results_folder,
+    snake_keys,
+)
 from slam2d.runs.signals import check_stop
+from slam2d.runs.slam_outputs import ape_figure, write_loops, write_relations
 from slam2d.types import Trajectory
 
 log = logging.getLogger("slam2d")
@@ -67,7 +77,7 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | N
     t_eval = time.perf_counter()
     _write_outputs(cfg, result, out)
     if relations is not None:
-        _write_relations(out, cfg, result, relations, metrics["relations"]["frame"])
+        write_relations(out, cfg, result, relations, metrics["relations"]["frame"])
     t_end = time.perf_counter()
     metrics["timings_s"] = {"slam": t_slam - t0, "evaluation": t_eval - t_slam, "outputs": t_end - t_eval}
     metrics["runtime_s"] = t_end - t0
@@ -128,65 +138,7 @@ def _write_outputs(cfg: ExperimentConfig, result, out: Path) -> None:
         save_map_png(grid, out / "map.png", trajectories, title=cfg.name)
         if result.ground_truth is not None:
             ape_figure(out / "ape.png", result.stamps, result.poses, result.ground_truth, cfg.evaluation.align)
-
-
-def _write_relations(out: Path, cfg: ExperimentConfig, result, relations, frame: str) -> None:
-    """relations.csv (every scored relation: its stamps and the errors of the estimate and of odometry) and
-    relations.png (their histograms), scored in ``frame`` as the metric is."""
-    mounts = np.array([s.sensor_pose for s in result.scans])
-    errors = {}
-    for label, est in (("estimate", result.poses), ("odometry", result.odometry)):
-        poses = geometry.compose(est, mounts) if frame == "laser" else est
-        errors[label] = relation_errors(result.stamps, poses, relations, cfg.evaluation.relation_tolerance)
-    ok = errors["estimate"][2]
-    table = np.column_stack([relations.t1[ok], relations.t2[ok], *errors["estimate"][:2], *errors["odometry"][:2]])
-    np.savetxt(out / "relations.csv", table, delimiter=",", fmt="%.6f", comments="",
-               header="t1_s,t2_s,trans_m,rot_deg,odometry_trans_m,odometry_rot_deg")
-    if not cfg.output.figures or not ok.any():
-        return
-    fig = Figure(figsize=(11, 4))
-    FigureCanvasAgg(fig)
-    for ax, k, unit in zip(fig.subplots(1, 2), (0, 1), ("translational error (m)", "rotational error (deg)")):
-        top = max(1.05 * float(errors["estimate"][k].max()), 1e-9)  # odometry beyond it: the last bin
-        bins = np.linspace(0.0, top, 60)
-        for label, colour in (("odometry", "0.6"), ("estimate", "tab:blue")):
-            ax.hist(np.clip(errors[label][k], 0, top), bins=bins, color=colour, alpha=0.7, label=label)
-        ax.set_yscale("log")
-        ax.set_xlabel(unit)
-        ax.set_ylabel("relations")
-        ax.legend(fontsize="small")
-    worst = np.argsort(errors["estimate"][0])[::-1][:3]
-    fig.suptitle(f"{int(ok.sum())} relations ({frame} frame); worst: " + ", ".join(
-        f"{errors['estimate'][0][w]:.3f} m at {relations.t1[ok][w]:.1f}-{relations.t2[ok][w]:.1f} s" for w in worst),
-        fontsize="small")  # fmt: skip
-    fig.savefig(out / "relations.png", dpi=110, bbox_inches="tight")
-
-
-def ape_figure(path: Path, stamps, estimate, truth, align: bool = True) -> None:
-    """APE (m, position error against ground truth, after the SE(2) alignment of the ATE when ``align``) over
-    time, and the trajectory coloured by it (as evo_ape's plots)."""
-    if align:
-        estimate = geometry.compose(align_se2(estimate, truth), estimate)
-    err = np.hypot(*(estimate[:, :2] - truth[:, :2]).T)
-    fig = Figure(figsize=(12, 4.8))
-    FigureCanvasAgg(fig)
-    over_time, along = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.2, 1]})
-    t = np.asarray(stamps) - stamps[0]
-    over_time.plot(t, err, lw=0.8, color="tab:blue")
-    for value, style in ((np.sqrt(np.mean(err**2)), "--"), (np.median(err), ":")):
-        over_time.axhline(value, color="tab:red", lw=0.8, ls=style)
-    over_time.set_xlabel("time (s)")
-    over_time.set_ylabel("APE (m)")
-    over_time.set_title(f"APE: RMSE {np.sqrt(np.mean(err**2)):.4f} m (dashed), median {np.median(err):.4f} m (dotted)",
-                        fontsize="small")
-    along.plot(truth[:, 0], truth[:, 1], color="0.75", lw=2.0, zorder=1, label="ground truth")
-    dots = along.scatter(estimate[:, 0], estimate[:, 1], c=err, s=3, cmap="viridis", zorder=2)
-    fig.colorbar(dots, ax=along, label="APE (m)")
-    along.set_aspect("equal")
-    along.set_xlabel("x (m)")
-    along.set_ylabel("y (m)")
-    along.legend(loc="best", fontsize="small")
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    write_loops(out, result, cfg.output.figures)
 
 
 def _log_summary(metrics: dict[str, Any]) -> None:
