@@ -45,6 +45,14 @@ def test_a_run_lists_and_draws_its_loop_closures(run_folder):
     assert 'alt="loops.png"' in (run_folder / "report.html").read_text()
 
 
+def test_a_simulator_run_measures_its_map_against_the_plan(run_folder):
+    acc = json.loads((run_folder / "metrics.json").read_text())["map_accuracy"]
+    rows = (run_folder / "spans.csv").read_text().splitlines()
+    assert len(rows) == 1 + acc["points"]["spans"] == 1 + acc["grid"]["spans"] == 12
+    assert acc["points"]["seen"] >= 3 and acc["points"]["mean_abs_error_m"] < 0.01
+    assert acc["grid"]["max_abs_error_m"] < 0.055  # each face within half a 5 cm cell, and the alignment
+
+
 def test_the_run_report_renders_in_a_browser(run_folder, tmp_path):
     dom = _dom((run_folder / "report.html").as_uri(), tmp_path)
     assert "Main metrics" in dom and dom.count("<figure>") >= 2 and "ate.rmse" in dom

@@ -2,7 +2,8 @@
 
 The folder holds the resolved config, the final map (PGM + YAML, PNG with the path and the hybrid
 graph), the hybrid map (``hybrid.json``), the true and estimated trajectories, coverage against time
-and distance (``coverage.csv``, ``coverage.png``), ``explore.gif`` and ``metrics.json``.
+and distance (``coverage.csv``, ``coverage.png``), the map's wall-to-wall spans against the plan
+(``spans.csv``), ``explore.gif`` and ``metrics.json``.
 """
 
 from __future__ import annotations
@@ -14,11 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from slam2d import config as config_mod
-from slam2d.evaluation.trajectory import write_tum
+from slam2d.evaluation.trajectory import align_se2, write_tum
 from slam2d.exploration.config import ExploreConfig
 from slam2d.exploration.loop import ExplorationRun, explore, resolved
 from slam2d.mapping.export import save_map_server
 from slam2d.runs.results import json_text, live_view, progress_bar, results_folder
+from slam2d.runs.slam_outputs import write_map_accuracy
 from slam2d.types import Trajectory
 
 log = logging.getLogger(__name__)
@@ -38,6 +40,8 @@ def run_explore(cfg: ExploreConfig, quiet: bool = False, viz: str | Path | None 
                 progress_bar("exploring (simulated s)", cfg.exploration.max_time, quiet) as advance:
             run = explore(cfg, lambda now, coverage: advance(now, f"coverage {100 * coverage:.0f} %"), view)
         _write(work, cfg, run)
+        run.metrics["map_accuracy"] = write_map_accuracy(work, run.world, cfg.seed,
+                                                         align_se2(run.estimate, run.truth), run.grid)["grid"]
         (work / "metrics.json").write_text(json_text(run.metrics))
         m = run.metrics
         log.info("%s: coverage %.1f %% in %.0f s, %.1f m (%.0f s wall)", m["stop_reason"], 100 * m["coverage"],

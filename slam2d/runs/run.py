@@ -18,7 +18,7 @@ from slam2d.evaluation.relations import (
     relations_frame,
     relations_metric,
 )
-from slam2d.evaluation.trajectory import ate, rpe, write_tum
+from slam2d.evaluation.trajectory import align_se2, ate, rpe, write_tum
 from slam2d.mapping.export import save_map_png, save_map_server
 from slam2d.mapping.layers import write_layers
 from slam2d.mapping.occupancy import build_grid, check_resolution
@@ -34,7 +34,13 @@ from slam2d.runs.results import (
     snake_keys,
 )
 from slam2d.runs.signals import check_stop
-from slam2d.runs.slam_outputs import ape_figure, write_loops, write_relations
+from slam2d.runs.slam_outputs import (
+    ape_figure,
+    write_loops,
+    write_map_accuracy,
+    write_relations,
+)
+from slam2d.sim.world import load_world
 from slam2d.types import Trajectory
 
 log = logging.getLogger("slam2d")
@@ -75,7 +81,9 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | N
     }
     metrics.update(_evaluate(cfg, result, relations))
     t_eval = time.perf_counter()
-    _write_outputs(cfg, result, out)
+    grid = _write_outputs(cfg, result, out)
+    if cfg.dataset.kind == "simulator" and result.ground_truth is not None:
+        metrics["map_accuracy"] = _map_accuracy(out, cfg, result, grid)
     if relations is not None:
         write_relations(out, cfg, result, relations, metrics["relations"]["frame"])
     t_end = time.perf_counter()
@@ -85,6 +93,18 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | N
     (out / "metrics.json").write_text(json_text(metrics))
     _log_summary(metrics)
     return metrics
+
+
+def _map_accuracy(out: Path, cfg: ExperimentConfig, result, grid) -> dict[str, Any]:
+    """The simulator world's spans in the map: its grid and the scan endpoints at the estimate."""
+    sim = cfg.dataset.simulator
+    summary = write_map_accuracy(out, load_world(sim.world, sim.resolution), cfg.seed,
+                                 align_se2(result.poses, result.ground_truth), grid, (result.scans, result.poses))
+    log.info("map accuracy: %d of %d spans seen; mean |error| %.1f mm at the scan endpoints, %.1f mm in the grid",
+             summary["points"]["seen"], summary["points"]["spans"],
+             1000 * summary["points"].get("mean_abs_error_m", np.nan),
+             1000 * summary["grid"].get("mean_abs_error_m", np.nan))  # fmt: skip
+    return summary
 
 
 def _load_relations(cfg: ExperimentConfig):
@@ -120,7 +140,8 @@ def _evaluate(cfg: ExperimentConfig, result, relations) -> dict[str, Any]:
     return out
 
 
-def _write_outputs(cfg: ExperimentConfig, result, out: Path) -> None:
+def _write_outputs(cfg: ExperimentConfig, result, out: Path):
+    """The trajectories, graph, map and figures; returns the map (OccupancyGrid)."""
     write_tum(out / "trajectory.tum", Trajectory(result.stamps, result.poses))
     write_tum(out / "odometry.tum", Trajectory(result.stamps, result.odometry))
     if result.ground_truth is not None:
@@ -139,6 +160,7 @@ def _write_outputs(cfg: ExperimentConfig, result, out: Path) -> None:
         if result.ground_truth is not None:
             ape_figure(out / "ape.png", result.stamps, result.poses, result.ground_truth, cfg.evaluation.align)
     write_loops(out, result, cfg.output.figures)
+    return grid
 
 
 def _log_summary(metrics: dict[str, Any]) -> None:

@@ -1,8 +1,10 @@
 """The SLAM run's evaluation files beside its trajectories: ``ape.png`` (APE over time and along the path),
-``relations.csv/png`` (every scored relation's error) and ``loops.csv/png`` (the loop-closure timeline)."""
+``relations.csv/png`` (every scored relation's error), ``loops.csv/png`` (the loop-closure timeline) and
+``spans.csv`` (the map's wall-to-wall spans against the simulator's plan)."""
 
 from __future__ import annotations
 
+import csv
 from pathlib import Path
 
 import numpy as np
@@ -11,8 +13,10 @@ from matplotlib.figure import Figure
 
 from slam2d import geometry
 from slam2d.config import ExperimentConfig
+from slam2d.evaluation.map_accuracy import measure_spans, span_summary, span_table
 from slam2d.evaluation.relations import relation_errors
 from slam2d.evaluation.trajectory import align_se2
+from slam2d.sim.spans import spans_of
 
 __all__ = ["ape_figure", "write_loops", "write_relations"]
 
@@ -115,3 +119,46 @@ def write_loops(out: Path, result, figures: bool = True) -> None:
     fig.suptitle("loop-closure timeline (loops rejected by the matcher are counted in metrics.json only)",
                  fontsize="small")
     fig.savefig(out / "loops.png", dpi=110, bbox_inches="tight")
+
+
+def grid_points(grid) -> tuple[np.ndarray, np.ndarray]:
+    """The grid's wall surfaces as points and viewpoints (M, 2) m in the grid's frame: the centre of each
+    occupied cell beside a rather free one (seen, occupancy below one half), and that cell's centre (once per
+    such 4-neighbour)."""
+    occupied, free = grid.occupied_mask(), np.pad(grid.log_odds < 0, 1)
+    cells = np.argwhere(occupied)
+    points, views = [], []
+    for step in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        beside = cells + step
+        seen = free[beside[:, 0] + 1, beside[:, 1] + 1]
+        points.append(cells[seen])
+        views.append(beside[seen])
+    return grid.cell_to_world(np.concatenate(points)), grid.cell_to_world(np.concatenate(views))
+
+
+def write_map_accuracy(out: Path, world, seed: int, to_truth, grid, scans=None) -> dict:
+    """``spans.csv``: ``world``'s wall-to-wall spans (:func:`slam2d.sim.spans.spans_of`) measured in the map,
+    from the grid's wall cells and, with ``scans`` (scans and their base poses), from the registered scan
+    endpoints; both in the map frame that the pose ``to_truth`` carries onto the world's. Returns their
+    summaries (``grid``, ``points``)."""
+    spans = spans_of(world, seed)
+    maps = {"grid": grid_points(grid)} | ({} if scans is None else {"points": scan_points(*scans)})
+    measured = {label: measure_spans(geometry.transform_points(to_truth, points), spans,
+                                     geometry.transform_points(to_truth, views))
+                for label, (points, views) in maps.items()}  # fmt: skip
+    rows = span_table(spans, measured)
+    with (out / "spans.csv").open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return {label: span_summary(spans, values) for label, values in measured.items()}
+
+
+def scan_points(scans, poses) -> tuple[np.ndarray, np.ndarray]:
+    """Every scan's endpoints at its base pose (M, 2) m and the laser's position each was seen from."""
+    points, views = [], []
+    for scan, pose in zip(scans, poses):
+        hits = geometry.transform_points(pose, scan.points_in_base())
+        points.append(hits)
+        views.append(np.broadcast_to(geometry.compose(pose, scan.sensor_pose)[:2], hits.shape))
+    return np.concatenate(points), np.concatenate(views)

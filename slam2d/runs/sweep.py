@@ -27,11 +27,21 @@ from slam2d import config as config_mod
 from slam2d.config import ExperimentConfig
 from slam2d.errors import InputError
 from slam2d.evaluation.report import write_report
-from slam2d.evaluation.tables import check_summary, flatten_metrics, summarize, write_table
+from slam2d.evaluation.tables import (
+    check_summary,
+    flatten_metrics,
+    summarize,
+    write_table,
+)
 from slam2d.plugins import resolve
 from slam2d.runs import signals
 from slam2d.runs.commands import command_of, resolved, run_command
-from slam2d.runs.results import new_folder, output_root, progress_console, shows_progress
+from slam2d.runs.results import (
+    new_folder,
+    output_root,
+    progress_console,
+    shows_progress,
+)
 
 log = logging.getLogger("slam2d")
 
@@ -77,7 +87,7 @@ def read_sweep(path: str | Path, overrides: list[str] = (), grid: list[str] = ()
     sweep = config_mod.load_dict(path)
     unknown = set(sweep) - set(SWEEP_KEYS)
     if unknown:
-        raise InputError(path, f"unknown sweep key '{sorted(unknown)[0]}'")
+        raise InputError(path, f"unknown sweep key '{min(unknown)}'")
     if "base" in sweep and "config" in sweep:
         raise InputError(path, "give the base config as 'base' (a file) or 'config' (inline), not both")
     command = command_of(sweep.get("command", "run"), f"{path}: command")
