@@ -434,6 +434,10 @@ def test_exploring_two_rooms_terminates_with_full_coverage(tmp_path, strategy, c
     names += ["explore.gif"] if strategy == "utility" else []
     for name in names:
         assert (folder / name).stat().st_size > 0, name
+    page = (folder / "report.html").read_text()
+    assert 'alt="coverage.png"' in page and "over distance driven" in page and "<th>coverage</th>" in page
+    spans = m["map_accuracy"]  # seeded spans across the two rooms, in the final grid
+    assert spans["seen"] >= 0.75 * spans["spans"] and spans["max_abs_error_m"] < 0.1
     # room B was mapped: SLAM's grid is free at its centre
     from slam2d.mapping.export import load_map_server
 

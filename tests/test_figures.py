@@ -55,3 +55,5 @@ def test_path_png_title_gives_the_shortened_length(monkeypatch, tmp_path):
     (title,) = titles
     assert title.startswith(f"{metrics['length_m']:.2f} m (grid path {metrics['grid_length_m']:.2f} m), ")
     assert Path(folder / "path.png").is_file()
+    page = (folder / "report.html").read_text()
+    assert 'alt="path.png"' in page and "the planned path" in page and "<th>length_m</th>" in page

@@ -27,6 +27,8 @@ def test_slam_in_the_loop_reaches_the_goal_and_writes_the_run(tmp_path):
     assert 0.9 < m["length_ratio"] < 1.3
     for name in ("config.yaml", "trajectory.tum", "ground_truth.tum", "map.png", "velocity.png", "run.gif"):
         assert (folder / name).stat().st_size > 0, name
+    page = (folder / "report.html").read_text()
+    assert 'alt="velocity.png"' in page and 'alt="run.gif"' in page and "<th>success</th>" in page
     true = np.loadtxt(folder / "ground_truth.tum")
     est = np.loadtxt(folder / "trajectory.tum")
     assert len(true) == len(est) + 1 or len(true) == len(est)

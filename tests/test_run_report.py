@@ -69,6 +69,16 @@ def test_other_commands_write_a_report_too(tmp_path):
     assert "<th>rooms</th>" in page and 'alt="rooms.png"' in page
 
 
+def test_a_localisation_report_shows_the_particles_converging(tmp_path):
+    from slam2d.localization.config import LocalizeConfig
+    from slam2d.runs.localize import run_localize
+
+    folder = run_localize(LocalizeConfig(map="office", seconds=3, output={"root": str(tmp_path)}), quiet=True)
+    page = (folder / "report.html").read_text()
+    assert 'alt="error_particles.png"' in page and "particle convergence" in page
+    assert re.search(r'alt="cloud_\w+\.png"', page)
+
+
 def test_a_run_with_relations_writes_their_errors_and_histogram(tmp_path, data_file):
     data_file("radish/mit-csail.clf")
     cfg = config.load(Path(__file__).parents[1] / "experiments/csail.yaml",

@@ -43,7 +43,7 @@ for _name, _command in {
         "relations.trans_abs_mean", "relations.trans_abs_std", "relations.rot_abs_mean", "relations.rot_abs_std",
         "odometry_relations.trans_abs_mean", "ate.rmse", "odometry_ate.rmse", "rpe.trans_rmse", "rpe.rot_rmse_deg",
         "cpu_ms_per_scan", "slam.loop_closures_kept", "slam.loop_closures_rejected", "frontend_fallbacks", "scans",
-        "runtime_s", "peak_rss_mb"), 'SLAM on a dataset: trajectory, map, graph, ATE/RPE and the relations metric.'),
+        "map_accuracy.points.mean_abs_error_m", "runtime_s", "peak_rss_mb"), 'SLAM on a dataset: trajectory, map, graph, ATE/RPE and the relations metric.'),
     "segment": Command("slam2d.segmentation.config:SegmentConfig", "slam2d.runs.segment:run_segment", (
         "recall", "precision", "rooms_found", "rooms_gt", "rooms", "k", "seconds", "cpu_seconds"), 'Rooms of a map: labels, region graph, recall and precision against a ground truth.'),
     "plan": Command("slam2d.planning.config:PlanConfig", "slam2d.runs.plan:run_plan", (
@@ -54,7 +54,8 @@ for _name, _command in {
         "min_clearance", "pose_rmse", "planner_hz", "wall_s"), 'Drive the simulated robot to a goal on online SLAM (or a known map).'),
     "explore": Command("slam2d.exploration.config:ExploreConfig", "slam2d.runs.explore:run_explore", (
         "coverage", "distance_to_99", "time_to_99", "distance_to_90", "map_iou", "ate_rmse", "collisions",
-        "min_clearance", "path_repetition", "decision_ms_median", "stop_reason", "wall_s"), 'Explore a simulated world from nothing with SLAM in the loop.'),
+        "min_clearance", "path_repetition", "decision_ms_median", "map_accuracy.mean_abs_error_m", "stop_reason",
+        "wall_s"), 'Explore a simulated world from nothing with SLAM in the loop.'),
     "localize": Command("slam2d.localization.config:LocalizeConfig", "slam2d.runs.localize:run_localize", (
         "position_rmse", "heading_rmse_deg", "converged_s", "false_convergence", "position_rmse_converged",
         "particles_median", "update_ms_median"), 'Monte Carlo localisation on a known map: tracking, global localisation, kidnapping.'),
