@@ -1,0 +1,314 @@
+"""Jump Point Search (Harabor & Grastien, AAAI 2011) on slam2d's grid, numba inner loop.
+
+Same graph as :mod:`~slam2d.planning.astar`'s 8-connected A*: axial steps of 1,
+diagonal steps of √2, a diagonal needs both side cells free (no corner
+cutting). JPS prunes the symmetric paths of that graph and searches only
+*jump points*; its paths have A*'s optimal length (they may differ among equal
+length paths). The pruning rules are the no-corner-cutting variant (Harabor &
+Grastien, ICAPS 2014; warthog's ``jps``):
+
+- arriving diagonally in ``(dr, dc)``, the successor directions are
+  ``(dr, 0)``, ``(0, dc)`` and ``(dr, dc)``: a diagonal move has no forced
+  neighbours when it may not cut corners;
+- arriving straight in ``d`` at cell ``n``, the side ``s`` (perpendicular) is
+  *forced* when ``n + s`` is free and ``n - d + s`` blocked; then ``s`` and
+  ``d + s`` are successor directions beside ``d``;
+- a straight jump steps until the next move is not allowed (no successor), the
+  goal, or a cell with a forced side; a diagonal jump steps until the next move
+  is not allowed, the goal, or a cell from which a straight jump in ``(dr, 0)``
+  or ``(0, dc)`` finds a jump point.
+
+Jump points are joined by straight or diagonal lines, so the A* over them uses
+the octile distance as edge cost; the returned path lists every cell in between.
+Costmaps are not supported: a non-zero ``cost`` layer raises ValueError (the
+pruning assumes uniform step costs; plan with ``astar``). JPS is 8-connected only.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from numba import njit
+
+from slam2d.planning.astar import (
+    _DC,
+    _DR,
+    SQRT2,
+    PlanResult,
+    SearchBuffers,
+    _octile,
+    _pop,
+    _sift_up,
+    endpoint_problem,
+    move_mask,
+)
+from slam2d.planning.base import register_planner
+from slam2d.planning.grid import PlanningGrid
+
+__all__ = ["JPS", "jps"]
+
+# Moves in astar.py's order: 0 up, 1 down, 2 left, 3 right (rows -/+, cols -/+), then diagonals
+# 4 (-1, -1), 5 (-1, +1), 6 (+1, -1), 7 (+1, +1).
+
+
+@njit(inline="always")
+def _sign(x):
+    return (x > 0) - (x < 0)
+
+
+@njit(inline="always")
+def _vert(dr):
+    """Move index of the axial step (dr, 0)."""
+    return 0 if dr < 0 else 1
+
+
+@njit(inline="always")
+def _horiz(dc):
+    """Move index of the axial step (0, dc)."""
+    return 2 if dc < 0 else 3
+
+
+@njit(inline="always")
+def _diag(dr, dc):
+    """Move index of the diagonal step (dr, dc)."""
+    return 4 + (2 if dr > 0 else 0) + (1 if dc > 0 else 0)
+
+
+@njit(inline="always")
+def _forced(free, width, v, dr, dc):
+    """Whether cell ``v`` reached by the straight step (dr, dc) has a forced side."""
+    if dr != 0:
+        b = v - dr * width
+        return (free[v - 1] != 0 and free[b - 1] == 0) or (free[v + 1] != 0 and free[b + 1] == 0)
+    a = v - width
+    c = v + width
+    return (free[a] != 0 and free[a - dc] == 0) or (free[c] != 0 and free[c - dc] == 0)
+
+
+@njit(cache=True)
+def _successor_dirs(moves, free, width, u, p):
+    """Bit mask of the move indices to jump in from ``u`` reached from jump point ``p`` (-1: the start)."""
+    if p < 0:
+        return np.int64(moves[u])
+    ur = u // width
+    pr = p // width
+    dr = _sign(ur - pr)
+    dc = _sign((u - ur * width) - (p - pr * width))
+    if dr != 0 and dc != 0:
+        m = (1 << _vert(dr)) | (1 << _horiz(dc)) | (1 << _diag(dr, dc))
+    elif dr != 0:
+        m = 1 << _vert(dr)
+        b = u - dr * width
+        for s in (-1, 1):
+            if free[u + s] != 0 and free[b + s] == 0:
+                m |= (1 << _horiz(s)) | (1 << _diag(dr, s))
+    else:
+        m = 1 << _horiz(dc)
+        for s in (-1, 1):
+            if free[u + s * width] != 0 and free[u + s * width - dc] == 0:
+                m |= (1 << _vert(s)) | (1 << _diag(s, dc))
+    return m & np.int64(moves[u])
+
+
+@njit(cache=True)
+def _jump_straight(moves, free, width, u, k, dr, dc, t):
+    """The jump point reached from ``u`` by straight steps (dr, dc) (move index ``k``), or -1."""
+    step = dr * width + dc
+    v = u
+    while (moves[v] >> k) & 1:
+        v += step
+        if v == t or _forced(free, width, v, dr, dc):
+            return v
+    return -1
+
+
+@njit(cache=True)
+def _jump(moves, free, width, u, k, dr, dc, t):
+    """The jump point reached from ``u`` in direction (dr, dc) (move index ``k``), or -1."""
+    if dr == 0 or dc == 0:
+        return _jump_straight(moves, free, width, u, k, dr, dc, t)
+    kv = _vert(dr)
+    kh = _horiz(dc)
+    step = dr * width + dc
+    v = u
+    while (moves[v] >> k) & 1:
+        v += step
+        if v == t:
+            return v
+        if _jump_straight(moves, free, width, v, kv, dr, 0, t) >= 0:
+            return v
+        if _jump_straight(moves, free, width, v, kh, 0, dc, t) >= 0:
+            return v
+    return -1
+
+
+@njit(cache=True)
+def _jps(moves, free, width, s, t, g, parent, state, hk, hg, hn, hpos, stamp, dr_of, dc_of):
+    """JPS from padded index ``s`` to ``t``; the A* of astar.py over jump points (same heap, ties and
+    ``state`` stamps). Returns (found, jump points expanded); ``parent`` links jump points."""
+    reached = 2 * stamp
+    done = reached + 1
+    tr = t // width
+    tc = t - tr * width
+    state[s] = reached
+    g[s] = 0.0
+    parent[s] = -1
+    sr = s // width
+    _sift_up(hk, hg, hn, hpos, 0, _octile(sr, s - sr * width, tr, tc, True), 0.0, s)
+    size = 1
+    expanded = 0
+    while size > 0:
+        u, size = _pop(hk, hg, hn, hpos, size)
+        state[u] = done
+        expanded += 1
+        if u == t:
+            return True, expanded
+        ur = u // width
+        uc = u - ur * width
+        gu = g[u]
+        dirs = _successor_dirs(moves, free, width, u, parent[u])
+        for k in range(8):
+            if not (dirs >> k) & 1:
+                continue
+            v = _jump(moves, free, width, u, k, dr_of[k], dc_of[k], t)
+            if v < 0:
+                continue
+            sv = state[v]
+            if sv == done:
+                continue
+            vr = v // width
+            vc = v - vr * width
+            ng = gu + _octile(ur, uc, vr, vc, True)
+            if sv < reached:
+                state[v] = reached
+                g[v] = ng
+                parent[v] = u
+                _sift_up(hk, hg, hn, hpos, size, ng + _octile(vr, vc, tr, tc, True), ng, v)
+                size += 1
+            elif ng < g[v] - 1e-12:
+                i = hpos[v]
+                hv = hk[i] - g[v]
+                g[v] = ng
+                parent[v] = u
+                _sift_up(hk, hg, hn, hpos, i, ng + hv, ng, v)
+    return False, expanded
+
+
+@njit(cache=True)
+def _trace_lines(parent, t, width):
+    """(L, 2) unpadded (row, col) cells from the root to ``t`` through the jump points linked by
+    ``parent`` (every cell of the straight and diagonal lines between them), their length (cells)
+    and the number of jump points."""
+    n = 1
+    jumps = 1
+    v = t
+    while parent[v] != -1:
+        p = parent[v]
+        vr = v // width
+        pr = p // width
+        n += max(abs(vr - pr), abs((v - vr * width) - (p - pr * width)))
+        jumps += 1
+        v = p
+    out = np.empty((n, 2), np.int64)
+    axial = 0
+    diagonal = 0
+    i = n - 1
+    v = t
+    while True:
+        vr = v // width
+        vc = v - vr * width
+        p = parent[v]
+        if p == -1:
+            out[i, 0] = vr - 1
+            out[i, 1] = vc - 1
+            break
+        pr = p // width
+        pc = p - pr * width
+        dr = _sign(pr - vr)
+        dc = _sign(pc - vc)
+        m = max(abs(vr - pr), abs(vc - pc))
+        for j in range(m):
+            out[i, 0] = vr + j * dr - 1
+            out[i, 1] = vc + j * dc - 1
+            i -= 1
+        if dr != 0 and dc != 0:
+            diagonal += m
+        else:
+            axial += m
+        v = p
+    return out, axial + diagonal * SQRT2, jumps
+
+
+# ---------------------------------------------------------------- planner
+
+class JPS:
+    """Reusable Jump Point Search over a :class:`PlanningGrid` (or a bool mask, resolution 1).
+
+    The same moves and optimal lengths as :class:`~slam2d.planning.astar.AStar` (8-connected, no corner
+    cutting). ``cost``: None or an all-zero layer; a non-zero layer raises ValueError (use A*). Buffers
+    are allocated once; ``expanded`` counts jump points, ``info['jump_points']`` those on the path.
+    """
+
+    name = "JPS"
+
+    def __init__(self, grid: PlanningGrid | np.ndarray, cost: np.ndarray | None = None):
+        if not isinstance(grid, PlanningGrid):
+            grid = PlanningGrid(np.asarray(grid, dtype=bool))
+        if cost is not None and np.any(np.asarray(cost) != 0):
+            raise ValueError(f"{self.name} needs uniform step costs: a non-zero cost layer breaks its pruning "
+                             "(plan with the 'astar' planner on a costmap)")  # fmt: skip
+        self.grid = grid
+        h, w = grid.shape
+        self.shape = (h, w)
+        self.width = w + 2
+        self.free_p = np.pad(grid.free, 1).astype(np.uint8).ravel()
+        self.moves = move_mask(grid.free)
+        self.buf = SearchBuffers(self.free_p.size)
+
+    def index(self, cell) -> int:
+        """Padded flat index of a (row, col) cell."""
+        return (int(cell[0]) + 1) * self.width + int(cell[1]) + 1
+
+    def _usable(self, cell) -> bool:
+        r, c = int(cell[0]), int(cell[1])
+        return 0 <= r < self.shape[0] and 0 <= c < self.shape[1] and self.free_p[(r + 1) * self.width + c + 1] != 0
+
+    def search(self, s: int, t: int) -> tuple[bool, int]:
+        """Run the kernel between padded indices; (found, jump points expanded). Parents stay in ``buf``."""
+        b = self.buf
+        return _jps(self.moves, self.free_p, self.width, s, t, *b.arrays(), b.next_stamp(), _DR, _DC)
+
+    def plan(self, start, goal) -> PlanResult:
+        """Path between (row, col) cells; found=False with A*'s reasons when there is none."""
+        t0 = time.perf_counter()
+        res = self.grid.resolution
+        if not (self._usable(start) and self._usable(goal)):
+            why = endpoint_problem(self.grid.free, start, "start") or endpoint_problem(self.grid.free, goal, "goal")
+            return PlanResult.failure(why, 0, time.perf_counter() - t0, res)
+        t = self.index(goal)
+        found, expanded = self.search(self.index(start), t)
+        if not found:
+            return PlanResult.failure(
+                f"goal {tuple(int(v) for v in goal)} is unreachable from start {tuple(int(v) for v in start)} "
+                f"({expanded} jump points searched)",
+                expanded, time.perf_counter() - t0, res,
+            )  # fmt: skip
+        path, length, jumps = _trace_lines(self.buf.parent, t, self.width)
+        return PlanResult(path, length, expanded, time.perf_counter() - t0, True, "", length, res,
+                          {"jump_points": int(jumps)})  # fmt: skip
+
+    def plan_world(self, start_xy, goal_xy) -> PlanResult:
+        """Path between world points (x, y) m (their containing cells)."""
+        return self.plan(self.grid.world_to_cell(start_xy), self.grid.world_to_cell(goal_xy))
+
+
+def jps(grid: PlanningGrid | np.ndarray, start, goal) -> PlanResult:
+    """One-off JPS between (row, col) cells (allocates buffers; use :class:`JPS` for many queries)."""
+    return JPS(grid).plan(start, goal)
+
+
+@register_planner("jps")
+def jps_planner(grid: PlanningGrid | np.ndarray) -> JPS:
+    """Jump Point Search: A*'s optimal lengths (8-connected, no corner cutting), searching jump points only."""
+    return JPS(grid)
