@@ -143,10 +143,29 @@ def _jump(moves, free, width, u, k, dr, dc, t):
     return -1
 
 
+@njit(inline="always")
+def _table_jump(dist, u, k, dr, dc, width, ddr, ddc):
+    """JPS+'s jump from ``u`` in move ``k`` = (dr, dc), looked up in ``dist`` (see
+    :mod:`~slam2d.planning.jps_plus`); the goal is (ddr, ddc) cells away. Returns (cell or -1, steps)."""
+    d = dist[u, k]
+    if dr == 0 or dc == 0:
+        ahead = ddc * dc if dr == 0 else ddr * dr
+        if ahead > 0 and (ddr if dr == 0 else ddc) == 0 and ahead <= abs(d):
+            return u + ahead * (dr * width + dc), ahead  # the goal, on the line within reach
+    else:
+        a = min(ddr * dr, ddc * dc)
+        if a > 0 and a <= abs(d):
+            return u + a * (dr * width + dc), a  # the target point, in line with the goal
+    if d > 0:
+        return u + d * (dr * width + dc), d
+    return -1, 0
+
+
 @njit(cache=True)
-def _jps(moves, free, width, s, t, g, parent, state, hk, hg, hn, hpos, stamp, dr_of, dc_of):
-    """JPS from padded index ``s`` to ``t``; the A* of astar.py over jump points (same heap, ties and
-    ``state`` stamps). Returns (found, jump points expanded); ``parent`` links jump points."""
+def _jps(dist, use_table, moves, free, width, s, t, g, parent, state, hk, hg, hn, hpos, stamp, dr_of, dc_of):
+    """JPS from padded index ``s`` to ``t``: the A* of astar.py (same heap, ties and ``state`` stamps)
+    over jump points, found by scanning the grid or, with ``use_table``, looked up in JPS+'s ``dist``.
+    Returns (found, jump points expanded); ``parent`` links jump points."""
     reached = 2 * stamp
     done = reached + 1
     tr = t // width
@@ -171,20 +190,28 @@ def _jps(moves, free, width, s, t, g, parent, state, hk, hg, hn, hpos, stamp, dr
         for k in range(8):
             if not (dirs >> k) & 1:
                 continue
-            v = _jump(moves, free, width, u, k, dr_of[k], dc_of[k], t)
+            dr = dr_of[k]
+            dc = dc_of[k]
+            n = 0
+            if use_table:
+                v, n = _table_jump(dist, u, k, dr, dc, width, tr - ur, tc - uc)
+            else:
+                v = _jump(moves, free, width, u, k, dr, dc, t)
+                if v >= 0:
+                    vr = v // width
+                    n = max(abs(vr - ur), abs(v - vr * width - uc))
             if v < 0:
                 continue
             sv = state[v]
             if sv == done:
                 continue
-            vr = v // width
-            vc = v - vr * width
-            ng = gu + _octile(ur, uc, vr, vc, True)
+            ng = gu + (n * SQRT2 if dr != 0 and dc != 0 else float(n))
             if sv < reached:
+                vr = v // width
                 state[v] = reached
                 g[v] = ng
                 parent[v] = u
-                _sift_up(hk, hg, hn, hpos, size, ng + _octile(vr, vc, tr, tc, True), ng, v)
+                _sift_up(hk, hg, hn, hpos, size, ng + _octile(vr, v - vr * width, tr, tc, True), ng, v)
                 size += 1
             elif ng < g[v] - 1e-12:
                 i = hpos[v]
@@ -240,6 +267,26 @@ def _trace_lines(parent, t, width):
     return out, axial + diagonal * SQRT2, jumps
 
 
+@njit(cache=True)
+def _query(dist, use_table, moves, free, h, w, sr, sc, gr, gc, g, parent, state, hk, hg, hn, hpos, stamp,
+           dr_of, dc_of):  # fmt: skip
+    """One query between unpadded cells in one call: (code, expanded, path, length, jump points) with
+    code 0 found, 1 start unusable, 2 goal unusable, 3 unreachable (path empty unless found)."""
+    width = w + 2
+    empty = np.zeros((0, 2), np.int64)
+    if not (0 <= sr < h and 0 <= sc < w and free[(sr + 1) * width + sc + 1] != 0):
+        return 1, 0, empty, np.inf, 0
+    if not (0 <= gr < h and 0 <= gc < w and free[(gr + 1) * width + gc + 1] != 0):
+        return 2, 0, empty, np.inf, 0
+    t = (gr + 1) * width + gc + 1
+    found, expanded = _jps(dist, use_table, moves, free, width, (sr + 1) * width + sc + 1, t,
+                           g, parent, state, hk, hg, hn, hpos, stamp, dr_of, dc_of)  # fmt: skip
+    if not found:
+        return 3, expanded, empty, np.inf, 0
+    path, length, jumps = _trace_lines(parent, t, width)
+    return 0, expanded, path, length, jumps
+
+
 # ---------------------------------------------------------------- planner
 
 class JPS:
@@ -265,38 +312,36 @@ class JPS:
         self.free_p = np.pad(grid.free, 1).astype(np.uint8).ravel()
         self.moves = move_mask(grid.free)
         self.buf = SearchBuffers(self.free_p.size)
+        self.table = np.zeros((1, 8), np.int32)  # JPS+'s jump distances (unused here)
+        self.use_table = False
 
     def index(self, cell) -> int:
         """Padded flat index of a (row, col) cell."""
         return (int(cell[0]) + 1) * self.width + int(cell[1]) + 1
 
-    def _usable(self, cell) -> bool:
-        r, c = int(cell[0]), int(cell[1])
-        return 0 <= r < self.shape[0] and 0 <= c < self.shape[1] and self.free_p[(r + 1) * self.width + c + 1] != 0
-
     def search(self, s: int, t: int) -> tuple[bool, int]:
         """Run the kernel between padded indices; (found, jump points expanded). Parents stay in ``buf``."""
         b = self.buf
-        return _jps(self.moves, self.free_p, self.width, s, t, *b.arrays(), b.next_stamp(), _DR, _DC)
+        return _jps(self.table, self.use_table, self.moves, self.free_p, self.width, s, t, *b.arrays(),
+                    b.next_stamp(), _DR, _DC)  # fmt: skip
 
     def plan(self, start, goal) -> PlanResult:
         """Path between (row, col) cells; found=False with A*'s reasons when there is none."""
         t0 = time.perf_counter()
-        res = self.grid.resolution
-        if not (self._usable(start) and self._usable(goal)):
+        b = self.buf
+        h, w = self.shape
+        code, expanded, path, length, jumps = _query(
+            self.table, self.use_table, self.moves, self.free_p, h, w, int(start[0]), int(start[1]), int(goal[0]),
+            int(goal[1]), b.g, b.parent, b.state, b.hk, b.hg, b.hn, b.hpos, b.next_stamp(), _DR, _DC)  # fmt: skip
+        if code == 0:
+            return PlanResult(path, length, expanded, time.perf_counter() - t0, True, "", length,
+                              self.grid.resolution, {"jump_points": jumps})  # fmt: skip
+        if code == 3:
+            why = (f"goal {tuple(int(v) for v in goal)} is unreachable from start {tuple(int(v) for v in start)} "
+                   f"({expanded} jump points searched)")  # fmt: skip
+        else:
             why = endpoint_problem(self.grid.free, start, "start") or endpoint_problem(self.grid.free, goal, "goal")
-            return PlanResult.failure(why, 0, time.perf_counter() - t0, res)
-        t = self.index(goal)
-        found, expanded = self.search(self.index(start), t)
-        if not found:
-            return PlanResult.failure(
-                f"goal {tuple(int(v) for v in goal)} is unreachable from start {tuple(int(v) for v in start)} "
-                f"({expanded} jump points searched)",
-                expanded, time.perf_counter() - t0, res,
-            )  # fmt: skip
-        path, length, jumps = _trace_lines(self.buf.parent, t, self.width)
-        return PlanResult(path, length, expanded, time.perf_counter() - t0, True, "", length, res,
-                          {"jump_points": int(jumps)})  # fmt: skip
+        return PlanResult.failure(why, expanded, time.perf_counter() - t0, self.grid.resolution)
 
     def plan_world(self, start_xy, goal_xy) -> PlanResult:
         """Path between world points (x, y) m (their containing cells)."""
