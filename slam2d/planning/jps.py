@@ -87,14 +87,12 @@ def _forced(free, width, v, dr, dc):
 
 
 @njit(cache=True)
-def _successor_dirs(moves, free, width, u, p):
-    """Bit mask of the move indices to jump in from ``u`` reached from jump point ``p`` (-1: the start)."""
-    if p < 0:
+def _successor_dirs(moves, free, width, u, kin, dr_of, dc_of):
+    """Bit mask of the move indices to jump in from ``u`` reached by move ``kin`` (-1: the start)."""
+    if kin < 0:
         return np.int64(moves[u])
-    ur = u // width
-    pr = p // width
-    dr = _sign(ur - pr)
-    dc = _sign((u - ur * width) - (p - pr * width))
+    dr = dr_of[kin]
+    dc = dc_of[kin]
     if dr != 0 and dc != 0:
         m = (1 << _vert(dr)) | (1 << _horiz(dc)) | (1 << _diag(dr, dc))
     elif dr != 0:
@@ -123,26 +121,6 @@ def _jump_straight(moves, free, width, u, k, dr, dc, t):
     return -1
 
 
-@njit(cache=True)
-def _jump(moves, free, width, u, k, dr, dc, t):
-    """The jump point reached from ``u`` in direction (dr, dc) (move index ``k``), or -1."""
-    if dr == 0 or dc == 0:
-        return _jump_straight(moves, free, width, u, k, dr, dc, t)
-    kv = _vert(dr)
-    kh = _horiz(dc)
-    step = dr * width + dc
-    v = u
-    while (moves[v] >> k) & 1:
-        v += step
-        if v == t:
-            return v
-        if _jump_straight(moves, free, width, v, kv, dr, 0, t) >= 0:
-            return v
-        if _jump_straight(moves, free, width, v, kh, 0, dc, t) >= 0:
-            return v
-    return -1
-
-
 @njit(inline="always")
 def _table_jump(dist, u, k, dr, dc, width, ddr, ddc):
     """JPS+'s jump from ``u`` in move ``k`` = (dr, dc), looked up in ``dist`` (see
@@ -162,62 +140,121 @@ def _table_jump(dist, u, k, dr, dc, width, ddr, ddc):
 
 
 @njit(cache=True)
-def _jps(dist, use_table, moves, free, width, s, t, g, parent, state, hk, hg, hn, hpos, stamp, dr_of, dc_of):
+def _scan_successors(moves, free, width, u, dirs, t, dr_of, dc_of, out_v, out_k):
+    """JPS's successors of ``u`` in the moves ``dirs`` (bit mask), by scanning: jump points into
+    ``out_v`` with the move reaching them in ``out_k``; returns their number.
+
+    Diagonal jump points are not returned (Harabor & Grastien 2014's pruning of intermediate jump
+    points): a diagonal scan returns the straight jump points (and the goal) seen from each of them,
+    so an edge runs diagonally first, then straight, and no row is scanned twice."""
+    m = 0
+    for k in range(8):
+        if not (dirs >> k) & 1:
+            continue
+        dr = dr_of[k]
+        dc = dc_of[k]
+        if dr == 0 or dc == 0:
+            v = _jump_straight(moves, free, width, u, k, dr, dc, t)
+            if v >= 0:
+                out_v[m] = v
+                out_k[m] = k
+                m += 1
+            continue
+        kv = _vert(dr)
+        kh = _horiz(dc)
+        step = dr * width + dc
+        x = u
+        while (moves[x] >> k) & 1:
+            x += step
+            if x == t:
+                out_v[m] = t
+                out_k[m] = k
+                m += 1
+                break
+            v = _jump_straight(moves, free, width, x, kv, dr, 0, t)
+            if v >= 0:
+                out_v[m] = v
+                out_k[m] = kv
+                m += 1
+            v = _jump_straight(moves, free, width, x, kh, 0, dc, t)
+            if v >= 0:
+                out_v[m] = v
+                out_k[m] = kh
+                m += 1
+    return m
+
+
+@njit(cache=True)
+def _table_successors(dist, width, u, dirs, tr, tc, dr_of, dc_of, out_v, out_k):
+    """JPS+'s successors of ``u`` in the moves ``dirs``, looked up in ``dist`` (:func:`_table_jump`);
+    diagonal jump points are returned (a look-up is cheap, and most are never expanded)."""
+    m = 0
+    ur = u // width
+    uc = u - ur * width
+    for k in range(8):
+        if (dirs >> k) & 1:
+            v, _ = _table_jump(dist, u, k, dr_of[k], dc_of[k], width, tr - ur, tc - uc)
+            if v >= 0:
+                out_v[m] = v
+                out_k[m] = k
+                m += 1
+    return m
+
+
+@njit(cache=True)
+def _jps(dist, use_table, moves, free, width, s, t, g, parent, state, arrive, hk, hg, hn, hpos, stamp, dr_of, dc_of,
+         out_v, out_k):  # fmt: skip
     """JPS from padded index ``s`` to ``t``: the A* of astar.py (same heap, ties and ``state`` stamps)
     over jump points, found by scanning the grid or, with ``use_table``, looked up in JPS+'s ``dist``.
-    Returns (found, jump points expanded); ``parent`` links jump points."""
+    Successors join their parent by a diagonal then a straight line (edge cost: octile distance);
+    ``arrive[v]`` is the move by which ``v`` was reached; ``out_v``, ``out_k`` are scratch for the
+    successors of one node. Returns (found, jump points expanded)."""
     reached = 2 * stamp
-    done = reached + 1
     tr = t // width
     tc = t - tr * width
     state[s] = reached
     g[s] = 0.0
     parent[s] = -1
+    arrive[s] = -1
     sr = s // width
     _sift_up(hk, hg, hn, hpos, 0, _octile(sr, s - sr * width, tr, tc, True), 0.0, s)
     size = 1
     expanded = 0
     while size > 0:
         u, size = _pop(hk, hg, hn, hpos, size)
-        state[u] = done
+        state[u] = reached + 1
         expanded += 1
         if u == t:
             return True, expanded
         ur = u // width
         uc = u - ur * width
         gu = g[u]
-        dirs = _successor_dirs(moves, free, width, u, parent[u])
-        for k in range(8):
-            if not (dirs >> k) & 1:
-                continue
-            dr = dr_of[k]
-            dc = dc_of[k]
-            n = 0
-            if use_table:
-                v, n = _table_jump(dist, u, k, dr, dc, width, tr - ur, tc - uc)
-            else:
-                v = _jump(moves, free, width, u, k, dr, dc, t)
-                if v >= 0:
-                    vr = v // width
-                    n = max(abs(vr - ur), abs(v - vr * width - uc))
-            if v < 0:
-                continue
+        dirs = _successor_dirs(moves, free, width, u, arrive[u], dr_of, dc_of)
+        if use_table:
+            m = _table_successors(dist, width, u, dirs, tr, tc, dr_of, dc_of, out_v, out_k)
+        else:
+            m = _scan_successors(moves, free, width, u, dirs, t, dr_of, dc_of, out_v, out_k)
+        for j in range(m):
+            v = out_v[j]
             sv = state[v]
-            if sv == done:
+            if sv == reached + 1:
                 continue
-            ng = gu + (n * SQRT2 if dr != 0 and dc != 0 else float(n))
+            vr = v // width
+            vc = v - vr * width
+            ng = gu + _octile(ur, uc, vr, vc, True)
             if sv < reached:
-                vr = v // width
                 state[v] = reached
                 g[v] = ng
                 parent[v] = u
-                _sift_up(hk, hg, hn, hpos, size, ng + _octile(vr, v - vr * width, tr, tc, True), ng, v)
+                arrive[v] = out_k[j]
+                _sift_up(hk, hg, hn, hpos, size, ng + _octile(vr, vc, tr, tc, True), ng, v)
                 size += 1
             elif ng < g[v] - 1e-12:
                 i = hpos[v]
                 hv = hk[i] - g[v]
                 g[v] = ng
                 parent[v] = u
+                arrive[v] = out_k[j]
                 _sift_up(hk, hg, hn, hpos, i, ng + hv, ng, v)
     return False, expanded
 
@@ -225,8 +262,8 @@ def _jps(dist, use_table, moves, free, width, s, t, g, parent, state, hk, hg, hn
 @njit(cache=True)
 def _trace_lines(parent, t, width):
     """(L, 2) unpadded (row, col) cells from the root to ``t`` through the jump points linked by
-    ``parent`` (every cell of the straight and diagonal lines between them), their length (cells)
-    and the number of jump points."""
+    ``parent``, every cell of the edges between them (each diagonal first, then straight), their
+    length (cells) and the number of jump points."""
     n = 1
     jumps = 1
     v = t
@@ -242,34 +279,35 @@ def _trace_lines(parent, t, width):
     diagonal = 0
     i = n - 1
     v = t
-    while True:
-        vr = v // width
-        vc = v - vr * width
+    r = v // width
+    c = v - r * width
+    out[i, 0] = r - 1
+    out[i, 1] = c - 1
+    while parent[v] != -1:
         p = parent[v]
-        if p == -1:
-            out[i, 0] = vr - 1
-            out[i, 1] = vc - 1
-            break
         pr = p // width
         pc = p - pr * width
-        dr = _sign(pr - vr)
-        dc = _sign(pc - vc)
-        m = max(abs(vr - pr), abs(vc - pc))
-        for j in range(m):
-            out[i, 0] = vr + j * dr - 1
-            out[i, 1] = vc + j * dc - 1
+        while r != pr or c != pc:  # backwards: the straight part first, then the diagonal one
+            ar = abs(pr - r)
+            ac = abs(pc - c)
+            if ar >= ac:
+                r += _sign(pr - r)
+            if ac >= ar:
+                c += _sign(pc - c)
+            if ar == ac:
+                diagonal += 1
+            else:
+                axial += 1
             i -= 1
-        if dr != 0 and dc != 0:
-            diagonal += m
-        else:
-            axial += m
+            out[i, 0] = r - 1
+            out[i, 1] = c - 1
         v = p
     return out, axial + diagonal * SQRT2, jumps
 
 
 @njit(cache=True)
-def _query(dist, use_table, moves, free, h, w, sr, sc, gr, gc, g, parent, state, hk, hg, hn, hpos, stamp,
-           dr_of, dc_of):  # fmt: skip
+def _query(dist, use_table, moves, free, h, w, sr, sc, gr, gc, g, parent, state, arrive, hk, hg, hn, hpos, stamp,
+           dr_of, dc_of, out_v, out_k):  # fmt: skip
     """One query between unpadded cells in one call: (code, expanded, path, length, jump points) with
     code 0 found, 1 start unusable, 2 goal unusable, 3 unreachable (path empty unless found)."""
     width = w + 2
@@ -279,8 +317,8 @@ def _query(dist, use_table, moves, free, h, w, sr, sc, gr, gc, g, parent, state,
     if not (0 <= gr < h and 0 <= gc < w and free[(gr + 1) * width + gc + 1] != 0):
         return 2, 0, empty, np.inf, 0
     t = (gr + 1) * width + gc + 1
-    found, expanded = _jps(dist, use_table, moves, free, width, (sr + 1) * width + sc + 1, t,
-                           g, parent, state, hk, hg, hn, hpos, stamp, dr_of, dc_of)  # fmt: skip
+    found, expanded = _jps(dist, use_table, moves, free, width, (sr + 1) * width + sc + 1, t, g, parent, state,
+                           arrive, hk, hg, hn, hpos, stamp, dr_of, dc_of, out_v, out_k)  # fmt: skip
     if not found:
         return 3, expanded, empty, np.inf, 0
     path, length, jumps = _trace_lines(parent, t, width)
@@ -312,6 +350,8 @@ class JPS:
         self.free_p = np.pad(grid.free, 1).astype(np.uint8).ravel()
         self.moves = move_mask(grid.free)
         self.buf = SearchBuffers(self.free_p.size)
+        self.out_v = np.zeros(4 * (h + w + 4), np.int64)  # one node's successors: <= 2 per diagonal step
+        self.out_k = np.zeros(4 * (h + w + 4), np.int64)
         self.table = np.zeros((1, 8), np.int32)  # JPS+'s jump distances (unused here)
         self.use_table = False
 
@@ -322,8 +362,8 @@ class JPS:
     def search(self, s: int, t: int) -> tuple[bool, int]:
         """Run the kernel between padded indices; (found, jump points expanded). Parents stay in ``buf``."""
         b = self.buf
-        return _jps(self.table, self.use_table, self.moves, self.free_p, self.width, s, t, *b.arrays(),
-                    b.next_stamp(), _DR, _DC)  # fmt: skip
+        return _jps(self.table, self.use_table, self.moves, self.free_p, self.width, s, t, b.g, b.parent, b.state,
+                    b.mark, b.hk, b.hg, b.hn, b.hpos, b.next_stamp(), _DR, _DC, self.out_v, self.out_k)  # fmt: skip
 
     def plan(self, start, goal) -> PlanResult:
         """Path between (row, col) cells; found=False with A*'s reasons when there is none."""
@@ -332,7 +372,8 @@ class JPS:
         h, w = self.shape
         code, expanded, path, length, jumps = _query(
             self.table, self.use_table, self.moves, self.free_p, h, w, int(start[0]), int(start[1]), int(goal[0]),
-            int(goal[1]), b.g, b.parent, b.state, b.hk, b.hg, b.hn, b.hpos, b.next_stamp(), _DR, _DC)  # fmt: skip
+            int(goal[1]), b.g, b.parent, b.state, b.mark, b.hk, b.hg, b.hn, b.hpos, b.next_stamp(), _DR, _DC,
+            self.out_v, self.out_k)  # fmt: skip
         if code == 0:
             return PlanResult(path, length, expanded, time.perf_counter() - t0, True, "", length,
                               self.grid.resolution, {"jump_points": jumps})  # fmt: skip
