@@ -109,18 +109,6 @@ def _successor_dirs(moves, free, width, u, kin, dr_of, dc_of):
     return m & np.int64(moves[u])
 
 
-@njit(cache=True)
-def _jump_straight(moves, free, width, u, k, dr, dc, t):
-    """The jump point reached from ``u`` by straight steps (dr, dc) (move index ``k``), or -1."""
-    step = dr * width + dc
-    v = u
-    while (moves[v] >> k) & 1:
-        v += step
-        if v == t or _forced(free, width, v, dr, dc):
-            return v
-    return -1
-
-
 @njit(inline="always")
 def _table_jump(dist, u, k, dr, dc, width, ddr, ddc):
     """JPS+'s jump from ``u`` in move ``k`` = (dr, dc), looked up in ``dist`` (see
@@ -139,8 +127,125 @@ def _table_jump(dist, u, k, dr, dc, width, ddr, ddc):
     return -1, 0
 
 
+@njit(inline="always")
+def _ctz(x):
+    """Index of the lowest set bit of a non-zero uint64."""
+    n = 0
+    if (x & np.uint64(0xFFFFFFFF)) == 0:
+        n += 32
+        x >>= np.uint64(32)
+    if (x & np.uint64(0xFFFF)) == 0:
+        n += 16
+        x >>= np.uint64(16)
+    if (x & np.uint64(0xFF)) == 0:
+        n += 8
+        x >>= np.uint64(8)
+    if (x & np.uint64(0xF)) == 0:
+        n += 4
+        x >>= np.uint64(4)
+    if (x & np.uint64(0x3)) == 0:
+        n += 2
+        x >>= np.uint64(2)
+    if (x & np.uint64(0x1)) == 0:
+        n += 1
+    return n
+
+
+@njit(inline="always")
+def _msb(x):
+    """Index of the highest set bit of a non-zero uint64."""
+    n = 0
+    if x >> np.uint64(32):
+        n += 32
+        x >>= np.uint64(32)
+    if x >> np.uint64(16):
+        n += 16
+        x >>= np.uint64(16)
+    if x >> np.uint64(8):
+        n += 8
+        x >>= np.uint64(8)
+    if x >> np.uint64(4):
+        n += 4
+        x >>= np.uint64(4)
+    if x >> np.uint64(2):
+        n += 2
+        x >>= np.uint64(2)
+    if x >> np.uint64(1):
+        n += 1
+    return n
+
+
+@njit(inline="always")
+def _scan_line(bits, i, p0, step, target):
+    """Block-based straight jump (Harabor & Grastien 2014) along line ``i`` of ``bits`` (64 cells a
+    word): from position ``p0`` in ``step`` (+1 or -1), the first position that is the ``target`` (-1:
+    none on this line), or has a forced side (free on line ``i - 1`` or ``i + 1``, blocked there one
+    step back); -1 if a blocked cell comes first."""
+    one = np.uint64(1)
+    if step > 0:
+        p = p0 + 1
+        j = p >> 6
+        keep = np.uint64(0xFFFFFFFFFFFFFFFF) << np.uint64(p & 63)
+        while True:
+            a = bits[i - 1, j]
+            b = bits[i + 1, j]
+            a_back = a << one
+            b_back = b << one
+            if j > 0:
+                a_back |= bits[i - 1, j - 1] >> np.uint64(63)
+                b_back |= bits[i + 1, j - 1] >> np.uint64(63)
+            stop = (~bits[i, j] | (a & ~a_back) | (b & ~b_back)) & keep
+            if stop != 0:
+                x = (j << 6) + _ctz(stop)
+                if p0 < target <= x:
+                    return target
+                return x if (bits[i, j] >> np.uint64(x & 63)) & one else -1
+            j += 1
+            keep = np.uint64(0xFFFFFFFFFFFFFFFF)
+    p = p0 - 1
+    j = p >> 6
+    r = p & 63
+    keep = np.uint64(0xFFFFFFFFFFFFFFFF) if r == 63 else (one << np.uint64(r + 1)) - one
+    while True:
+        a = bits[i - 1, j]
+        b = bits[i + 1, j]
+        a_back = (a >> one) | (bits[i - 1, j + 1] << np.uint64(63))
+        b_back = (b >> one) | (bits[i + 1, j + 1] << np.uint64(63))
+        stop = (~bits[i, j] | (a & ~a_back) | (b & ~b_back)) & keep
+        if stop != 0:
+            x = (j << 6) + _msb(stop)
+            if x <= target < p0:
+                return target
+            return x if (bits[i, j] >> np.uint64(x & 63)) & one else -1
+        j -= 1
+        keep = np.uint64(0xFFFFFFFFFFFFFFFF)
+
+
+@njit(inline="always")
+def _jump_bits(rows, cols, width, u, dr, dc, tr, tc):
+    """The jump point reached from ``u`` by straight steps (dr, dc), or -1: :func:`_scan_line` over the
+    row bits ``rows`` (padded rows x words) or the column bits ``cols``."""
+    ur = u // width
+    uc = u - ur * width
+    if dr == 0:
+        x = _scan_line(rows, ur, uc, dc, tc if tr == ur else -1)
+        return ur * width + x if x >= 0 else -1
+    y = _scan_line(cols, uc, ur, dr, tr if tc == uc else -1)
+    return y * width + uc if y >= 0 else -1
+
+
+def bit_lines(free_padded: np.ndarray) -> np.ndarray:
+    """(lines, words) uint64: bit ``b`` of word ``j`` of line ``i`` is ``free_padded[i, 64 j + b]``;
+    a zero word at each end of a line (before the first, after the last) is never read as free."""
+    h, w = free_padded.shape
+    words = w // 64 + 2
+    bits = np.zeros((h, words * 64), bool)
+    bits[:, :w] = free_padded
+    return np.packbits(bits, axis=1, bitorder="little").view("<u8").astype(np.uint64)
+
+
 @njit(cache=True)
-def _scan_successors(moves, free, width, u, dirs, t, dr_of, dc_of, out_v, out_k):
+def _scan_successors(moves, free, rows, cols, width, u, dirs, t, dr_of, dc_of, out_v, out_k):
     """JPS's successors of ``u`` in the moves ``dirs`` (bit mask), by scanning: jump points into
     ``out_v`` with the move reaching them in ``out_k``; returns their number.
 
@@ -148,13 +253,15 @@ def _scan_successors(moves, free, width, u, dirs, t, dr_of, dc_of, out_v, out_k)
     points): a diagonal scan returns the straight jump points (and the goal) seen from each of them,
     so an edge runs diagonally first, then straight, and no row is scanned twice."""
     m = 0
+    tr = t // width
+    tc = t - tr * width
     for k in range(8):
         if not (dirs >> k) & 1:
             continue
         dr = dr_of[k]
         dc = dc_of[k]
         if dr == 0 or dc == 0:
-            v = _jump_straight(moves, free, width, u, k, dr, dc, t)
+            v = _jump_bits(rows, cols, width, u, dr, dc, tr, tc)
             if v >= 0:
                 out_v[m] = v
                 out_k[m] = k
@@ -171,12 +278,12 @@ def _scan_successors(moves, free, width, u, dirs, t, dr_of, dc_of, out_v, out_k)
                 out_k[m] = k
                 m += 1
                 break
-            v = _jump_straight(moves, free, width, x, kv, dr, 0, t)
+            v = _jump_bits(rows, cols, width, x, dr, 0, tr, tc)
             if v >= 0:
                 out_v[m] = v
                 out_k[m] = kv
                 m += 1
-            v = _jump_straight(moves, free, width, x, kh, 0, dc, t)
+            v = _jump_bits(rows, cols, width, x, 0, dc, tr, tc)
             if v >= 0:
                 out_v[m] = v
                 out_k[m] = kh
@@ -202,7 +309,7 @@ def _table_successors(dist, width, u, dirs, tr, tc, dr_of, dc_of, out_v, out_k):
 
 
 @njit(cache=True)
-def _jps(dist, use_table, moves, free, width, s, t, g, parent, state, arrive, hk, hg, hn, hpos, stamp, dr_of, dc_of,
+def _jps(dist, use_table, moves, free, rows, cols, width, s, t, g, parent, state, arrive, hk, hg, hn, hpos, stamp, dr_of, dc_of,
          out_v, out_k):  # fmt: skip
     """JPS from padded index ``s`` to ``t``: the A* of astar.py (same heap, ties and ``state`` stamps)
     over jump points, found by scanning the grid or, with ``use_table``, looked up in JPS+'s ``dist``.
@@ -233,7 +340,7 @@ def _jps(dist, use_table, moves, free, width, s, t, g, parent, state, arrive, hk
         if use_table:
             m = _table_successors(dist, width, u, dirs, tr, tc, dr_of, dc_of, out_v, out_k)
         else:
-            m = _scan_successors(moves, free, width, u, dirs, t, dr_of, dc_of, out_v, out_k)
+            m = _scan_successors(moves, free, rows, cols, width, u, dirs, t, dr_of, dc_of, out_v, out_k)
         for j in range(m):
             v = out_v[j]
             sv = state[v]
@@ -306,7 +413,7 @@ def _trace_lines(parent, t, width):
 
 
 @njit(cache=True)
-def _query(dist, use_table, moves, free, h, w, sr, sc, gr, gc, g, parent, state, arrive, hk, hg, hn, hpos, stamp,
+def _query(dist, use_table, moves, free, rows, cols, h, w, sr, sc, gr, gc, g, parent, state, arrive, hk, hg, hn, hpos, stamp,
            dr_of, dc_of, out_v, out_k):  # fmt: skip
     """One query between unpadded cells in one call: (code, expanded, path, length, jump points) with
     code 0 found, 1 start unusable, 2 goal unusable, 3 unreachable (path empty unless found)."""
@@ -317,7 +424,7 @@ def _query(dist, use_table, moves, free, h, w, sr, sc, gr, gc, g, parent, state,
     if not (0 <= gr < h and 0 <= gc < w and free[(gr + 1) * width + gc + 1] != 0):
         return 2, 0, empty, np.inf, 0
     t = (gr + 1) * width + gc + 1
-    found, expanded = _jps(dist, use_table, moves, free, width, (sr + 1) * width + sc + 1, t, g, parent, state,
+    found, expanded = _jps(dist, use_table, moves, free, rows, cols, width, (sr + 1) * width + sc + 1, t, g, parent, state,
                            arrive, hk, hg, hn, hpos, stamp, dr_of, dc_of, out_v, out_k)  # fmt: skip
     if not found:
         return 3, expanded, empty, np.inf, 0
@@ -349,6 +456,8 @@ class JPS:
         self.width = w + 2
         self.free_p = np.pad(grid.free, 1).astype(np.uint8).ravel()
         self.moves = move_mask(grid.free)
+        padded = np.pad(grid.free, 1)
+        self.rows, self.cols = bit_lines(padded), bit_lines(padded.T)
         self.buf = SearchBuffers(self.free_p.size)
         self.out_v = np.zeros(4 * (h + w + 4), np.int64)  # one node's successors: <= 2 per diagonal step
         self.out_k = np.zeros(4 * (h + w + 4), np.int64)
@@ -362,7 +471,7 @@ class JPS:
     def search(self, s: int, t: int) -> tuple[bool, int]:
         """Run the kernel between padded indices; (found, jump points expanded). Parents stay in ``buf``."""
         b = self.buf
-        return _jps(self.table, self.use_table, self.moves, self.free_p, self.width, s, t, b.g, b.parent, b.state,
+        return _jps(self.table, self.use_table, self.moves, self.free_p, self.rows, self.cols, self.width, s, t, b.g, b.parent, b.state,
                     b.mark, b.hk, b.hg, b.hn, b.hpos, b.next_stamp(), _DR, _DC, self.out_v, self.out_k)  # fmt: skip
 
     def plan(self, start, goal) -> PlanResult:
@@ -371,7 +480,7 @@ class JPS:
         b = self.buf
         h, w = self.shape
         code, expanded, path, length, jumps = _query(
-            self.table, self.use_table, self.moves, self.free_p, h, w, int(start[0]), int(start[1]), int(goal[0]),
+            self.table, self.use_table, self.moves, self.free_p, self.rows, self.cols, h, w, int(start[0]), int(start[1]), int(goal[0]),
             int(goal[1]), b.g, b.parent, b.state, b.mark, b.hk, b.hg, b.hn, b.hpos, b.next_stamp(), _DR, _DC,
             self.out_v, self.out_k)  # fmt: skip
         if code == 0:
