@@ -16,8 +16,9 @@
    costs.
 
 Times are process CPU time (``time.process_time``), the best of ``--repeat``
-runs of each query, one planner at a time over all queries; each planner is
-built and warmed up (compiled) on the map before timing. A*, JPS and JPS+ are
+runs of each query; the planners take turns query by query (the machine's load
+changes alike for all); each planner is built and warmed up (compiled) on the
+map before timing. A*, JPS and JPS+ are
 all single-threaded numba called from Python, so each query includes the same
 few microseconds of call overhead.
 
@@ -85,11 +86,14 @@ def mismatches(grid, planners, pairs, optimal=None) -> dict:
 
 
 def speed(planners, pairs, repeat: int) -> dict:
-    """Per planner name: (L,) best CPU seconds of each query, one planner at a time."""
-    out = {}
-    for name, p in planners.items():
+    """Per planner name: (L,) best CPU seconds of each query; the planners take turns on each query
+    (so a change of load on the shared machine hits all of them alike)."""
+    for p in planners.values():
         p.plan(*pairs[0])  # compiled and cached outside the timings
-        out[name] = np.array([best_cpu(p.plan, s, g, repeat)[1] for s, g in pairs])
+    out = {name: np.zeros(len(pairs)) for name in planners}
+    for i, (s, g) in enumerate(pairs):
+        for name, p in planners.items():
+            out[name][i] = best_cpu(p.plan, s, g, repeat)[1]
     return out
 
 
