@@ -161,3 +161,15 @@ def test_movingai_scenarios_optimal(data_file, name):
         for s, t, opt in zip(sc.start_cells, sc.goal_cells, sc.optimal):
             r = planner.plan(s, t)
             assert r.found and abs(r.length - opt) <= 1e-5 * max(opt, 1.0), (planner.name, s, t)
+
+
+@pytest.mark.parametrize("name", ["jps", "jps_plus"])
+def test_plan_queries_on_a_floor_plan_match_astar(data_file, name):
+    from slam2d.planning.config import PlanConfig
+    from slam2d.planning.query import plan_queries
+
+    plan = data_file("rooms/Freiburg52_scan.png")
+    cfg = PlanConfig.model_validate({"planning": {"hierarchy": name, "queries": 8, "min_distance": 5.0}})
+    m = plan_queries(plan, cfg)
+    assert m["planner"] == name and m["queries"] == 8 and m["failures"] == 0
+    assert abs(m["mean_subopt_pct"]) < 1e-9 and abs(m["max_subopt_pct"]) < 1e-9 and m["min_query_m"] >= 5.0
