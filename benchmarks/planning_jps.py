@@ -97,17 +97,21 @@ def speed(planners, pairs, repeat: int) -> dict:
     return out
 
 
+def med(values):
+    """The median as a float, or a dash when there are no values."""
+    return float(np.median(values)) if len(values) else "–"
+
+
 def run_map(name, grid, check_pairs, long_pairs, optimal, repeat):
     """One row of figures for a map, and the per-query speed-ups of JPS and JPS+."""
     planners = {"A*": AStar(grid), "JPS": JPS(grid), "JPS+": JPSPlus(grid)}
     bad = mismatches(grid, planners, check_pairs, optimal)
     t = speed(planners, long_pairs, repeat) if long_pairs else None
     up = {k: t["A*"] / np.maximum(t[k], 1e-9) for k in ("JPS", "JPS+")} if t else {"JPS": [], "JPS+": []}
-    med = (lambda v: float(np.median(v)) if len(v) else "–")  # noqa: E731
     h, w = grid.shape
     build = build_seconds(grid.free)
-    row = [name, f"{w}x{h}", len(check_pairs), f"{bad['JPS']} / {bad['JPS+']}", len(long_pairs),
-           med(1e3 * t["A*"]) if t else "–", med(1e3 * t["JPS"]) if t else "–", med(1e3 * t["JPS+"]) if t else "–",
+    ms = [med(1e3 * t[k]) if t else "–" for k in ("A*", "JPS", "JPS+")]
+    row = [name, f"{w}x{h}", len(check_pairs), f"{bad['JPS']} / {bad['JPS+']}", len(long_pairs), *ms,
            med(up["JPS"]), med(up["JPS+"]), 1e3 * build, planners["JPS+"].table_bytes / 2**20]  # fmt: skip
     return row, up
 
@@ -127,8 +131,8 @@ def movingai(data: Path, maps, sample: int, min_length: float, repeat: int, seed
         pick = np.sort(rng.choice(long, min(sample, len(long)), replace=False)) if len(long) else long
         row, up = run_map(name, grid, pairs, [pairs[i] for i in pick], sc.optimal, repeat)
         rows.append(row)
-        for k in ups:
-            ups[k].extend(up[k])
+        for k, pooled in ups.items():
+            pooled.extend(up[k])
         print(f"  {name} done", flush=True)
     return rows, ups
 
@@ -141,8 +145,8 @@ def floor_plans(data: Path, plans, queries: int, min_length: float, radius: floa
         pairs = [(s, g) for s, g in pairs if np.hypot(*(s - g)) >= min_length]
         row, up = run_map(name, grid, pairs, pairs, None, repeat)
         rows.append(row)
-        for k in ups:
-            ups[k].extend(up[k])
+        for k, pooled in ups.items():
+            pooled.extend(up[k])
         print(f"  {name} done", flush=True)
     return rows, ups
 

@@ -18,8 +18,14 @@ Grastien, ICAPS 2014; warthog's ``jps``):
   is not allowed, the goal, or a cell from which a straight jump in ``(dr, 0)``
   or ``(0, dc)`` finds a jump point.
 
-Jump points are joined by straight or diagonal lines, so the A* over them uses
-the octile distance as edge cost; the returned path lists every cell in between.
+Two refinements of Harabor & Grastien (ICAPS 2014): straight jumps scan 64
+cells a word (:mod:`~slam2d.planning.bitlines`), and a diagonal scan does not
+queue the diagonal jump points it passes but the straight jump points (and the
+goal) seen from them, with the scan's origin as parent; so an edge runs
+diagonally first, then straight, costs the octile distance, and no row is
+scanned twice. The returned path lists every cell. JPS+ (:mod:`~slam2d.planning.jps_plus`)
+shares the search with the jumps looked up in a table.
+
 Costmaps are not supported: a non-zero ``cost`` layer raises ValueError (the
 pruning assumes uniform step costs; plan with ``astar``). JPS is 8-connected only.
 """
@@ -44,6 +50,7 @@ from slam2d.planning.astar import (
     move_mask,
 )
 from slam2d.planning.base import register_planner
+from slam2d.planning.bitlines import _scan_line, bit_lines
 from slam2d.planning.grid import PlanningGrid
 
 __all__ = ["JPS", "jps"]
@@ -128,100 +135,6 @@ def _table_jump(dist, u, k, dr, dc, width, ddr, ddc):
 
 
 @njit(inline="always")
-def _ctz(x):
-    """Index of the lowest set bit of a non-zero uint64."""
-    n = 0
-    if (x & np.uint64(0xFFFFFFFF)) == 0:
-        n += 32
-        x >>= np.uint64(32)
-    if (x & np.uint64(0xFFFF)) == 0:
-        n += 16
-        x >>= np.uint64(16)
-    if (x & np.uint64(0xFF)) == 0:
-        n += 8
-        x >>= np.uint64(8)
-    if (x & np.uint64(0xF)) == 0:
-        n += 4
-        x >>= np.uint64(4)
-    if (x & np.uint64(0x3)) == 0:
-        n += 2
-        x >>= np.uint64(2)
-    if (x & np.uint64(0x1)) == 0:
-        n += 1
-    return n
-
-
-@njit(inline="always")
-def _msb(x):
-    """Index of the highest set bit of a non-zero uint64."""
-    n = 0
-    if x >> np.uint64(32):
-        n += 32
-        x >>= np.uint64(32)
-    if x >> np.uint64(16):
-        n += 16
-        x >>= np.uint64(16)
-    if x >> np.uint64(8):
-        n += 8
-        x >>= np.uint64(8)
-    if x >> np.uint64(4):
-        n += 4
-        x >>= np.uint64(4)
-    if x >> np.uint64(2):
-        n += 2
-        x >>= np.uint64(2)
-    if x >> np.uint64(1):
-        n += 1
-    return n
-
-
-@njit(inline="always")
-def _scan_line(bits, i, p0, step, target):
-    """Block-based straight jump (Harabor & Grastien 2014) along line ``i`` of ``bits`` (64 cells a
-    word): from position ``p0`` in ``step`` (+1 or -1), the first position that is the ``target`` (-1:
-    none on this line), or has a forced side (free on line ``i - 1`` or ``i + 1``, blocked there one
-    step back); -1 if a blocked cell comes first."""
-    one = np.uint64(1)
-    if step > 0:
-        p = p0 + 1
-        j = p >> 6
-        keep = np.uint64(0xFFFFFFFFFFFFFFFF) << np.uint64(p & 63)
-        while True:
-            a = bits[i - 1, j]
-            b = bits[i + 1, j]
-            a_back = a << one
-            b_back = b << one
-            if j > 0:
-                a_back |= bits[i - 1, j - 1] >> np.uint64(63)
-                b_back |= bits[i + 1, j - 1] >> np.uint64(63)
-            stop = (~bits[i, j] | (a & ~a_back) | (b & ~b_back)) & keep
-            if stop != 0:
-                x = (j << 6) + _ctz(stop)
-                if p0 < target <= x:
-                    return target
-                return x if (bits[i, j] >> np.uint64(x & 63)) & one else -1
-            j += 1
-            keep = np.uint64(0xFFFFFFFFFFFFFFFF)
-    p = p0 - 1
-    j = p >> 6
-    r = p & 63
-    keep = np.uint64(0xFFFFFFFFFFFFFFFF) if r == 63 else (one << np.uint64(r + 1)) - one
-    while True:
-        a = bits[i - 1, j]
-        b = bits[i + 1, j]
-        a_back = (a >> one) | (bits[i - 1, j + 1] << np.uint64(63))
-        b_back = (b >> one) | (bits[i + 1, j + 1] << np.uint64(63))
-        stop = (~bits[i, j] | (a & ~a_back) | (b & ~b_back)) & keep
-        if stop != 0:
-            x = (j << 6) + _msb(stop)
-            if x <= target < p0:
-                return target
-            return x if (bits[i, j] >> np.uint64(x & 63)) & one else -1
-        j -= 1
-        keep = np.uint64(0xFFFFFFFFFFFFFFFF)
-
-
-@njit(inline="always")
 def _jump_bits(rows, cols, width, u, dr, dc, tr, tc):
     """The jump point reached from ``u`` by straight steps (dr, dc), or -1: :func:`_scan_line` over the
     row bits ``rows`` (padded rows x words) or the column bits ``cols``."""
@@ -232,16 +145,6 @@ def _jump_bits(rows, cols, width, u, dr, dc, tr, tc):
         return ur * width + x if x >= 0 else -1
     y = _scan_line(cols, uc, ur, dr, tr if tc == uc else -1)
     return y * width + uc if y >= 0 else -1
-
-
-def bit_lines(free_padded: np.ndarray) -> np.ndarray:
-    """(lines, words) uint64: bit ``b`` of word ``j`` of line ``i`` is ``free_padded[i, 64 j + b]``;
-    a zero word at each end of a line (before the first, after the last) is never read as free."""
-    h, w = free_padded.shape
-    words = w // 64 + 2
-    bits = np.zeros((h, words * 64), bool)
-    bits[:, :w] = free_padded
-    return np.packbits(bits, axis=1, bitorder="little").view("<u8").astype(np.uint64)
 
 
 @njit(cache=True)
@@ -309,8 +212,8 @@ def _table_successors(dist, width, u, dirs, tr, tc, dr_of, dc_of, out_v, out_k):
 
 
 @njit(cache=True)
-def _jps(dist, use_table, moves, free, rows, cols, width, s, t, g, parent, state, arrive, hk, hg, hn, hpos, stamp, dr_of, dc_of,
-         out_v, out_k):  # fmt: skip
+def _jps(dist, use_table, moves, free, rows, cols, width, s, t, g, parent, state, arrive, hk, hg, hn, hpos, stamp,
+         dr_of, dc_of, out_v, out_k):  # fmt: skip
     """JPS from padded index ``s`` to ``t``: the A* of astar.py (same heap, ties and ``state`` stamps)
     over jump points, found by scanning the grid or, with ``use_table``, looked up in JPS+'s ``dist``.
     Successors join their parent by a diagonal then a straight line (edge cost: octile distance);
@@ -413,8 +316,8 @@ def _trace_lines(parent, t, width):
 
 
 @njit(cache=True)
-def _query(dist, use_table, moves, free, rows, cols, h, w, sr, sc, gr, gc, g, parent, state, arrive, hk, hg, hn, hpos, stamp,
-           dr_of, dc_of, out_v, out_k):  # fmt: skip
+def _query(dist, use_table, moves, free, rows, cols, h, w, sr, sc, gr, gc, g, parent, state, arrive, hk, hg, hn,
+           hpos, stamp, dr_of, dc_of, out_v, out_k):  # fmt: skip
     """One query between unpadded cells in one call: (code, expanded, path, length, jump points) with
     code 0 found, 1 start unusable, 2 goal unusable, 3 unreachable (path empty unless found)."""
     width = w + 2
@@ -424,8 +327,8 @@ def _query(dist, use_table, moves, free, rows, cols, h, w, sr, sc, gr, gc, g, pa
     if not (0 <= gr < h and 0 <= gc < w and free[(gr + 1) * width + gc + 1] != 0):
         return 2, 0, empty, np.inf, 0
     t = (gr + 1) * width + gc + 1
-    found, expanded = _jps(dist, use_table, moves, free, rows, cols, width, (sr + 1) * width + sc + 1, t, g, parent, state,
-                           arrive, hk, hg, hn, hpos, stamp, dr_of, dc_of, out_v, out_k)  # fmt: skip
+    found, expanded = _jps(dist, use_table, moves, free, rows, cols, width, (sr + 1) * width + sc + 1, t, g, parent,
+                           state, arrive, hk, hg, hn, hpos, stamp, dr_of, dc_of, out_v, out_k)  # fmt: skip
     if not found:
         return 3, expanded, empty, np.inf, 0
     path, length, jumps = _trace_lines(parent, t, width)
@@ -461,8 +364,14 @@ class JPS:
         self.buf = SearchBuffers(self.free_p.size)
         self.out_v = np.zeros(4 * (h + w + 4), np.int64)  # one node's successors: <= 2 per diagonal step
         self.out_k = np.zeros(4 * (h + w + 4), np.int64)
+        b = self.buf
+        self._buffers = (b.g, b.parent, b.state, b.mark, b.hk, b.hg, b.hn, b.hpos)  # mark: the arrival moves
         self.table = np.zeros((1, 8), np.int32)  # JPS+'s jump distances (unused here)
         self.use_table = False
+
+    def _maps(self) -> tuple:
+        """The kernels' map arguments: jump table, whether to use it, moves, free cells, row and column bits."""
+        return self.table, self.use_table, self.moves, self.free_p, self.rows, self.cols
 
     def index(self, cell) -> int:
         """Padded flat index of a (row, col) cell."""
@@ -470,19 +379,15 @@ class JPS:
 
     def search(self, s: int, t: int) -> tuple[bool, int]:
         """Run the kernel between padded indices; (found, jump points expanded). Parents stay in ``buf``."""
-        b = self.buf
-        return _jps(self.table, self.use_table, self.moves, self.free_p, self.rows, self.cols, self.width, s, t, b.g, b.parent, b.state,
-                    b.mark, b.hk, b.hg, b.hn, b.hpos, b.next_stamp(), _DR, _DC, self.out_v, self.out_k)  # fmt: skip
+        return _jps(*self._maps(), self.width, s, t, *self._buffers, self.buf.next_stamp(), _DR, _DC, self.out_v,
+                    self.out_k)  # fmt: skip
 
     def plan(self, start, goal) -> PlanResult:
         """Path between (row, col) cells; found=False with A*'s reasons when there is none."""
         t0 = time.perf_counter()
-        b = self.buf
-        h, w = self.shape
         code, expanded, path, length, jumps = _query(
-            self.table, self.use_table, self.moves, self.free_p, self.rows, self.cols, h, w, int(start[0]), int(start[1]), int(goal[0]),
-            int(goal[1]), b.g, b.parent, b.state, b.mark, b.hk, b.hg, b.hn, b.hpos, b.next_stamp(), _DR, _DC,
-            self.out_v, self.out_k)  # fmt: skip
+            *self._maps(), *self.shape, int(start[0]), int(start[1]), int(goal[0]), int(goal[1]), *self._buffers,
+            self.buf.next_stamp(), _DR, _DC, self.out_v, self.out_k)  # fmt: skip
         if code == 0:
             return PlanResult(path, length, expanded, time.perf_counter() - t0, True, "", length,
                               self.grid.resolution, {"jump_points": jumps})  # fmt: skip
