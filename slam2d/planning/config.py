@@ -20,6 +20,10 @@ class PlanningConfig(Section):
         "hpa (square clusters) or rooms (the room graph of a segmentation)"
     )
     cluster_size: int = Field(16, gt=1, description="HPA* cluster side, cells")
+    corridor: bool = Field(
+        False, description="rooms: one A* over all the route's rooms (the shortest path inside the rooms crossed) "
+        "instead of one per room"
+    )
     robot_radius: float = Field(0.2, ge=0, description="obstacle inflation, m")
     labels: str | None = Field(
         None, description="rooms: label image (labels.png of slam2d segment) or .npy; None: the map is "
