@@ -40,6 +40,7 @@ from numba import njit
 from slam2d.planning.astar import (
     _DC,
     _DR,
+    _EPS_F,
     SQRT2,
     PlanResult,
     SearchBuffers,
@@ -213,7 +214,7 @@ def _table_successors(dist, width, u, dirs, tr, tc, dr_of, dc_of, out_v, out_k):
 
 @njit(cache=True)
 def _jps(dist, use_table, moves, free, rows, cols, width, s, t, g, parent, state, arrive, hk, hg, hn, hpos, stamp,
-         dr_of, dc_of, out_v, out_k):  # fmt: skip
+         dr_of, dc_of, out_v, out_k, stack):  # fmt: skip
     """JPS from padded index ``s`` to ``t``: the A* of astar.py (same heap, ties and ``state`` stamps)
     over jump points, found by scanning the grid or, with ``use_table``, looked up in JPS+'s ``dist``.
     Successors join their parent by a diagonal then a straight line (edge cost: octile distance);
@@ -229,9 +230,14 @@ def _jps(dist, use_table, moves, free, rows, cols, width, s, t, g, parent, state
     sr = s // width
     _sift_up(hk, hg, hn, hpos, 0, _octile(sr, s - sr * width, tr, tc, True), 0.0, s)
     size = 1
+    top = 0
     expanded = 0
-    while size > 0:
-        u, size = _pop(hk, hg, hn, hpos, size)
+    while size > 0 or top > 0:
+        if top > 0:
+            top -= 1
+            u = stack[top]
+        else:
+            u, size = _pop(hk, hg, hn, hpos, size)
         state[u] = reached + 1
         expanded += 1
         if u == t:
@@ -244,6 +250,7 @@ def _jps(dist, use_table, moves, free, rows, cols, width, s, t, g, parent, state
             m = _table_successors(dist, width, u, dirs, tr, tc, dr_of, dc_of, out_v, out_k)
         else:
             m = _scan_successors(moves, free, rows, cols, width, u, dirs, t, dr_of, dc_of, out_v, out_k)
+        fu = gu + _octile(ur, uc, tr, tc, True)
         for j in range(m):
             v = out_v[j]
             sv = state[v]
@@ -257,15 +264,21 @@ def _jps(dist, use_table, moves, free, rows, cols, width, s, t, g, parent, state
                 g[v] = ng
                 parent[v] = u
                 arrive[v] = out_k[j]
-                _sift_up(hk, hg, hn, hpos, size, ng + _octile(vr, vc, tr, tc, True), ng, v)
-                size += 1
+                hv = _octile(vr, vc, tr, tc, True)
+                if ng + hv <= fu + _EPS_F:  # f does not grow: next, without the heap
+                    hpos[v] = -1
+                    stack[top] = v
+                    top += 1
+                else:
+                    _sift_up(hk, hg, hn, hpos, size, ng + hv, ng, v)
+                    size += 1
             elif ng < g[v] - 1e-12:
                 i = hpos[v]
-                hv = hk[i] - g[v]
+                if i >= 0:
+                    _sift_up(hk, hg, hn, hpos, i, ng + hk[i] - g[v], ng, v)
                 g[v] = ng
                 parent[v] = u
                 arrive[v] = out_k[j]
-                _sift_up(hk, hg, hn, hpos, i, ng + hv, ng, v)
     return False, expanded
 
 
@@ -317,7 +330,7 @@ def _trace_lines(parent, t, width):
 
 @njit(cache=True)
 def _query(dist, use_table, moves, free, rows, cols, h, w, sr, sc, gr, gc, g, parent, state, arrive, hk, hg, hn,
-           hpos, stamp, dr_of, dc_of, out_v, out_k):  # fmt: skip
+           hpos, stamp, dr_of, dc_of, out_v, out_k, stack):  # fmt: skip
     """One query between unpadded cells in one call: (code, expanded, path, length, jump points) with
     code 0 found, 1 start unusable, 2 goal unusable, 3 unreachable (path empty unless found)."""
     width = w + 2
@@ -328,7 +341,7 @@ def _query(dist, use_table, moves, free, rows, cols, h, w, sr, sc, gr, gc, g, pa
         return 2, 0, empty, np.inf, 0
     t = (gr + 1) * width + gc + 1
     found, expanded = _jps(dist, use_table, moves, free, rows, cols, width, (sr + 1) * width + sc + 1, t, g, parent,
-                           state, arrive, hk, hg, hn, hpos, stamp, dr_of, dc_of, out_v, out_k)  # fmt: skip
+                           state, arrive, hk, hg, hn, hpos, stamp, dr_of, dc_of, out_v, out_k, stack)  # fmt: skip
     if not found:
         return 3, expanded, empty, np.inf, 0
     path, length, jumps = _trace_lines(parent, t, width)
@@ -364,6 +377,7 @@ class JPS:
         self.buf = SearchBuffers(self.free_p.size)
         self.out_v = np.zeros(4 * (h + w + 4), np.int64)  # one node's successors: <= 2 per diagonal step
         self.out_k = np.zeros(4 * (h + w + 4), np.int64)
+        self.stack = np.zeros(self.free_p.size, np.int32)  # reached nodes whose f equals their parent's
         b = self.buf
         self._buffers = (b.g, b.parent, b.state, b.mark, b.hk, b.hg, b.hn, b.hpos)  # mark: the arrival moves
         self.table = np.zeros((1, 8), np.int32)  # JPS+'s jump distances (unused here)
@@ -380,14 +394,14 @@ class JPS:
     def search(self, s: int, t: int) -> tuple[bool, int]:
         """Run the kernel between padded indices; (found, jump points expanded). Parents stay in ``buf``."""
         return _jps(*self._maps(), self.width, s, t, *self._buffers, self.buf.next_stamp(), _DR, _DC, self.out_v,
-                    self.out_k)  # fmt: skip
+                    self.out_k, self.stack)  # fmt: skip
 
     def plan(self, start, goal) -> PlanResult:
         """Path between (row, col) cells; found=False with A*'s reasons when there is none."""
         t0 = time.perf_counter()
         code, expanded, path, length, jumps = _query(
             *self._maps(), *self.shape, int(start[0]), int(start[1]), int(goal[0]), int(goal[1]), *self._buffers,
-            self.buf.next_stamp(), _DR, _DC, self.out_v, self.out_k)  # fmt: skip
+            self.buf.next_stamp(), _DR, _DC, self.out_v, self.out_k, self.stack)  # fmt: skip
         if code == 0:
             return PlanResult(path, length, expanded, time.perf_counter() - t0, True, "", length,
                               self.grid.resolution, {"jump_points": jumps})  # fmt: skip
