@@ -140,7 +140,7 @@ def test_jump_distances_on_a_corridor_and_a_corner():
 def test_jps_plus_build_is_timed_and_small():
     free = np.ones((100, 120), bool)
     p = JPSPlus(free)
-    assert p.build_seconds >= 0 and p.table_bytes == 102 * 122 * 8 * 4
+    assert p.build_seconds >= 0 and p.table_bytes == 102 * 122 * 8 * 2  # int16
 
 
 def test_registered_names_resolve():

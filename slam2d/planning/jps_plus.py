@@ -4,7 +4,7 @@ Game AI Pro 2, ch. 14), numba.
 Preprocessing stores, for every free cell and each of the 8 moves, how far the
 online jump of :mod:`~slam2d.planning.jps` would go without a goal: ``d > 0``
 steps to the next jump point, or ``-d >= 0`` steps before the next move is not
-allowed (a wall). Two sweeps per direction (int32, 8 values a cell; a few ms on a
+allowed (a wall). One sweep per move (int16, 8 values a cell; tens of ms on a
 512×512 map), so the table is cheap to rebuild when the map changes: build a new
 planner on the new grid.
 
@@ -31,12 +31,19 @@ from slam2d.planning.jps import JPS, _forced, _horiz, _vert
 __all__ = ["JPSPlus", "jump_distances"]
 
 
+def _table(moves, free, h: int, w: int) -> np.ndarray:
+    """((h + 2) (w + 2), 8) jump distances of the padded grid (module docstring), int16 (int32 on maps
+    over 32 000 cells a side); 0 on blocked cells. A cell's 8 values are adjacent in memory: a query
+    reads them together."""
+    dist = np.zeros(((h + 2) * (w + 2), 8), np.int16 if max(h, w) < 32_000 else np.int32)
+    _jump_distances(moves, free, h, w, _DR, _DC, dist)
+    return dist
+
+
 @njit(cache=True)
-def _jump_distances(moves, free, h, w, dr_of, dc_of):
-    """((h + 2) (w + 2), 8) int32 jump distances of the padded grid (module docstring); 0 on blocked cells.
-    A cell's 8 values are adjacent in memory: a query reads them together."""
+def _jump_distances(moves, free, h, w, dr_of, dc_of, dist):
+    """Fill ``dist`` (zeros, see :func:`_table`) with the jump distances of the padded grid."""
     width = w + 2
-    dist = np.zeros(((h + 2) * width, 8), np.int32)
     for k in range(8):  # axial moves first: the diagonal ones read them
         dr = dr_of[k]
         dc = dc_of[k]
@@ -62,15 +69,14 @@ def _jump_distances(moves, free, h, w, dr_of, dc_of):
                     dist[n, k] = dist[m, k] + 1
                 else:
                     dist[n, k] = dist[m, k] - 1
-    return dist
 
 
 def jump_distances(free: np.ndarray) -> np.ndarray:
-    """JPS+ jump distances (8, H, W) int32 of a free mask (H, W): per move of astar.py's order (up,
-    down, left, right, then the diagonals), ``d > 0`` steps to the jump point, ``-d`` steps to a wall."""
+    """JPS+ jump distances (8, H, W) of a free mask (H, W): per move of astar.py's order (up, down,
+    left, right, then the diagonals), ``d > 0`` steps to the jump point, ``-d`` steps to a wall."""
     free = np.asarray(free, dtype=bool)
     h, w = free.shape
-    d = _jump_distances(move_mask(free), np.pad(free, 1).astype(np.uint8).ravel(), h, w, _DR, _DC)
+    d = _table(move_mask(free), np.pad(free, 1).astype(np.uint8).ravel(), h, w)
     return d.T.reshape(8, h + 2, w + 2)[:, 1:-1, 1:-1].copy()
 
 
@@ -84,7 +90,7 @@ class JPSPlus(JPS):
         t0 = time.perf_counter()
         super().__init__(grid, cost)
         h, w = self.shape
-        self.table = _jump_distances(self.moves, self.free_p, h, w, _DR, _DC)
+        self.table = _table(self.moves, self.free_p, h, w)
         self.use_table = True
         self.build_seconds = time.perf_counter() - t0
         self.table_bytes = self.table.nbytes
