@@ -85,16 +85,19 @@ def mismatches(grid, planners, pairs, optimal=None) -> dict:
     return bad
 
 
-def speed(planners, pairs, repeat: int) -> dict:
-    """Per planner name: (L,) best CPU seconds of each query; the planners take turns on each query
-    (so a change of load on the shared machine hits all of them alike)."""
+def speed(planners, pairs, repeat: int) -> tuple[dict, dict]:
+    """Per planner name: (L,) best CPU seconds of each query and (L,) nodes expanded (cells for A*, jump
+    points for JPS and JPS+); the planners take turns on each query (so a change of load on the shared
+    machine hits all of them alike)."""
     for p in planners.values():
         p.plan(*pairs[0])  # compiled and cached outside the timings
-    out = {name: np.zeros(len(pairs)) for name in planners}
+    secs = {name: np.zeros(len(pairs)) for name in planners}
+    expanded = {name: np.zeros(len(pairs)) for name in planners}
     for i, (s, g) in enumerate(pairs):
         for name, p in planners.items():
-            out[name][i] = best_cpu(p.plan, s, g, repeat)[1]
-    return out
+            r, secs[name][i] = best_cpu(p.plan, s, g, repeat)
+            expanded[name][i] = r.expanded
+    return secs, expanded
 
 
 def med(values):
@@ -106,18 +109,19 @@ def run_map(name, grid, check_pairs, long_pairs, optimal, repeat):
     """One row of figures for a map, and the per-query speed-ups of JPS and JPS+."""
     planners = {"A*": AStar(grid), "JPS": JPS(grid), "JPS+": JPSPlus(grid)}
     bad = mismatches(grid, planners, check_pairs, optimal)
-    t = speed(planners, long_pairs, repeat) if long_pairs else None
+    t, e = speed(planners, long_pairs, repeat) if long_pairs else (None, None)
     up = {k: t["A*"] / np.maximum(t[k], 1e-9) for k in ("JPS", "JPS+")} if t else {"JPS": [], "JPS+": []}
     h, w = grid.shape
     build = build_seconds(grid.free)
     ms = [med(1e3 * t[k]) if t else "–" for k in ("A*", "JPS", "JPS+")]
-    row = [name, f"{w}x{h}", len(check_pairs), f"{bad['JPS']} / {bad['JPS+']}", len(long_pairs), *ms,
+    ex = " / ".join(f"{med(e[k]):.0f}" for k in ("A*", "JPS", "JPS+")) if e else "–"
+    row = [name, f"{w}x{h}", len(check_pairs), f"{bad['JPS']} / {bad['JPS+']}", len(long_pairs), *ms, ex,
            med(up["JPS"]), med(up["JPS+"]), 1e3 * build, planners["JPS+"].table_bytes / 2**20]  # fmt: skip
     return row, up
 
 
 HEADER = ["map", "size", "checked", "mismatches JPS / JPS+", "long queries", "A* ms", "JPS ms", "JPS+ ms",
-          "JPS speed-up", "JPS+ speed-up", "JPS+ build ms", "table MB"]  # fmt: skip
+          "expanded A* / JPS / JPS+", "JPS speed-up", "JPS+ speed-up", "JPS+ build ms", "table MB"]  # fmt: skip
 
 
 def movingai(data: Path, maps, sample: int, min_length: float, repeat: int, seed: int):
