@@ -23,8 +23,10 @@ cells a word (:mod:`~slam2d.planning.bitlines`), and a diagonal scan does not
 queue the diagonal jump points it passes but the straight jump points (and the
 goal) seen from them, with the scan's origin as parent; so an edge runs
 diagonally first, then straight, costs the octile distance, and no row is
-scanned twice. The returned path lists every cell. JPS+ (:mod:`~slam2d.planning.jps_plus`)
-shares the search with the jumps looked up in a table.
+scanned twice. A successor whose f equals its parent's is expanded next from a
+stack, without the heap (A*'s order up to ties). The returned path lists every
+cell. JPS+ (:mod:`~slam2d.planning.jps_plus`) shares the search, its jumps
+looked up in a table (and its diagonal jump points queued: a look-up is cheap).
 
 Costmaps are not supported: a non-zero ``cost`` layer raises ValueError (the
 pruning assumes uniform step costs; plan with ``astar``). JPS is 8-connected only.
@@ -380,7 +382,7 @@ class JPS:
         self.stack = np.zeros(self.free_p.size, np.int32)  # reached nodes whose f equals their parent's
         b = self.buf
         self._buffers = (b.g, b.parent, b.state, b.mark, b.hk, b.hg, b.hn, b.hpos)  # mark: the arrival moves
-        self.table = np.zeros((1, 8), np.int32)  # JPS+'s jump distances (unused here)
+        self.table = np.zeros((1, 8), np.int16)  # JPS+'s jump distances (unused here)
         self.use_table = False
 
     def _maps(self) -> tuple:
