@@ -11,7 +11,8 @@
    diagonals cut corners, so their lengths may be shorter than optimal).
    Each method runs over all sampled queries in turn.
 3. Hierarchy on ``16room_000``: HPA* at several cluster sizes, raw and smoothed,
-   and the room-graph planner on a morphological room segmentation, against
+   and the room-graph planner on a morphological room segmentation (stitched per
+   room, or one A* over the route's rooms: ``corridor``), against
    A* on the same queries: suboptimality and per-query speed-up, over all
    scenarios and over the long ones (the upper quarter of the buckets).
 
@@ -146,7 +147,7 @@ def speed(data: Path, maps, sample: int, seed: int) -> str:
                   "length ≠ optimal (slam2d / nx / route / MCP)"], rows)  # fmt: skip
 
 
-def _room_planner(grid, smooth: bool):
+def _room_planner(grid, smooth: bool, corridor: bool = False):
     """Room-graph planner on a morphological segmentation of a Moving AI map (None if unavailable)."""
     try:
         from slam2d.mapping.topological import region_graph
@@ -158,7 +159,7 @@ def _room_planner(grid, smooth: bool):
     labels = morphological(grid.free, 1.0, room_area_min=20.0, room_area_max=2000.0, max_erosion=8.0)
     graph = region_graph(labels, grid.resolution, grid.origin, row0_top=False)
     seg_s = time.perf_counter() - t0
-    planner = RoomGraphPlanner(grid, labels, graph, smooth=smooth)
+    planner = RoomGraphPlanner(grid, labels, graph, smooth=smooth, corridor=corridor)
     planner.build_seconds += seg_s
     return planner, f"{graph.number_of_nodes()} rooms, {graph.number_of_edges()} portals"
 
@@ -175,10 +176,11 @@ def hierarchy(data: Path, clusters, long_frac: float) -> str:
             p = HPAStar(grid, c, smooth=smooth)
             label = f"HPA* {c}x{c}" + (" + smoothing" if smooth else "")
             planners.append((label, p, f"{p.n_nodes} nodes, {p.n_edges} edges"))
-    for smooth in (False, True):
-        p, note = _room_planner(grid, smooth)
+    for smooth, corridor in ((False, False), (True, False), (False, True)):
+        p, note = _room_planner(grid, smooth, corridor)
         if p is not None:
-            planners.append(("room graph" + (" + smoothing" if smooth else ""), p, note))
+            planners.append(("room graph" + (" + smoothing" if smooth else "") + (", corridor A*" if corridor else ""),
+                             p, note))  # fmt: skip
     for _, p, _ in planners:
         p.plan(sc.start_cells[0], sc.goal_cells[0])
     n = len(sc)

@@ -174,3 +174,19 @@ def test_room_graph_unlabelled_cells_and_fallback():
     assert_valid(free2, r, (2, 2), (2, 57))
     assert r.info["mode"] in ("corridor", "grid")
     assert r.length == pytest.approx(AStar(free2).plan((2, 2), (2, 57)).length, rel=0.05)
+
+
+def test_room_graph_corridor_is_shortest_inside_the_route_rooms():
+    from slam2d.planning.query import make_planner
+
+    free, labels = three_rooms()
+    grid = PlanningGrid(free, 0.05)
+    planner = make_planner(grid, "rooms", labels=labels, corridor=True)
+    assert planner.corridor and not make_planner(grid, "rooms", labels=labels).corridor
+    planner.smooth = False
+    stitched = RoomGraphPlanner(grid, labels, region_graph_of(labels), smooth=False)
+    for s, t in (((28, 2), (2, 57)), ((2, 2), (22, 58)), ((15, 10), (10, 45))):
+        r = planner.plan(s, t)
+        assert_valid(free, r, s, t) and r.info["mode"] == "corridor"
+        ref = AStar(grid).plan(s, t).length  # rooms 1-3 hold every path: the corridor is exact
+        assert r.length == pytest.approx(ref) and r.length <= stitched.plan(s, t).length + 1e-9

@@ -158,7 +158,8 @@ def plan(
     config: Optional[Path] = CONFIG_OPT,
     start: Optional[str] = typer.Option(None, help="x,y in metres (planning.start)"),
     goal: Optional[str] = typer.Option(None, help="x,y in metres (planning.goal)"),
-    hierarchical: Optional[str] = typer.Option(None, help="hpa (square clusters) or rooms (planning.hierarchy)"),
+    hierarchical: Optional[str] = typer.Option(None, help="jps, jps_plus (exact, faster than A*), hpa (square "
+                                               "clusters) or rooms (planning.hierarchy)"),
     labels: Optional[Path] = typer.Option(None, help="room label image (labels.png of slam2d segment); default: "
                                           "the map's segmentation (segmentation.*, morphological)"),
     robot_radius: Optional[float] = typer.Option(None, help="obstacle inflation, m (planning.robot_radius, 0.2)"),

@@ -20,6 +20,8 @@ _EXPORTS = {
     "make_planner": "query",
     "NoPathError": "query",
     "HPAStar": "hierarchical",
+    "JPS": "jps",
+    "JPSPlus": "jps_plus",
     "RoomGraphPlanner": "room_graph",
     "shortcut": "smoothing",
     "TrajectoryLimits": "timing",

@@ -18,7 +18,8 @@ class GlobalPlanner(Protocol):
 GLOBAL_PLANNERS = Registry(
     "global_planners", "planner", key="planning.hierarchy", options_key="planning",
     builtins={"astar": "slam2d.planning.astar", "hpa": "slam2d.planning.hierarchical",
-              "rooms": "slam2d.planning.room_graph"},
+              "rooms": "slam2d.planning.room_graph", "jps": "slam2d.planning.jps",
+              "jps_plus": "slam2d.planning.jps_plus"},
     aliases={"none": "astar"})
 """The global planners by name: ``create(name, options, grid, labels=..., graph=...)`` builds one on
 ``grid``; the room-graph planner takes the room ``labels`` (H, W) aligned with the grid (rows up) and

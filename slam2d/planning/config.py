@@ -16,9 +16,14 @@ class PlanningConfig(Section):
     """Which planner, on which query (or on ``queries`` random ones beside A*)."""
 
     hierarchy: Annotated[str, Choice("global_planners", canonical=False)] = Field(
-        "none", description="none (A*), hpa (square clusters) or rooms (the room graph of a segmentation)"
+        "none", description="none (A*), jps (Jump Point Search), jps_plus (JPS over precomputed jump distances), "
+        "hpa (square clusters) or rooms (the room graph of a segmentation)"
     )
     cluster_size: int = Field(16, gt=1, description="HPA* cluster side, cells")
+    corridor: bool = Field(
+        False, description="rooms: one A* over all the route's rooms (the shortest path inside the rooms crossed) "
+        "instead of one per room"
+    )
     robot_radius: float = Field(0.2, ge=0, description="obstacle inflation, m")
     labels: str | None = Field(
         None, description="rooms: label image (labels.png of slam2d segment) or .npy; None: the map is "

@@ -103,17 +103,18 @@ def _read_labels(path: Path) -> np.ndarray:
 
 
 def make_planner(grid: PlanningGrid, name: str | None = None, cluster_size: int = 16, labels=None, graph=None,
-                 key: str = "hierarchical"):
+                 key: str = "hierarchical", corridor: bool = False):
     """The global planner ``name`` (:data:`~slam2d.planning.base.GLOBAL_PLANNERS`; None: A*) on ``grid``.
 
     A planner that takes room ``labels`` (the room graph) gets them aligned with ``grid`` (rows going
     up): an array, a .npy or a labels.png, by default the morphological segmentation of ``grid``.
-    ``key`` names the choice in an error.
+    ``cluster_size`` (HPA*) and ``corridor`` (the room graph) go to the planners that take them. ``key``
+    names the choice in an error.
     """
     name = planner_name(name, key)
     inputs = {"labels": _labels(labels, grid), "graph": graph} if "labels" in GLOBAL_PLANNERS.takes(name) else {}
-    return GLOBAL_PLANNERS.create(name, GLOBAL_PLANNERS.options_in(name, {"cluster_size": cluster_size}), grid,
-                                  **inputs)
+    options = GLOBAL_PLANNERS.options_in(name, {"cluster_size": cluster_size, "corridor": corridor})
+    return GLOBAL_PLANNERS.create(name, options, grid, **inputs)
 
 
 def planner_name(name: str | None, key: str = "hierarchical") -> str:
@@ -139,6 +140,7 @@ def plan_on_map(
     resolution: float | None = None,
     segmentation=None,
     seed: int = 0,
+    corridor: bool = False,
 ) -> MapPlan:
     """Plan from ``start`` to ``goal`` (x, y) m on a map: grid path, shortcut, time-optimal trajectory.
 
@@ -147,7 +149,8 @@ def plan_on_map(
     ``robot_radius`` m. ``hierarchical``: a global planner's name (None: A*; ``"hpa"``, ``"rooms"``)
     (``labels``: a region image aligned with the map's rows going up, or
     None for the map's segmentation by ``segmentation``, a SegmentationConfig, default
-    morphological, run on the map before inflation; ``seed`` for spectral). The metrics say
+    morphological, run on the map before inflation; ``seed`` for spectral; ``corridor``: the room graph's one
+    A* over the route's rooms, see :class:`~slam2d.planning.room_graph.RoomGraphPlanner`). The metrics say
     ``found`` False with a ``reason`` when there is no path.
     """
     t_all = time.perf_counter()
@@ -161,7 +164,7 @@ def plan_on_map(
     name = planner_name(hierarchical)
     if _uses_rooms(name):
         labels = _labels(labels, grid, segmentation, seed)  # segment the map itself, not the inflated free space
-    planner = make_planner(free, name, cluster_size, labels)
+    planner = make_planner(free, name, cluster_size, labels, corridor=corridor)
     build_s = time.perf_counter() - t0
     result = planner.plan(free.world_to_cell(start), free.world_to_cell(goal))
     metrics = {
@@ -216,7 +219,7 @@ def plan_queries(map_path, cfg, labels=None) -> dict:
         labels = _labels(labels, grid, cfg.segmentation, cfg.seed)
     segmentation_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    planner = make_planner(free, hierarchy, p.cluster_size, labels, key="planning.hierarchy")
+    planner = make_planner(free, hierarchy, p.cluster_size, labels, key="planning.hierarchy", corridor=p.corridor)
     build_s = time.perf_counter() - t0
     astar = AStar(free)
     queries = sample_queries(free, astar, p.queries, p.min_distance, cfg.seed, Path(map_path).stem)

@@ -62,10 +62,14 @@ class RoomGraphPlanner:
     The route search runs on the portal graph: one node per portal (at the
     mean of its free cells), two portals of one region joined at their octile
     distance, the grid distance across an empty room.
+
+    ``corridor``: instead of stitching one A* per room, one A* over the union of the route's rooms and
+    portals: the shortest path inside the rooms the route crosses, so a detour is only what leaving
+    those rooms would save (slower: the search spans the whole corridor).
     """
 
     def __init__(self, grid: PlanningGrid | np.ndarray, labels: np.ndarray, graph=None, connectivity: int = 8,
-                 cost: np.ndarray | None = None, smooth: bool = True):  # fmt: skip
+                 cost: np.ndarray | None = None, smooth: bool = True, corridor: bool = False):  # fmt: skip
         t0 = time.perf_counter()
         self.low = AStar(grid, connectivity, cost)
         self.grid = self.low.grid
@@ -76,6 +80,7 @@ class RoomGraphPlanner:
             graph = _default_region_graph(labels, self.grid)
         self.graph = graph
         self.smooth = smooth and connectivity == 8
+        self.corridor = corridor
         self._assign_regions(labels)
         self._portals()
         self._portal_graph()
@@ -209,7 +214,12 @@ class RoomGraphPlanner:
         self.route_expanded = 0
         route = self._route(start, goal, rs, rg)
         expanded, mode, cells = 0, "regions", None
-        if route is not None:
+        if route is not None and self.corridor:
+            ports, pieces = route
+            mode = "corridor"
+            found, expanded = lo.search(s, t, zstamp=self._mark(pieces, ports))
+            cells = _trace_from(lo.buf.parent, s, t, lo.width) if found else None
+        elif route is not None:
             ports, pieces = route
             b = lo.buf
             h, w = self.grid.shape
@@ -248,9 +258,11 @@ class RoomGraphPlanner:
 
 
 @register_planner("rooms", takes=("labels", "graph"))
-def room_planner(grid: PlanningGrid | np.ndarray, labels: np.ndarray, graph=None) -> RoomGraphPlanner:
-    """A route over the rooms' graph (a room segmentation's ``labels``), then A* inside the route's rooms."""
-    return RoomGraphPlanner(grid, labels, graph)
+def room_planner(grid: PlanningGrid | np.ndarray, labels: np.ndarray, graph=None,
+                 corridor: bool = False) -> RoomGraphPlanner:  # fmt: skip
+    """A route over the rooms' graph (a room segmentation's ``labels``), then A* inside the route's rooms
+    (``corridor``: one A* over all of them, the shortest path inside the rooms crossed)."""
+    return RoomGraphPlanner(grid, labels, graph, corridor=corridor)
 
 
 def _traversable(cells: np.ndarray, region: np.ndarray, ia: int, ib: int, free: np.ndarray) -> bool:

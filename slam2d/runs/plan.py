@@ -42,7 +42,7 @@ def run_plan(cfg, quiet: bool = False) -> Path:
             (work / "metrics.json").write_text(json_text(metrics))
         else:
             planned = plan_on_map(map_path, p.start, p.goal, hierarchy, p.robot_radius, p.limits, p.cluster_size,
-                                  labels, cfg.resolution, cfg.segmentation, cfg.seed)
+                                  labels, cfg.resolution, cfg.segmentation, cfg.seed, p.corridor)
             metrics = write_plan(planned, work, cfg.output.figures)
             if not metrics["found"]:
                 raise NoPathError(metrics.get("reason") or "unknown")
