@@ -12,8 +12,10 @@ from __future__ import annotations
 import logging
 import logging.handlers
 import multiprocessing
+import os
 import pickle
 import queue
+import signal
 import time
 import traceback
 from collections import Counter
@@ -29,6 +31,7 @@ from slam2d.config import ExperimentConfig
 from slam2d.errors import InputError
 from slam2d.frontends import create_frontend
 from slam2d.frontends.base import FrontendResult
+from slam2d.processes import die_with_parent
 from slam2d.types import Scan
 
 
@@ -85,7 +88,7 @@ class FrontendWorker:
         self.cpu_s = 0.0
         ctx = multiprocessing.get_context("fork")
         self._queue = ctx.Queue()  # unbounded: the worker never waits for the back end
-        self._process = ctx.Process(target=_work, args=(frontend, scans, self._queue), daemon=True,
+        self._process = ctx.Process(target=_work, args=(frontend, scans, self._queue, os.getpid()), daemon=True,
                                     name="slam2d-frontend")
         self._process.start()
 
@@ -143,8 +146,11 @@ def _log_through(out) -> None:
     logging.root.addHandler(logging.handlers.QueueHandler(_QueueSink(out)))
 
 
-def _work(frontend, scans, out) -> None:
-    """Worker body: send batches of pairs, then the frontend's events and the reader's counts."""
+def _work(frontend, scans, out, parent: int) -> None:
+    """Worker body: send batches of pairs, then the frontend's events and the reader's counts. It dies
+    with ``parent`` and leaves SIGINT to it (the parent stops it)."""
+    die_with_parent(parent)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         _log_through(out)
         batch = []

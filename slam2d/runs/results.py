@@ -25,6 +25,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
 from slam2d.errors import InputError
+from slam2d.processes import claim, release, stale
 from slam2d.runs.report import write_run_report
 from slam2d.runs.signals import check_stop
 
@@ -38,18 +39,34 @@ def results_folder(root: str | Path, name: str, key: str = "output.root"):
     On failure the temporary folder is removed, so no half-written folder remains.
     ``key`` names ``root`` in errors (the config key or the CLI option)."""
     root = output_root(root, key)
+    remove_stale(root)
     work = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=root))
     published: list[Path] = []
     try:
+        claim(work)
         with log_to(work / "run.log"):
             yield work, published
         check_stop()  # a signal whose exception was swallowed still leaves no folder
         if (work / "metrics.json").is_file():
             write_run_report(work, name)
+        release(work)
         published.append(_publish(work, root, name))
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
         raise
+
+
+def remove_stale(root: Path, ownerless: bool = False) -> int:
+    """Remove the hidden work folders under ``root`` whose process was killed outright (see
+    :func:`slam2d.processes.stale`; ``ownerless``: those without an owner record too); log and return their count."""
+    removed = 0
+    for folder in root.glob(".?*-*"):
+        if folder.is_dir() and stale(folder, ownerless):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed += not folder.exists()
+    if removed:
+        log.info("%s: removed %d hidden folder%s left by killed runs", root, removed, "s" * (removed != 1))
+    return removed
 
 
 def output_root(root: str | Path, key: str = "output.root") -> Path:

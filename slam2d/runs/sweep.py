@@ -10,6 +10,7 @@ import itertools
 import json
 import logging
 import multiprocessing
+import os
 import re
 import shutil
 import tarfile
@@ -31,7 +32,7 @@ from slam2d.evaluation.tables import check_summary, flatten_metrics, summarize, 
 from slam2d.plugins import resolve
 from slam2d.runs import signals
 from slam2d.runs.commands import command_of, resolved, run_command
-from slam2d.runs.results import new_folder, output_root, progress_console, shows_progress
+from slam2d.runs.results import new_folder, output_root, progress_console, remove_stale, shows_progress
 
 log = logging.getLogger("slam2d")
 
@@ -191,16 +192,23 @@ def variant_config(base: dict[str, Any], variant: Variant, root: Path, source: s
 
 def _run_variant(cfg: ExperimentConfig) -> tuple[str, dict[str, Any] | None, str | None]:
     """Worker: (folder, metrics, error)."""
+    if signals.orphaned():  # the sweep's process is gone: start nothing, write nothing
+        os._exit(143)
     if signals.stopped():
         raise KeyboardInterrupt
-    with signals.variant_running():
-        try:
-            folder = run_command(cfg, quiet=True)
-            return str(folder), json.loads((folder / "metrics.json").read_text()), None
-        except Exception as err:  # reported in the table, the sweep goes on
-            if signals.stopped():  # a signal can surface as another error (an interrupted import raises ImportError)
-                raise KeyboardInterrupt from err
-            return "", None, f"{type(err).__name__}: {err}"
+    try:
+        with signals.variant_running():
+            try:
+                folder = run_command(cfg, quiet=True)
+                return str(folder), json.loads((folder / "metrics.json").read_text()), None
+            except Exception as err:  # reported in the table, the sweep goes on
+                if signals.stopped():  # a signal can surface as another error (an interrupted import: ImportError)
+                    raise KeyboardInterrupt from err
+                return "", None, f"{type(err).__name__}: {err}"
+    except KeyboardInterrupt:
+        if signals.orphaned():  # its folder is removed; nobody is left to tell
+            os._exit(143)
+        raise
 
 
 class SweepStopped(KeyboardInterrupt):
@@ -254,8 +262,8 @@ def _sweep_folder(path, base: dict[str, Any], resume, model=None) -> Path:
             raise InputError(root, "not a sweep folder (no sweep.yaml): give the folder 'slam2d ablate' printed")
         if (root / "sweep.yaml").read_bytes() != Path(path).read_bytes():
             log.warning("%s differs from the sweep %s was started with; variants are matched by name", path, root)
-        for stale in (root / "runs").glob(".*"):  # left by a process killed outright
-            shutil.rmtree(stale, ignore_errors=True)
+        if (root / "runs").is_dir():
+            remove_stale(root / "runs", ownerless=True)  # left by a process killed outright
         return root
     name = str(config_mod.load_dict(path).get("name") or Path(path).stem)
     config_mod.validate({"name": name}, f"{path}: name")  # a folder name
@@ -395,7 +403,7 @@ def _execute_local(cfgs: list[ExperimentConfig], workers: int):
     # forkserver, not fork: a worker forked from a process that has run numba's parallel kernels (GNU
     # OpenMP) aborts as soon as it runs them itself (a localize sweep started after a localisation)
     pool = ProcessPoolExecutor(max_workers=max(1, workers), mp_context=multiprocessing.get_context("forkserver"),
-                               initializer=signals.init_sweep_worker)
+                               initializer=signals.init_sweep_worker, initargs=(os.getpid(),))
     try:
         futures = {pool.submit(_run_variant, c): i for i, c in enumerate(cfgs)}
         for fut in as_completed(futures):
