@@ -97,3 +97,36 @@ def test_die_with_parent_exits_when_the_parent_is_already_gone():
     code = "import os; from slam2d import processes; processes.die_with_parent(os.getppid() + 1); print('alive')"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert done.returncode == 128 + signal.SIGKILL and done.stdout == ""
+
+
+# ---------------------------------------------------------------- signals: 130, 143, no traceback
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
+def test_signal_to_the_group_during_run(tmp_path, sig, code):
+    root = tmp_path / "results"
+    proc = _cli("run", "-q", "--set", f"output.root={root}", start_new_session=True)
+    _wait_for(lambda: psutil.Process(proc.pid).children())
+    time.sleep(1.0)
+    os.killpg(proc.pid, sig)  # as a terminal's Ctrl-C or a scheduler does: every process of the group
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == code, err
+    assert "Traceback" not in err and "stopped: no results folder written" in err
+    assert list(root.iterdir()) == []
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)], ids=["SIGINT", "SIGTERM"])
+def test_signal_to_the_group_during_ablate(tmp_path, sig, code):
+    sweep = _sweep(tmp_path, [{"name": "a", "set": {"seed": 1}}, {"name": "b", "set": {"seed": 2}}], workers=2)
+    proc = _cli("ablate", "-q", sweep, start_new_session=True)
+    runs = lambda: list((tmp_path / "res").glob("ablate-sweep-*/runs/.*"))  # noqa: E731
+    _wait_for(lambda: len(runs()) == 2)
+    family = psutil.Process(proc.pid).children(recursive=True)
+    time.sleep(0.5)
+    os.killpg(proc.pid, sig)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == code, err
+    assert "Traceback" not in err and "0 of 2 variants finished" in err
+    assert runs() == []
+    time.sleep(1.0)
+    assert _living(family) == []

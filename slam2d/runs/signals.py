@@ -15,6 +15,7 @@ _STOPPED = False  # whether SIGINT or SIGTERM has arrived in this process (in a 
 
 
 _RUNNING_VARIANT = False  # in a sweep worker: whether a variant is running
+_SIGNAL = 0  # the first SIGINT or SIGTERM that arrived (0: none)
 
 
 def _handler(stop):
@@ -26,6 +27,8 @@ def _handler(stop):
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
             return
+        global _SIGNAL
+        _SIGNAL = _SIGNAL or signum
         stop()
 
     return handler
@@ -53,6 +56,11 @@ def stop_on_signals():
 def stopped() -> bool:
     """Whether SIGINT or SIGTERM has arrived since :func:`stop_on_signals`."""
     return _STOPPED
+
+
+def exit_code() -> int:
+    """The exit status of a command the first signal stopped, as shells give it: 130 (SIGINT), 143 (SIGTERM)."""
+    return 128 + (_SIGNAL or signal.SIGINT)
 
 
 def check_stop() -> None:
