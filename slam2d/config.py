@@ -18,11 +18,19 @@ from slam2d.plugins import load_plugins, resolve
 from slam2d.registry import Choice, check_choices, validation_error
 
 
+MIN_RESOLUTION, MAX_RESOLUTION = 1e-3, 10.0  # m per cell of any grid: 1 mm to 10 m
+MAX_BEAMS = 10_000  # beams of a (real or simulated) scan
+MAX_SAMPLES = 1_000_000  # particles, queries, candidates: counts of things made and scored one by one
+
+Resolution = Annotated[float, Field(ge=MIN_RESOLUTION, le=MAX_RESOLUTION)]
+"""A grid's cell size, m: finite, 1 mm to 10 m."""
+
+
 class Section(BaseModel):
     """Base of all config sections: unknown keys are rejected, and so are options an implementation
-    the section names does not take (:class:`slam2d.registry.Choice`)."""
+    the section names does not take (:class:`slam2d.registry.Choice`); numbers must be finite."""
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
     @model_validator(mode="after")
     def _options_fit(self):
@@ -33,7 +41,7 @@ class Section(BaseModel):
 class LaserModel(Section):
     """Simulated laser: beams spread evenly over the field of view."""
 
-    beams: int = Field(360, gt=0)
+    beams: int = Field(360, gt=0, le=MAX_BEAMS)
     fov_deg: float = Field(360.0, gt=0, le=360)
     range_min: float = Field(0.05, ge=0)
     range_max: float = Field(12.0, gt=0)
@@ -58,7 +66,7 @@ class SimulatorConfig(Section):
     """The embedded default dataset: a world, a scripted route, a laser, odometry."""
 
     world: str = Field("office", description="built-in world name, or path to an occupancy PNG")
-    resolution: float = Field(0.05, gt=0, description="m per pixel of a PNG world")
+    resolution: Resolution = Field(0.05, description="m per pixel of a PNG world")
     route: list[tuple[float, float]] | None = Field(
         None, description="waypoints (x, y) in m; None takes the world's scripted route"
     )
@@ -111,11 +119,11 @@ class LoopClosureConfig(Section):
         4, ge=0, description="a wide search (all places needing twice window_xy) at every n-th loop search (0: never)"
     )
     window_theta_deg: float = Field(30.0, gt=0, description="half-width of the rotational search window")
-    resolution: float = Field(0.05, gt=0, description="m; finest grid of the correlative matcher")
+    resolution: Resolution = Field(0.05, description="m; finest grid of the correlative matcher")
     min_score: float = Field(
         0.55, ge=0, le=1, description="mean likelihood of scan points on the submap to accept (1 = all on it)"
     )
-    max_candidates: int = Field(3, gt=0, description="candidates verified per new keyframe")
+    max_candidates: int = Field(3, gt=0, le=1000, description="candidates verified per new keyframe")
     ambiguity_distance: float = Field(
         0.5, ge=0, description="m; reject a match with a rival this far from it or farther (0: no check) ..."
     )
@@ -138,7 +146,7 @@ class BackendConfig(Section):
 class MappingConfig(Section):
     """Log-odds occupancy grid."""
 
-    resolution: float = Field(0.05, gt=0, description="m per cell")
+    resolution: Resolution = Field(0.05, description="m per cell")
     log_odds_hit: float = Field(0.85, gt=0)
     log_odds_miss: float = Field(-0.4, lt=0)
     log_odds_min: float = Field(-2.0, lt=0)
@@ -187,7 +195,7 @@ class NavigationConfig(Section):
         "none", description="without slam: 'mcl' drives on Monte Carlo localisation in the world's map "
         "(tracking from a rough start pose, slam2d.localization) instead of the true pose"
     )
-    people: int = Field(0, ge=0, description="people wandering at random (discs the map does not hold)")
+    people: int = Field(0, ge=0, le=1000, description="people wandering at random (discs the map does not hold)")
     people_speed: float = Field(0.5, gt=0, description="m/s")
     animation: bool = Field(True, description="an animated GIF of the run in the results folder")
     options: dict[str, Any] = Field(
@@ -233,7 +241,7 @@ class CommandConfig(Section):
         default_factory=list, description="Python files or modules imported first (implementations they register)"
     )
     map: str | None = Field(None, description="map file (map.yaml, floor-plan PNG, Moving AI .map)")
-    resolution: float | None = Field(None, gt=0, description="m per pixel of an image map (default 0.05)")
+    resolution: Resolution | None = Field(None, description="m per pixel of an image map (default 0.05)")
     output: OutputConfig = OutputConfig()
 
     @field_validator("name")

@@ -40,6 +40,15 @@ def short_repr(value: Any, limit: int = 80) -> str:
     return text if len(text) <= limit else f"{text[:limit - 3]}..."
 
 
+def check_inside(key: str, point, extent, what: str = "the map") -> None:
+    """InputError naming ``key`` if the point ``(x, y, ...)`` m lies outside ``extent`` (x_min, x_max, y_min, y_max)."""
+    x, y = float(point[0]), float(point[1])
+    x0, x1, y0, y1 = map(float, extent)
+    if not (x0 <= x <= x1 and y0 <= y <= y1):
+        raise InputError(key, f"({x:g}, {y:g}) is outside {what}: x from {x0:g} to {x1:g} m, y from {y0:g} to "
+                         f"{y1:g} m")
+
+
 def read_text(path) -> str:
     """The UTF-8 text of ``path``; an InputError naming it if it cannot be read or is not text."""
     try:

@@ -385,7 +385,10 @@ def test_resolution_too_fine_for_any_map_is_refused_before_the_run(tmp_path, mon
     from slam2d.runs.run import run_experiment
 
     monkeypatch.setattr(pipeline.SlamPipeline, "run", lambda *a, **k: pytest.fail("the SLAM ran"))
-    cfg = config.load(None, [f"output.root={tmp_path}", "mapping.resolution=1e-7"])
+    with pytest.raises(InputError, match=r"key 'mapping.resolution': Input should be greater than or equal to 0.001"):
+        config.load(None, [f"output.root={tmp_path}", "mapping.resolution=1e-7"])
+    cfg = config.load(None, [f"output.root={tmp_path}"])
+    object.__setattr__(cfg.mapping, "resolution", 1e-7)  # past the config's check
     with pytest.raises(InputError, match=r"mapping.resolution: 1e-07 m per cell: even the 1 m margin alone"):
         run_experiment(cfg, quiet=True)
     assert list(tmp_path.iterdir()) == []

@@ -18,7 +18,7 @@ class PlanningConfig(Section):
     hierarchy: Annotated[str, Choice("global_planners", canonical=False)] = Field(
         "none", description="none (A*), hpa (square clusters) or rooms (the room graph of a segmentation)"
     )
-    cluster_size: int = Field(16, gt=1, description="HPA* cluster side, cells")
+    cluster_size: int = Field(16, gt=1, le=4096, description="HPA* cluster side, cells")
     robot_radius: float = Field(0.2, ge=0, description="obstacle inflation, m")
     labels: str | None = Field(
         None, description="rooms: label image (labels.png of slam2d segment) or .npy; None: the map is "
@@ -27,7 +27,7 @@ class PlanningConfig(Section):
     start: tuple[float, float] | None = Field(None, description="x, y in m (with goal: one query)")
     goal: tuple[float, float] | None = Field(None, description="x, y in m")
     queries: int = Field(
-        0, ge=0, description="instead of start and goal: this many seeded random start-goal pairs that A* "
+        0, ge=0, le=100_000, description="instead of start and goal: this many seeded random start-goal pairs that A* "
         "connects, each planned by A* and by the chosen planner (suboptimality, speed-up)"
     )
     min_distance: float = Field(10.0, ge=0, description="m; preferred straight-line distance between a query's ends")
