@@ -18,6 +18,7 @@ from slam2d.plugins import load_plugins, resolve
 from slam2d.registry import Choice, check_choices, validation_error
 
 
+MAX_NAME_BYTES = 200  # a results folder's name; its date and hidden-folder suffixes fit in a file system's 255
 MIN_RESOLUTION, MAX_RESOLUTION = 1e-3, 10.0  # m per cell of any grid: 1 mm to 10 m
 MAX_BEAMS = 10_000  # beams of a (real or simulated) scan
 MAX_SAMPLES = 1_000_000  # particles, queries, candidates: counts of things made and scored one by one
@@ -226,8 +227,10 @@ class ExperimentConfig(Section):
 
 def folder_name(name: str) -> str:
     """``name`` if it can name a results folder, else ValueError (for a pydantic validator)."""
-    if not 0 < len(name) <= 200 or name.startswith(".") or any(c in name for c in "/\\\0"):
-        raise ValueError("must be a folder name: 1-200 characters, no '/', '\\' or NUL, no leading '.'")
+    if not 0 < len(name.encode("utf-8", "surrogatepass")) <= MAX_NAME_BYTES or name.startswith(".") \
+            or any(c in name for c in "/\\\0"):
+        raise ValueError(f"must be a folder name: 1-{MAX_NAME_BYTES} bytes (UTF-8), no '/', '\\' or NUL, no "
+                         "leading '.'")
     return name
 
 
