@@ -63,6 +63,7 @@ def _fail(err: Exception) -> None:
 
 
 STOPPED_CODES = (130, 143)  # stopped by SIGINT, by SIGTERM
+NOT_REACHED = 3  # navigate: the goal was not reached (its results are written)
 
 
 def _stopped(what: str) -> None:
