@@ -74,8 +74,8 @@ def _clock_reset():
 
 
 def test_losing_more_than_a_small_fraction_fails_naming_it(tmp_path):
-    with pytest.raises(InputError, match=r"run.clf: 16 of 300 scans \(5%\) unusable \(8 scans stamped after .*"
-                                         r"more than the 5% allowed \(dataset.max_skipped\)$"):
+    with pytest.raises(InputError, match=r"run.clf: 16 of 300 scans \(5.3 %\) unusable \(8 scans stamped after .*"
+                                         r"more than the 5.0 % allowed \(dataset.max_skipped\)$"):
         list(CarmenSource(_log(tmp_path, _clock_reset())))
 
 
@@ -84,7 +84,7 @@ def test_max_skipped_lets_a_lossy_log_through_with_a_warning(tmp_path, caplog):
     source.max_skipped = 1.0
     with caplog.at_level(logging.WARNING):
         assert len(list(source)) == 92  # the 8 scans before the reset are outvoted by the 200 after it
-    assert "208 of 300 scans (69.3%) skipped" in caplog.text
+    assert "208 of 300 scans (69.3 %) skipped" in caplog.text
 
 
 # ---------------------------------------------------------------- item 2: numeric fields
