@@ -260,8 +260,9 @@ def _sweep_folder(path, base: dict[str, Any], resume, model=None) -> Path:
         root = Path(resume).expanduser()
         if not (root / "sweep.yaml").is_file():
             raise InputError(root, "not a sweep folder (no sweep.yaml): give the folder 'slam2d ablate' printed")
-        if (root / "sweep.yaml").read_bytes() != Path(path).read_bytes():
-            log.warning("%s differs from the sweep %s was started with; variants are matched by name", path, root)
+        if config_mod.load_dict(root / "sweep.yaml") != config_mod.load_dict(path):
+            raise InputError(f"--resume {root}", f"its sweep.yaml differs from {path}: resume with the sweep file it "
+                             "was started with (or start a new sweep)")
         if (root / "runs").is_dir():
             remove_stale(root / "runs", ownerless=True)  # left by a process killed outright
         return root
