@@ -13,7 +13,7 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from slam2d.errors import InputError, read_text, short_repr  # noqa: F401 (short_repr: for config users)
+from slam2d.errors import InputError, not_a_file, read_text, short_repr  # noqa: F401 (short_repr: for config users)
 from slam2d.plugins import load_plugins, resolve
 from slam2d.registry import Choice, check_choices, validation_error
 
@@ -300,7 +300,7 @@ def load_dict(path: str | Path) -> dict[str, Any]:
     """Read a YAML mapping from ``path`` (clear error if missing or malformed)."""
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "config file not found")
+        raise InputError(path, not_a_file(path) or "config file not found")
     data = read_yaml(path)
     if data is None:
         return {}

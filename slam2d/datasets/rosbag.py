@@ -18,7 +18,7 @@ from slam2d import geometry
 from slam2d.config import DatasetConfig
 from slam2d.datasets.base import MAX_COORD, ScanSource, register_dataset
 from slam2d.datasets.registry import log_path
-from slam2d.errors import InputError
+from slam2d.errors import InputError, not_a_file
 from slam2d.types import Scan
 
 log = logging.getLogger(__name__)
@@ -88,6 +88,8 @@ class RosbagSource(ScanSource):
         self.notes: Counter[str] = Counter()
         if not self.path.exists():
             raise InputError(self.path, "file not found")
+        if not self.path.is_dir() and (kind := not_a_file(self.path)):  # a ROS 2 bag is a folder
+            raise InputError(self.path, kind)
         with self._open() as reader:
             topics = reader.topics
             self.scan_topic = _pick_topic(self.path, topics, LASER_TYPE, scan_topic, "/scan")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d.config import MAX_RESOLUTION, MIN_RESOLUTION, MappingConfig, read_yaml, short_repr
-from slam2d.errors import InputError
+from slam2d.errors import InputError, not_a_file
 from slam2d.mapping.grid import OccupancyGrid, logit
 from slam2d.mapping.image import read_grey
 
@@ -107,7 +107,7 @@ def map_yaml_free_thresh(path) -> float:
 
 def _read_map_yaml(path: Path) -> dict:
     if not path.is_file():
-        raise InputError(path, "map YAML not found")
+        raise InputError(path, not_a_file(path) or "map YAML not found")
     meta = read_yaml(path)
     if not isinstance(meta, dict):
         raise InputError(path, "a map YAML must be a mapping")

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d.config import MAX_RESOLUTION, MIN_RESOLUTION
-from slam2d.errors import InputError
+from slam2d.errors import InputError, not_a_file
 from slam2d.mapping.export import LOADED_LOG_ODDS, load_map_server
 from slam2d.mapping.grid import OccupancyGrid
 from slam2d.mapping.image import read_grey
@@ -43,7 +43,8 @@ def load_map(path, resolution: float | None = None) -> OccupancyGrid:
     if path.is_dir() and (path / "map.yaml").is_file():
         path = path / "map.yaml"
     if not path.is_file():
-        raise InputError(path, "map file not found (a map.yaml, a results folder, a floor-plan image or a .map)")
+        raise InputError(path, not_a_file(path) or "map file not found (a map.yaml, a results folder, a floor-plan "
+                         "image or a .map)")
     suffix = path.suffix.lower()
     if suffix in _MAP_YAML:
         return load_map_server(path)
