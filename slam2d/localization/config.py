@@ -41,8 +41,8 @@ class MclConfig(Section):
                                        "is judged on this share of the beams, the best-fitting at each particle: "
                                        "a map lacking part of what the laser sees (an opened door, glass, a wall "
                                        "worn off a SLAM grid) is no kidnapping (1: every beam always, as amcl)")
-    recovery_candidates: int = Field(20, gt=0, le=MAX_SAMPLES, description="random particles are drawn by the scan's likelihood "
-                                     "from this many times as many uniform poses (1: uniform, as amcl)")
+    recovery_candidates: int = Field(20, gt=0, le=1000, description="random particles are drawn by the scan's "
+                                     "likelihood from this many times as many uniform poses (1: uniform, as amcl)")
     hypothesis_fit: bool = Field(True, description="each cluster's total weight follows the scan's likelihood at "
                                  "its weighted mean pose, not the mean over its particles: a look-alike place "
                                  "weighs as much as the true one whatever the number and spread of its particles "
