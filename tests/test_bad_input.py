@@ -144,17 +144,25 @@ def test_bag_odometry_message_with_nan_or_absurd_pose_is_dropped(tmp_path, bad, 
 # ---------------------------------------------------------------- item 5: corrupt bag chunk
 
 
-def test_corrupt_bag_chunk_names_the_file(tmp_path):
+def test_corrupt_bag_chunk_is_read_as_far_as_it_is_good(tmp_path, caplog):
     scans = [(1.0 + 0.2 * i, np.linspace(1.0, 5.0, 180)) for i in range(200)]
     odoms = [(1.0 + 0.2 * i, (0.0, 0.0, 0.0)) for i in range(200)]
-    path = _write_bag("ros1", tmp_path / "c.bag", scans=scans, odoms=odoms, compression="BZ2")
+    path = _write_bag("ros1", tmp_path / "c.bag", scans=scans, odoms=odoms, compression="BZ2", chunk_bytes=8192)
     data = bytearray(path.read_bytes())
     mid = len(data) // 3
     data[mid:mid + 64] = bytes(64)
     path.write_bytes(bytes(data))
     source = RosbagSource(path)  # the index at the end is intact
-    with pytest.raises(InputError, match=r"c.bag: /(scan|odom) message \d+: unreadable"):
+    with pytest.raises(InputError, match=r"c.bag: \d+ of 200 scans .* unusable \(\d+ scans in an unreadable part of "
+                                         r"the bag\); more than the 5.0 % allowed"):
         list(source)
+    source.max_skipped = 1.0
+    with caplog.at_level(logging.WARNING):
+        good = list(source)
+    lost = source.skipped["scans in an unreadable part of the bag"]
+    assert 0 < len(good) < 200 and len(good) + lost == 200
+    assert np.allclose([s.stamp for s in good], [1.0 + 0.2 * i for i in range(len(good))])  # the first ones
+    assert "c.bag: /scan message" in caplog.text and "read as far as the bag is good" in caplog.text
 
 
 # ---------------------------------------------------------------- item 6: map.yaml, label images, robot radius
