@@ -124,3 +124,20 @@ def test_localize_initial_pose_outside_the_map_is_an_input_error(tmp_path):
     with pytest.raises(InputError, match=r"^initial_pose: \(500, 0\) is outside the map"):
         run_localize(cfg, quiet=True)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("workers", [0, -2, 100_000])
+def test_sweep_workers_are_bounded(tmp_path, workers):
+    import yaml
+
+    from slam2d.runs.sweep import run_sweep
+
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump({"config": {"output": {"root": str(tmp_path / "res")}},
+                                    "variants": [{"name": "a", "set": {"seed": 1}}]}))
+    with pytest.raises(InputError, match=r"^--workers: expected a positive integer up to 256"):
+        run_sweep(path, workers=workers, quiet=True)
+    path.write_text(path.read_text() + f"workers: {workers}\n")
+    with pytest.raises(InputError, match=r"sweep.yaml: workers: expected a positive integer up to 256"):
+        run_sweep(path, quiet=True)
+    assert not (tmp_path / "res").exists()

@@ -96,11 +96,20 @@ def read_sweep(path: str | Path, overrides: list[str] = (), grid: list[str] = ()
         raise InputError(path, "variant names must be unique")
     for v in variants:  # validate every variant, its frontend included, before running any
         _check_variant(base, v, path, model)
-    workers = sweep.get("workers", 2)
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise InputError(f"{path}: workers", f"expected a positive integer, got {config_mod.short_repr(workers)}")
+    workers = check_workers(sweep.get("workers", 2), f"{path}: workers")
     summary = check_summary(sweep["summary"], f"{path}: summary") if "summary" in sweep else None
     return Sweep(base, variants, workers, model, summary, command.main_metrics)
+
+
+MAX_WORKERS = 256
+"""Most worker processes a sweep runs at once."""
+
+
+def check_workers(workers, key: str) -> int:
+    """``workers`` if it is an integer from 1 to MAX_WORKERS, else an InputError naming ``key``."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= MAX_WORKERS:
+        raise InputError(key, f"expected a positive integer up to {MAX_WORKERS}, got {config_mod.short_repr(workers)}")
+    return workers
 
 
 def grid_axis(text: str) -> tuple[str, list[Any]]:
@@ -233,6 +242,8 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
     """
     if executor not in EXECUTORS:
         raise InputError("--executor", f"unknown executor '{executor}' ({', '.join(EXECUTORS)})")
+    if workers is not None:
+        check_workers(workers, "--workers")
     sweep = read_sweep(path, overrides, grid)
     base, variants = sweep.base, sweep.variants
     if executor == "ray":
