@@ -16,6 +16,7 @@ import os
 import pickle
 import queue
 import signal
+import threading
 import time
 import traceback
 from collections import Counter
@@ -88,7 +89,9 @@ class FrontendWorker:
         self.cpu_s = 0.0
         ctx = multiprocessing.get_context("fork")
         self._queue = ctx.Queue()  # unbounded: the worker never waits for the back end
-        self._process = ctx.Process(target=_work, args=(frontend, scans, self._queue, os.getpid()), daemon=True,
+        # the parent-death signal comes when the forking thread ends: only the main thread lives as long as the process
+        parent = os.getpid() if threading.current_thread() is threading.main_thread() else None
+        self._process = ctx.Process(target=_work, args=(frontend, scans, self._queue, parent), daemon=True,
                                     name="slam2d-frontend")
         self._process.start()
 
@@ -146,10 +149,11 @@ def _log_through(out) -> None:
     logging.root.addHandler(logging.handlers.QueueHandler(_QueueSink(out)))
 
 
-def _work(frontend, scans, out, parent: int) -> None:
+def _work(frontend, scans, out, parent: int | None) -> None:
     """Worker body: send batches of pairs, then the frontend's events and the reader's counts. It dies
     with ``parent`` and leaves SIGINT to it (the parent stops it)."""
-    die_with_parent(parent)
+    if parent is not None:
+        die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         _log_through(out)
