@@ -68,3 +68,15 @@ def test_resume_with_a_different_sweep_is_an_error(tmp_path):
         run_sweep(second, quiet=True, resume=folder)
     first.write_text("# the same sweep, commented\n" + first.read_text())
     assert run_sweep(first, quiet=True, resume=folder)[0] == folder
+
+
+def test_pipe_and_device_as_trajectory_world_and_graph(fifo):
+    from slam2d.datasets.g2o import read_g2o
+    from slam2d.evaluation.trajectory import read_tum
+    from slam2d.sim.world import World
+
+    for read in (read_tum, World.from_png, read_g2o):
+        with pytest.raises(InputError, match=r"pipe.yaml: a named pipe \(FIFO\), not a file$"):
+            read(fifo)
+        with pytest.raises(InputError, match=r"^/dev/null: a device, not a file$"):
+            read("/dev/null")

@@ -12,7 +12,7 @@ import numpy as np
 from PIL import Image
 from scipy import ndimage
 
-from slam2d.errors import InputError, check_inside
+from slam2d.errors import InputError, check_inside, not_a_file
 from slam2d.planning.astar import AStar, PlanResult, check_path, path_length
 from slam2d.planning.base import GLOBAL_PLANNERS
 from slam2d.planning.grid import PlanningGrid, load_grid
@@ -68,7 +68,7 @@ def _labels(labels, grid: PlanningGrid, segmentation=None, seed: int = 0) -> np.
     if isinstance(labels, (str, Path)):
         path = Path(labels)
         if not path.is_file():
-            raise InputError(path, "labels file not found")
+            raise InputError(path, not_a_file(path) or "labels file not found")
         labels = _read_labels(path)
     labels = np.asarray(labels)
     if labels.shape != shape:
