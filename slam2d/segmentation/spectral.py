@@ -30,7 +30,7 @@ from scipy import linalg, sparse
 from scipy.sparse.linalg import eigsh
 from threadpoolctl import threadpool_limits
 
-from slam2d.config import MAX_BEAMS, Section
+from slam2d.config import MAX_BEAMS, Resolution, Section
 from slam2d.errors import InputError
 from slam2d.registry import Choice, validation_error
 from slam2d.segmentation.base import SEGMENTATION_METHODS, SIMILARITY_MEASURES, register_method
@@ -106,7 +106,7 @@ class SpectralConfig(Section):
     label_rule: Literal["fraction", "vote", "nearest"] = Field(
         "fraction", description="how cells take observation labels (see label_free_cells)"
     )
-    label_cell_m: float = Field(0.1, gt=0, description="cell size of the labelling pass, m")
+    label_cell_m: Resolution = Field(0.1, description="cell size of the labelling pass, m")
     min_segment_m2: float = Field(0.0, ge=0, description="segments smaller than this are absorbed, m^2")
     merge_ratio: float | None = Field(
         0.7, gt=0, description="merge segments whose boundary is at least this fraction of their width; None: off"
