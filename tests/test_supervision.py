@@ -130,3 +130,8 @@ def test_signal_to_the_group_during_ablate(tmp_path, sig, code):
     assert runs() == []
     time.sleep(1.0)
     assert _living(family) == []
+
+
+def test_python_dash_m_slam2d_is_the_command():
+    done = subprocess.run([sys.executable, "-m", "slam2d", "--version"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.startswith("slam2d "), done.stderr
