@@ -83,3 +83,28 @@ def test_names_are_limited_in_bytes_not_characters(tmp_path):
     stem = "地" * 80  # 240 bytes: a valid file name, too long for "map-STEM-YYYYmmdd-HHMMSS"
     folder = run_map(_map_config(tmp_path, tmp_path / "res", _map_yaml(tmp_path, stem)))
     assert folder.is_dir() and len(folder.name.encode()) <= 255 and folder.name.startswith("map-地地")
+
+
+def test_sweep_folder_and_table_write_failures(tmp_path, monkeypatch):
+    import yaml
+
+    from slam2d.runs import sweep as sweeps
+
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump({"workers": 1, "variants": [{"name": "a", "set": {"seed": 1}}], "config": {
+        "output": {"root": str(tmp_path / "res")}, "mapping": {"resolution": 0.1}, "dataset": {"max_scans": 5}}}))
+
+    def refuse(parent, stem):
+        raise PermissionError(errno.EACCES, "Permission denied", str(parent / stem))
+
+    monkeypatch.setattr(sweeps, "new_folder", refuse)
+    with pytest.raises(InputError, match=r"res/ablate-sweep-\d+-\d+: cannot write \(Permission denied\)$"):
+        sweeps.run_sweep(path, quiet=True)
+    monkeypatch.undo()
+
+    def full(rows, stem, *args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", f"{stem}.md")
+
+    monkeypatch.setattr(sweeps, "write_table", full)
+    with pytest.raises(InputError, match=r"table.md: cannot write \(No space left on device\)$"):
+        sweeps.run_sweep(path, quiet=True)

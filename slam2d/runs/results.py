@@ -59,13 +59,30 @@ def results_folder(root: str | Path, name: str, key: str = "output.root"):
     except BaseException as err:
         shutil.rmtree(work, ignore_errors=True)
         if isinstance(err, OSError) and err.errno in WRITE_ERRORS:
-            raise InputError(err.filename or work, f"cannot write ({err.strerror or err})") from None
+            raise write_error(err, work) from None
         raise
 
 
 WRITE_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG}
 """OSErrors that filling a results folder turns into an InputError naming the path: the disk is full,
 read-only or refuses (a name too long, no permission)."""
+
+
+def write_error(err: OSError, where) -> InputError:
+    """The InputError of a write that failed with ``err`` (one of WRITE_ERRORS): its file (else ``where``)
+    and the reason."""
+    return InputError(err.filename or where, f"cannot write ({err.strerror or err})")
+
+
+@contextmanager
+def writes(where):
+    """In the block an OSError of WRITE_ERRORS becomes an InputError (:func:`write_error`)."""
+    try:
+        yield
+    except OSError as err:
+        if err.errno in WRITE_ERRORS:
+            raise write_error(err, where) from None
+        raise
 
 
 def fit_name(name: str) -> str:

@@ -32,7 +32,7 @@ from slam2d.evaluation.tables import check_summary, flatten_metrics, summarize, 
 from slam2d.plugins import resolve
 from slam2d.runs import signals
 from slam2d.runs.commands import command_of, resolved, run_command
-from slam2d.runs.results import new_folder, output_root, progress_console, remove_stale, shows_progress
+from slam2d.runs.results import new_folder, output_root, progress_console, remove_stale, shows_progress, writes
 
 log = logging.getLogger("slam2d")
 
@@ -248,7 +248,8 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
     base, variants = sweep.base, sweep.variants
     if executor == "ray":
         _connect_ray()  # before the sweep folder: an unreachable cluster leaves none
-    root = _sweep_folder(path, base, resume, sweep.model)
+    with writes("output.root" if resume is None else resume):
+        root = _sweep_folder(path, base, resume, sweep.model)
     cfgs = [variant_config(base, v, root / "runs", model=sweep.model) for v in variants]
     outcomes = [_finished(root / "runs", c.name) for c in cfgs]
     todo = [i for i, o in enumerate(outcomes) if o is None]
@@ -260,9 +261,11 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
     except BaseException as err:
         if not (isinstance(err, KeyboardInterrupt) or signals.stopped()):
             raise
-        _write_sweep_table(root, variants, outcomes, sweep.summary, sweep.main_metrics)
+        with writes(root):
+            _write_sweep_table(root, variants, outcomes, sweep.summary, sweep.main_metrics)
         raise SweepStopped(root, sum(o is not None and not o[2] for o in outcomes), len(variants)) from None
-    return root, _write_sweep_table(root, variants, outcomes, sweep.summary, sweep.main_metrics)
+    with writes(root):
+        return root, _write_sweep_table(root, variants, outcomes, sweep.summary, sweep.main_metrics)
 
 
 def _sweep_folder(path, base: dict[str, Any], resume, model=None) -> Path:
