@@ -13,16 +13,25 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from slam2d.errors import InputError, read_text, short_repr  # noqa: F401 (short_repr: for config users)
+from slam2d.errors import InputError, not_a_file, read_text, short_repr  # noqa: F401 (short_repr: for config users)
 from slam2d.plugins import load_plugins, resolve
 from slam2d.registry import Choice, check_choices, validation_error
 
 
+MAX_NAME_BYTES = 200  # a results folder's name; its date and hidden-folder suffixes fit in a file system's 255
+MIN_RESOLUTION, MAX_RESOLUTION = 1e-3, 10.0  # m per cell of any grid: 1 mm to 10 m
+MAX_BEAMS = 10_000  # beams of a (real or simulated) scan
+MAX_SAMPLES = 1_000_000  # particles, queries, candidates: counts of things made and scored one by one
+
+Resolution = Annotated[float, Field(ge=MIN_RESOLUTION, le=MAX_RESOLUTION)]
+"""A grid's cell size, m: finite, 1 mm to 10 m."""
+
+
 class Section(BaseModel):
     """Base of all config sections: unknown keys are rejected, and so are options an implementation
-    the section names does not take (:class:`slam2d.registry.Choice`)."""
+    the section names does not take (:class:`slam2d.registry.Choice`); numbers must be finite."""
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
 
     @model_validator(mode="after")
     def _options_fit(self):
@@ -33,7 +42,7 @@ class Section(BaseModel):
 class LaserModel(Section):
     """Simulated laser: beams spread evenly over the field of view."""
 
-    beams: int = Field(360, gt=0)
+    beams: int = Field(360, gt=0, le=MAX_BEAMS)
     fov_deg: float = Field(360.0, gt=0, le=360)
     range_min: float = Field(0.05, ge=0)
     range_max: float = Field(12.0, gt=0)
@@ -58,7 +67,7 @@ class SimulatorConfig(Section):
     """The embedded default dataset: a world, a scripted route, a laser, odometry."""
 
     world: str = Field("office", description="built-in world name, or path to an occupancy PNG")
-    resolution: float = Field(0.05, gt=0, description="m per pixel of a PNG world")
+    resolution: Resolution = Field(0.05, description="m per pixel of a PNG world")
     route: list[tuple[float, float]] | None = Field(
         None, description="waypoints (x, y) in m; None takes the world's scripted route"
     )
@@ -111,11 +120,11 @@ class LoopClosureConfig(Section):
         4, ge=0, description="a wide search (all places needing twice window_xy) at every n-th loop search (0: never)"
     )
     window_theta_deg: float = Field(30.0, gt=0, description="half-width of the rotational search window")
-    resolution: float = Field(0.05, gt=0, description="m; finest grid of the correlative matcher")
+    resolution: Resolution = Field(0.05, description="m; finest grid of the correlative matcher")
     min_score: float = Field(
         0.55, ge=0, le=1, description="mean likelihood of scan points on the submap to accept (1 = all on it)"
     )
-    max_candidates: int = Field(3, gt=0, description="candidates verified per new keyframe")
+    max_candidates: int = Field(3, gt=0, le=1000, description="candidates verified per new keyframe")
     ambiguity_distance: float = Field(
         0.5, ge=0, description="m; reject a match with a rival this far from it or farther (0: no check) ..."
     )
@@ -138,7 +147,7 @@ class BackendConfig(Section):
 class MappingConfig(Section):
     """Log-odds occupancy grid."""
 
-    resolution: float = Field(0.05, gt=0, description="m per cell")
+    resolution: Resolution = Field(0.05, description="m per cell")
     log_odds_hit: float = Field(0.85, gt=0)
     log_odds_miss: float = Field(-0.4, lt=0)
     log_odds_min: float = Field(-2.0, lt=0)
@@ -187,7 +196,7 @@ class NavigationConfig(Section):
         "none", description="without slam: 'mcl' drives on Monte Carlo localisation in the world's map "
         "(tracking from a rough start pose, slam2d.localization) instead of the true pose"
     )
-    people: int = Field(0, ge=0, description="people wandering at random (discs the map does not hold)")
+    people: int = Field(0, ge=0, le=1000, description="people wandering at random (discs the map does not hold)")
     people_speed: float = Field(0.5, gt=0, description="m/s")
     animation: bool = Field(True, description="an animated GIF of the run in the results folder")
     options: dict[str, Any] = Field(
@@ -218,8 +227,10 @@ class ExperimentConfig(Section):
 
 def folder_name(name: str) -> str:
     """``name`` if it can name a results folder, else ValueError (for a pydantic validator)."""
-    if not 0 < len(name) <= 200 or name.startswith(".") or any(c in name for c in "/\\\0"):
-        raise ValueError("must be a folder name: 1-200 characters, no '/', '\\' or NUL, no leading '.'")
+    if not 0 < len(name.encode("utf-8", "surrogatepass")) <= MAX_NAME_BYTES or name.startswith(".") \
+            or any(c in name for c in "/\\\0"):
+        raise ValueError(f"must be a folder name: 1-{MAX_NAME_BYTES} bytes (UTF-8), no '/', '\\' or NUL, no "
+                         "leading '.'")
     return name
 
 
@@ -233,7 +244,7 @@ class CommandConfig(Section):
         default_factory=list, description="Python files or modules imported first (implementations they register)"
     )
     map: str | None = Field(None, description="map file (map.yaml, floor-plan PNG, Moving AI .map)")
-    resolution: float | None = Field(None, gt=0, description="m per pixel of an image map (default 0.05)")
+    resolution: Resolution | None = Field(None, description="m per pixel of an image map (default 0.05)")
     output: OutputConfig = OutputConfig()
 
     @field_validator("name")
@@ -289,7 +300,7 @@ def load_dict(path: str | Path) -> dict[str, Any]:
     """Read a YAML mapping from ``path`` (clear error if missing or malformed)."""
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "config file not found")
+        raise InputError(path, not_a_file(path) or "config file not found")
     data = read_yaml(path)
     if data is None:
         return {}

@@ -12,8 +12,11 @@ from __future__ import annotations
 import logging
 import logging.handlers
 import multiprocessing
+import os
 import pickle
 import queue
+import signal
+import threading
 import time
 import traceback
 from collections import Counter
@@ -29,6 +32,7 @@ from slam2d.config import ExperimentConfig
 from slam2d.errors import InputError
 from slam2d.frontends import create_frontend
 from slam2d.frontends.base import FrontendResult
+from slam2d.processes import die_with_parent
 from slam2d.types import Scan
 
 
@@ -86,7 +90,9 @@ class FrontendWorker:
         self.cpu_s = 0.0
         ctx = multiprocessing.get_context("fork")
         self._queue = ctx.Queue()  # unbounded: the worker never waits for the back end
-        self._process = ctx.Process(target=_work, args=(frontend, scans, self._queue), daemon=True,
+        # the parent-death signal comes when the forking thread ends: only the main thread lives as long as the process
+        parent = os.getpid() if threading.current_thread() is threading.main_thread() else None
+        self._process = ctx.Process(target=_work, args=(frontend, scans, self._queue, parent), daemon=True,
                                     name="slam2d-frontend")
         self._process.start()
 
@@ -144,8 +150,12 @@ def _log_through(out) -> None:
     logging.root.addHandler(logging.handlers.QueueHandler(_QueueSink(out)))
 
 
-def _work(frontend, scans, out) -> None:
-    """Worker body: send batches of pairs, then the frontend's events and the reader's counts."""
+def _work(frontend, scans, out, parent: int | None) -> None:
+    """Worker body: send batches of pairs, then the frontend's events and the reader's counts. It dies
+    with ``parent`` and leaves SIGINT to it (the parent stops it)."""
+    if parent is not None:
+        die_with_parent(parent)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         _log_through(out)
         batch = []

@@ -74,8 +74,8 @@ def _clock_reset():
 
 
 def test_losing_more_than_a_small_fraction_fails_naming_it(tmp_path):
-    with pytest.raises(InputError, match=r"run.clf: 16 of 300 scans \(5%\) unusable \(8 scans stamped after .*"
-                                         r"more than the 5% allowed \(dataset.max_skipped\)$"):
+    with pytest.raises(InputError, match=r"run.clf: 16 of 300 scans \(5.3 %\) unusable \(8 scans stamped after .*"
+                                         r"more than the 5.0 % allowed \(dataset.max_skipped\)$"):
         list(CarmenSource(_log(tmp_path, _clock_reset())))
 
 
@@ -84,7 +84,7 @@ def test_max_skipped_lets_a_lossy_log_through_with_a_warning(tmp_path, caplog):
     source.max_skipped = 1.0
     with caplog.at_level(logging.WARNING):
         assert len(list(source)) == 92  # the 8 scans before the reset are outvoted by the 200 after it
-    assert "208 of 300 scans (69.3%) skipped" in caplog.text
+    assert "208 of 300 scans (69.3 %) skipped" in caplog.text
 
 
 # ---------------------------------------------------------------- item 2: numeric fields
@@ -144,17 +144,25 @@ def test_bag_odometry_message_with_nan_or_absurd_pose_is_dropped(tmp_path, bad, 
 # ---------------------------------------------------------------- item 5: corrupt bag chunk
 
 
-def test_corrupt_bag_chunk_names_the_file(tmp_path):
+def test_corrupt_bag_chunk_is_read_as_far_as_it_is_good(tmp_path, caplog):
     scans = [(1.0 + 0.2 * i, np.linspace(1.0, 5.0, 180)) for i in range(200)]
     odoms = [(1.0 + 0.2 * i, (0.0, 0.0, 0.0)) for i in range(200)]
-    path = _write_bag("ros1", tmp_path / "c.bag", scans=scans, odoms=odoms, compression="BZ2")
+    path = _write_bag("ros1", tmp_path / "c.bag", scans=scans, odoms=odoms, compression="BZ2", chunk_bytes=8192)
     data = bytearray(path.read_bytes())
     mid = len(data) // 3
     data[mid:mid + 64] = bytes(64)
     path.write_bytes(bytes(data))
     source = RosbagSource(path)  # the index at the end is intact
-    with pytest.raises(InputError, match=r"c.bag: /(scan|odom) message \d+: unreadable"):
+    with pytest.raises(InputError, match=r"c.bag: \d+ of 200 scans .* unusable \(\d+ scans in an unreadable part of "
+                                         r"the bag\); more than the 5.0 % allowed"):
         list(source)
+    source.max_skipped = 1.0
+    with caplog.at_level(logging.WARNING):
+        good = list(source)
+    lost = source.skipped["scans in an unreadable part of the bag"]
+    assert 0 < len(good) < 200 and len(good) + lost == 200
+    assert np.allclose([s.stamp for s in good], [1.0 + 0.2 * i for i in range(len(good))])  # the first ones
+    assert "c.bag: /scan message" in caplog.text and "read as far as the bag is good" in caplog.text
 
 
 # ---------------------------------------------------------------- item 6: map.yaml, label images, robot radius
@@ -247,11 +255,11 @@ def _wait_for(predicate, timeout=120.0):
 
 
 def _stop(proc: subprocess.Popen, sig) -> str:
-    """Send ``sig`` to ``proc`` alone (as a scheduler or `timeout` does); its stderr once it has exited 130."""
+    """Send ``sig`` to ``proc`` alone (as a scheduler or `timeout` does); its stderr once it has exited 128 + sig."""
     time.sleep(0.5)
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130, err
+    assert proc.returncode == 128 + sig, err
     return err
 
 
@@ -385,7 +393,10 @@ def test_resolution_too_fine_for_any_map_is_refused_before_the_run(tmp_path, mon
     from slam2d.runs.run import run_experiment
 
     monkeypatch.setattr(pipeline.SlamPipeline, "run", lambda *a, **k: pytest.fail("the SLAM ran"))
-    cfg = config.load(None, [f"output.root={tmp_path}", "mapping.resolution=1e-7"])
+    with pytest.raises(InputError, match=r"key 'mapping.resolution': Input should be greater than or equal to 0.001"):
+        config.load(None, [f"output.root={tmp_path}", "mapping.resolution=1e-7"])
+    cfg = config.load(None, [f"output.root={tmp_path}"])
+    object.__setattr__(cfg.mapping, "resolution", 1e-7)  # past the config's check
     with pytest.raises(InputError, match=r"mapping.resolution: 1e-07 m per cell: even the 1 m margin alone"):
         run_experiment(cfg, quiet=True)
     assert list(tmp_path.iterdir()) == []

@@ -42,8 +42,21 @@ def test_known_map_and_state_machine(tmp_path):
 
 
 def test_unreachable_goal_is_a_result_not_a_hang(tmp_path):
-    _, m = navigate(tmp_path, "navigation.goal=[30.0, 30.0]", "navigation.slam=false", "output.figures=false")
+    _, m = navigate(tmp_path, "navigation.goal=[0.0, 6.0]", "navigation.slam=false", "output.figures=false")
     assert not m["success"] and m["status"] == "unreachable"
+
+
+def test_navigate_exits_3_when_the_goal_is_not_reached_and_still_writes_its_results(tmp_path):
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "slam2d.cli", "navigate", "--goal", "0.0,6.0", "-o", str(tmp_path),
+                           "--set", "navigation.slam=false", "--set", "output.figures=false", "-q"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 3, done.stderr
+    assert "goal not reached: unreachable" in done.stderr
+    (folder,) = tmp_path.iterdir()
+    assert done.stdout == f"results: {folder}\n" and (folder / "metrics.json").is_file()
 
 
 def test_bad_navigation_input_is_a_one_line_error(tmp_path):

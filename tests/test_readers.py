@@ -77,13 +77,16 @@ def _ros_writer(kind: str, path):
     return Writer(path, version=9), ts, ts.serialize_cdr
 
 
-def _write_bag(kind, path, scans=(), odoms=(), tf=(), scan_topic="/scan", compression=None):
+def _write_bag(kind, path, scans=(), odoms=(), tf=(), scan_topic="/scan", compression=None, chunk_bytes=None):
     """scans: (stamp, ranges[, angle_increment or None[, header stamp]]); odoms: (stamp, (x, y, yaw));
-    tf: (parent, child, (x, y, yaw)). ``compression``: a ROS 1 chunk compression format name ("BZ2", "LZ4").
+    tf: (parent, child, (x, y, yaw)). ``compression``: a ROS 1 chunk compression format name ("BZ2", "LZ4");
+    ``chunk_bytes``: a ROS 1 chunk's size (default 1 MB).
     """
     writer, ts, ser = _ros_writer(kind, path)
     if compression:
         writer.set_compression(writer.CompressionFormat[compression])
+    if chunk_bytes:
+        writer.chunk_threshold = chunk_bytes
     T = ts.types
     Time = T["builtin_interfaces/msg/Time"]
 

@@ -13,6 +13,7 @@ from slam2d.cli.common import (
     CONFIG_ARG,
     CONFIG_OPT,
     JSON_OPT,
+    NOT_REACHED,
     OUT_SET_OPT,
     PLUGIN_OPT,
     QUIET_OPT,
@@ -259,7 +260,8 @@ def navigate(
     set_: list[str] = SET_OPT, root: Optional[Path] = OUT_SET_OPT, plugin: list[str] = PLUGIN_OPT,
     quiet: bool = QUIET_OPT, as_json: bool = JSON_OPT,
 ) -> None:
-    """Drive the simulated robot to a goal (online SLAM on by default); print the results folder."""
+    """Drive the simulated robot to a goal (online SLAM on by default); print the results folder. Exit 3 when
+    the goal was not reached (unreachable, blocked, out of time): the results are written all the same."""
     from slam2d.runs.navigate import run_navigate
 
     with _command(quiet):
@@ -268,6 +270,11 @@ def navigate(
                               plugin)
         folder = run_navigate(cfg, quiet)
     _results("navigate", folder, as_json)
+    metrics = json.loads((folder / "metrics.json").read_text())
+    if not metrics.get("success"):
+        typer.secho(f"goal not reached: {metrics.get('status')} ({metrics.get('reason')}); results written",
+                    fg="red", err=True)
+        raise typer.Exit(NOT_REACHED)
 
 
 @app.command()

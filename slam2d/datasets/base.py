@@ -28,6 +28,7 @@ EARLY = "scans stamped before the scan kept before them"
 LATE = "scans stamped after most of the scans that follow them"
 JUMP = "scans whose odometry jumps away from the scans around them"
 EMPTY = "empty scans (no valid beam)"
+BAD_LIMITS = "scans with bad range limits (range_min not below range_max)"
 
 
 def _with_followers(scans: Iterator[Scan], k: int) -> Iterator[tuple[Scan, list[Scan]]]:
@@ -130,8 +131,8 @@ class ScanSource:
         n, total = sum(self.skipped.values()), max(len(self), 1)
         if n > self.max_skipped * total:
             reasons = ", ".join(f"{count} {what}" for what, count in sorted(self.skipped.items()))
-            raise InputError(self.where, f"{n} of {total} scans ({n / total:.0%}) unusable ({reasons}); "
-                             f"more than the {self.max_skipped:.0%} allowed (dataset.max_skipped)")
+            raise InputError(self.where, f"{n} of {total} scans ({percent(n / total)}) unusable ({reasons}); "
+                             f"more than the {percent(self.max_skipped)} allowed (dataset.max_skipped)")
 
     def _checked(self, scans: Iterator[Scan]) -> Iterator[Scan]:
         last = None
@@ -145,6 +146,8 @@ class ScanSource:
                 self.invalid_beams += n_bad
                 ranges = np.where(bad, np.nan, ranges)
             problem = _stamp_or_pose_problem(scan, last, followers)
+            if problem is None and not scan.range_min < scan.range_max:
+                problem = BAD_LIMITS
             if problem is None and not np.any(~bad & (ranges >= scan.range_min) & (ranges < scan.range_max)):
                 problem = EMPTY
             if problem is not None:
@@ -170,9 +173,14 @@ class ScanSource:
             log.warning("%s: skipped %d %s", self.name, count, reason)
         n = sum(self.skipped.values())
         if n:
-            log.warning("%s: %d of %d scans (%.1f%%) skipped", self.where, n, len(self), 100 * n / max(len(self), 1))
+            log.warning("%s: %d of %d scans (%s) skipped", self.where, n, len(self), percent(n / max(len(self), 1)))
         if self.invalid_beams:
             log.info("%s: %d beams had no valid range (NaN, inf or negative) and were ignored", self.name, self.invalid_beams)
+
+
+def percent(share: float) -> str:
+    """``share`` (a fraction) as a percentage with one decimal: ``"5.3 %"``."""
+    return f"{100 * share:.1f} %"
 
 
 class DatasetReader(Protocol):

@@ -26,7 +26,7 @@ from slam2d import geometry
 from slam2d.config import DatasetConfig
 from slam2d.datasets.base import MAX_COORD, ScanSource, register_dataset
 from slam2d.datasets.registry import log_path
-from slam2d.errors import InputError
+from slam2d.errors import InputError, not_a_file
 from slam2d.types import Scan
 
 log = logging.getLogger(__name__)
@@ -114,7 +114,7 @@ class CarmenSource(ScanSource):
         self.ignored: Counter[str] = Counter()  # lines of other message types, comments
         self.notes: Counter[str] = Counter()  # oddities in scans that were kept
         if not self.path.is_file():
-            raise InputError(self.path, "file not found")
+            raise InputError(self.path, not_a_file(self.path) or "file not found")
         self._count = sum(1 for line in self._lines() if _tag(line) in self.messages)
         if not self._count:
             raise InputError(self.path, f"no {'/'.join(self.messages)} lines")

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d import geometry
-from slam2d.errors import InputError
+from slam2d.errors import InputError, not_a_file
 
 log = logging.getLogger(__name__)
 
@@ -78,7 +78,7 @@ def read_g2o(path) -> PoseGraphFile:
     """
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "file not found")
+        raise InputError(path, not_a_file(path) or "file not found")
     vertices: dict[int, np.ndarray] = {}
     edges, lines = [], []
     with open(path, encoding="ascii", errors="replace") as f:

@@ -18,7 +18,7 @@ from slam2d import geometry
 from slam2d.config import DatasetConfig
 from slam2d.datasets.base import MAX_COORD, ScanSource, register_dataset
 from slam2d.datasets.registry import log_path
-from slam2d.errors import InputError
+from slam2d.errors import InputError, not_a_file
 from slam2d.types import Scan
 
 log = logging.getLogger(__name__)
@@ -86,8 +86,11 @@ class RosbagSource(ScanSource):
         self.path = Path(path)
         self.max_scans = max_scans
         self.notes: Counter[str] = Counter()
+        self.damaged: dict[str, Counter[str]] = {}  # per topic: messages lost to damage (see _messages)
         if not self.path.exists():
             raise InputError(self.path, "file not found")
+        if not self.path.is_dir() and (kind := not_a_file(self.path)):  # a ROS 2 bag is a folder
+            raise InputError(self.path, kind)
         with self._open() as reader:
             topics = reader.topics
             self.scan_topic = _pick_topic(self.path, topics, LASER_TYPE, scan_topic, "/scan")
@@ -127,25 +130,39 @@ class RosbagSource(ScanSource):
             reader.close()
 
     def _messages(self, reader, topic: str):
-        """Deserialised messages of ``topic`` in bag order; an unreadable one is an InputError naming it."""
+        """(index, deserialised message) of ``topic`` in bag order, read as far as the bag is good: a message
+        that does not deserialise is skipped, a damaged chunk ends the stream; both are counted in
+        ``damaged[topic]`` (a Counter of "undecodable" and "unread") and logged."""
         conns = [c for c in reader.connections if c.topic == topic]
         stream = reader.messages(connections=conns)
+        damaged = self.damaged.setdefault(topic, Counter())
+        damaged.clear()
         index = 0
         while True:
             try:
                 item = next(stream, None)
-                if item is None:
-                    return
+            except Exception as err:  # rosbags raises many types for a corrupt chunk
+                total = sum(c.msgcount for c in conns)
+                damaged["unread"] = max(total - index, 1)
+                log.warning("%s: %s message %d on: unreadable (%s); read as far as the bag is good (%d of %d "
+                            "messages)", self.path, topic, index, _reason(err), index, total)
+                return
+            if item is None:
+                return
+            try:
                 msg = reader.deserialize(item[2], item[0].msgtype)
-            except Exception as err:  # rosbags raises many types for a corrupt chunk or message
-                raise InputError(self.path, f"{topic} message {index}: unreadable ({_reason(err)})") from err
-            yield msg
+            except Exception as err:  # noqa: BLE001 - rosbags raises many types for a corrupt message
+                if not damaged["undecodable"]:
+                    log.warning("%s: %s message %d: unreadable (%s); skipped", self.path, topic, index, _reason(err))
+                damaged["undecodable"] += 1
+            else:
+                yield index, msg
             index += 1
 
     def _read_odometry(self, reader):
         """All odometry as (stamps (N,) s, poses (N, 3)), sorted by stamp; sets the base frame."""
         stamps, poses, child, dropped = [], [], "", 0
-        for i, msg in enumerate(self._messages(reader, self.odom_topic)):
+        for i, msg in self._messages(reader, self.odom_topic):
             p = msg.pose.pose
             stamp, pose = _stamp(msg.header.stamp), (p.position.x, p.position.y, _yaw(p.orientation))
             if not (math.isfinite(stamp) and _finite(*pose)):
@@ -172,7 +189,7 @@ class RosbagSource(ScanSource):
         tf = {}
         for topic in ("/tf_static", "tf_static"):
             if topic in topics and topics[topic].msgtype == TF_TYPE:
-                for msg in self._messages(reader, topic):
+                for _, msg in self._messages(reader, topic):
                     for t in msg.transforms:
                         tr = t.transform
                         pose = np.array([tr.translation.x, tr.translation.y, _yaw(tr.rotation)])
@@ -208,8 +225,8 @@ class RosbagSource(ScanSource):
         t_odom, p_odom = self.odom  # before mounting_pose: sets the base frame and /tf_static
         count = 0
         with self._open() as reader:
-            for i, msg in enumerate(self._messages(reader, self.scan_topic)):
-                if i == len(self):
+            for i, msg in self._messages(reader, self.scan_topic):
+                if i >= len(self):
                     if len(self) == self.max_scans:
                         break
                     raise self._corrupt_index("more")
@@ -230,7 +247,12 @@ class RosbagSource(ScanSource):
                     sensor_pose=self.mounting_pose(msg.header.frame_id),
                     odom=geometry.interpolate(t_odom, p_odom, stamp),
                 )
-        if count < len(self):
+        damaged = self.damaged[self.scan_topic]
+        for _ in range(damaged["undecodable"]):
+            self.skip("scans that do not decode (damaged bag)")
+        for _ in range(min(damaged["unread"], len(self) - count - damaged["undecodable"])):
+            self.skip("scans in an unreadable part of the bag")
+        if count + damaged["undecodable"] + damaged["unread"] < len(self):
             raise self._corrupt_index(str(count))
         for what, n in self.notes.items():
             log.warning("%s: %d %s", self.path, n, what)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d import geometry
-from slam2d.errors import InputError, read_text
+from slam2d.errors import InputError, not_a_file, read_text
 from slam2d.evaluation.trajectory import _parse_row
 
 __all__ = ["Relations", "read_relations", "relations_metric", "relation_errors", "relations_frame", "format_relations"]
@@ -41,7 +41,7 @@ def read_relations(path) -> Relations:
     """
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "relations file not found")
+        raise InputError(path, not_a_file(path) or "relations file not found")
     rows = [
         _parse_row(text, f"{path}:{n}", 8)
         for n, line in enumerate(read_text(path).splitlines(), start=1)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from slam2d import geometry
-from slam2d.errors import InputError, read_text
+from slam2d.errors import InputError, not_a_file, read_text
 from slam2d.types import Trajectory
 
 __all__ = ["write_tum", "read_tum", "align_se2", "ate", "rpe"]
@@ -41,7 +41,7 @@ def read_tum(path) -> Trajectory:
     """
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "trajectory file not found")
+        raise InputError(path, not_a_file(path) or "trajectory file not found")
     rows, lines = [], []
     for n, line in enumerate(read_text(path).splitlines(), start=1):
         text = line.strip()

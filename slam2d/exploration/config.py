@@ -9,7 +9,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, field_validator
 
 from slam2d import config as config_mod
-from slam2d.config import ExperimentConfig, Section
+from slam2d.config import MAX_BEAMS, ExperimentConfig, Section
 from slam2d.exploration.base import EXPLORATION_STRATEGIES
 from slam2d.registry import Choice
 
@@ -56,7 +56,7 @@ class ExplorationConfig(Section):
         "tour", description="L of the utility: grid path, straight line, or how much later (m driven, mean over the "
                             "goals' hidden cells) a tour through all goals reaches them when this one is first (tour)")  # fmt: skip
     gain_range: float = Field(6.0, gt=0, description="m, reach of the rays counting hidden cells (information gain)")
-    gain_rays: int = Field(120, gt=3, description="rays cast for the information gain")
+    gain_rays: int = Field(120, gt=3, le=MAX_BEAMS, description="rays cast for the information gain")
     min_gain: float = Field(0.5, ge=0, description="m² of hidden area (unknown, no known cell beside it) a "
                                                    "candidate must still see to stay open")  # fmt: skip
     backtrack: Literal["graph", "grid"] = Field("graph", description="to an old candidate: over the topological graph "

@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, ValidationError, model_validator
 
-from slam2d.config import CommandConfig, Section
+from slam2d.config import MAX_BEAMS, MAX_SAMPLES, CommandConfig, Section
 from slam2d.localization.base import MCL_PRESETS, register_preset
 from slam2d.registry import Choice, validation_error
 
@@ -19,15 +19,15 @@ class MclConfig(Section):
     """A particle filter over SE(2) on a known map (slam2d.localization.mcl)."""
 
     # particle set and KLD sampling (Fox 2003)
-    min_particles: int = Field(100, gt=0, description="KLD's lower bound")
-    max_particles: int = Field(20000, gt=0, description="KLD's upper bound; the global set")
+    min_particles: int = Field(100, gt=0, le=MAX_SAMPLES, description="KLD's lower bound")
+    max_particles: int = Field(20000, gt=0, le=MAX_SAMPLES, description="KLD's upper bound; the global set")
     kld_err: float = Field(0.02, gt=0, description="epsilon: KL distance bound between sample and true posterior")
     kld_delta: float = Field(0.01, gt=0, lt=1, description="delta: the bound holds with probability 1 - delta")
     kld_bin_xy: float = Field(0.5, gt=0, description="m, histogram bin of KLD sampling and of the clusters")
     kld_bin_theta: float = Field(math.radians(10.0), gt=0, description="rad")
     kld_single_bin: Literal["min", "max"] = Field("min", description="particles when all fall in one bin "
                                                   "(amcl: max)")
-    global_candidates: int = Field(5, gt=0, description="global localisation: uniform poses weighed by the "
+    global_candidates: int = Field(5, gt=0, le=1000, description="global localisation: uniform poses weighed by the "
                                    "first scan, in multiples of max_particles, of which max_particles are kept")
     # update and resampling triggers
     update_min_d: float = Field(0.1, ge=0, description="m travelled (odometry) before a filter update")
@@ -41,8 +41,8 @@ class MclConfig(Section):
                                        "is judged on this share of the beams, the best-fitting at each particle: "
                                        "a map lacking part of what the laser sees (an opened door, glass, a wall "
                                        "worn off a SLAM grid) is no kidnapping (1: every beam always, as amcl)")
-    recovery_candidates: int = Field(20, gt=0, description="random particles are drawn by the scan's likelihood "
-                                     "from this many times as many uniform poses (1: uniform, as amcl)")
+    recovery_candidates: int = Field(20, gt=0, le=1000, description="random particles are drawn by the scan's "
+                                     "likelihood from this many times as many uniform poses (1: uniform, as amcl)")
     hypothesis_fit: bool = Field(True, description="each cluster's total weight follows the scan's likelihood at "
                                  "its weighted mean pose, not the mean over its particles: a look-alike place "
                                  "weighs as much as the true one whatever the number and spread of its particles "
@@ -55,7 +55,7 @@ class MclConfig(Section):
     alpha4: float = Field(0.01, ge=0, description="translation noise from rotation, m^2/rad^2")
     # sensor model
     model: Literal["likelihood_field", "beam"] = "likelihood_field"
-    beams: int = Field(60, gt=0, description="beams used per scan, evenly spread over the valid ones")
+    beams: int = Field(60, gt=0, le=MAX_BEAMS, description="beams used per scan, evenly spread over the valid ones")
     z_hit: float = Field(0.95, ge=0)
     z_rand: float = Field(0.05, ge=0)
     z_short: float = Field(0.1, ge=0, description="beam model only")

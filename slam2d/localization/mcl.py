@@ -30,6 +30,7 @@ from scipy.stats import norm
 
 from slam2d import geometry
 from slam2d.errors import InputError
+from slam2d.limits import check_memory
 from slam2d.localization.config import MclConfig
 from slam2d.localization.maps import KnownMap
 from slam2d.localization.sensor import LikelihoodField, sensor_model
@@ -38,6 +39,7 @@ from slam2d.types import Scan
 __all__ = ["Estimate", "ParticleFilter", "clusters", "kld_limit", "low_variance_indices", "sample_motion"]
 
 _MIN_TRANS = 0.01  # m: below this a motion has no heading of its own (rot1 = 0), as in amcl
+PARTICLE_BEAM_BYTES = 32  # memory per particle and beam while a scan is weighed (float64 temporaries)
 CONFIDENT_NOISE = 0.1  # random share below which a confident filter draws no random particle
 LOCAL_SPREAD = np.array([0.3, 0.3, 0.1])  # m, m, rad: sd of recovery candidates around the current particles
 
@@ -174,6 +176,9 @@ class ParticleFilter:
         self.map, self.cfg = known, cfg or MclConfig()
         if self.cfg.min_particles > self.cfg.max_particles:
             raise InputError("localization.min_particles", "must not exceed max_particles")
+        pool = self.cfg.max_particles * self.cfg.global_candidates
+        check_memory(pool * (self.cfg.beams * PARTICLE_BEAM_BYTES + 64), "localization.mcl.max_particles",
+                     f"weighing {pool} particles on {self.cfg.beams} beams")
         self.sensor = sensor_model(known, self.cfg, range_max)
         self.coarse = self.sensor  # the smoother likelihood field used while the pose is uncertain
         if self.cfg.model == "likelihood_field" and self.cfg.sigma_hit_uncertain != self.cfg.sigma_hit:

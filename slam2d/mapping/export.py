@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from slam2d.config import MappingConfig, read_yaml, short_repr
-from slam2d.errors import InputError
+from slam2d.config import MAX_RESOLUTION, MIN_RESOLUTION, MappingConfig, read_yaml, short_repr
+from slam2d.errors import InputError, not_a_file
 from slam2d.mapping.grid import OccupancyGrid, logit
 from slam2d.mapping.image import read_grey
 
@@ -107,7 +107,7 @@ def map_yaml_free_thresh(path) -> float:
 
 def _read_map_yaml(path: Path) -> dict:
     if not path.is_file():
-        raise InputError(path, "map YAML not found")
+        raise InputError(path, not_a_file(path) or "map YAML not found")
     meta = read_yaml(path)
     if not isinstance(meta, dict):
         raise InputError(path, "a map YAML must be a mapping")
@@ -137,6 +137,9 @@ def _check_numbers(path: Path, meta: dict) -> None:
     """Resolution > 0, origin [x, y, 0] finite, 0 <= free_thresh < occupied_thresh <= 1."""
     if _number(path, "resolution", meta["resolution"]) <= 0:
         raise InputError(path, f"key 'resolution': must be > 0 m per pixel, got {meta['resolution']}")
+    if not MIN_RESOLUTION <= meta["resolution"] <= MAX_RESOLUTION:
+        raise InputError(path, f"key 'resolution': expected {MIN_RESOLUTION:g} to {MAX_RESOLUTION:g} m per pixel, "
+                         f"got {meta['resolution']:g}")
     origin = meta["origin"]
     if not isinstance(origin, list) or len(origin) != 3:
         raise InputError(path, f"key 'origin': expected [x, y, yaw], got {short_repr(origin)}")

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from slam2d.errors import InputError
+from slam2d.limits import check_memory
 
+IMAGE_BYTES_PER_PIXEL = 24  # reading an image as a map: the pixels, the log-odds grid and temporaries
 WIDE_GREY = ("I;16", "I;16B", "I;16L", "I")
 """PIL modes of 16- and 32-bit grey images, scaled (not clipped) to 8 bits."""
 
@@ -17,12 +20,31 @@ def read_grey(path) -> np.ndarray:
     from PIL import Image, UnidentifiedImageError
 
     try:
-        with Image.open(Path(path)) as im:
+        with warnings.catch_warnings():  # PIL warns of a large image: check_size refuses it instead
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            im = Image.open(Path(path))
+        with im:
+            check_size(im, path)
             return grey8(im)
     except FileNotFoundError:
         raise InputError(path, "image not found") from None
+    except InputError:
+        raise
+    except Image.DecompressionBombError as err:
+        raise InputError(path, f"image too large ({str(err)[:160]})") from None
     except (UnidentifiedImageError, OSError, ValueError) as err:
         raise InputError(path, f"not a readable image ({str(err)[:120]})") from None
+
+
+def check_size(im, path) -> None:
+    """InputError if the PIL image ``im`` has more than PIL's ``MAX_IMAGE_PIXELS`` pixels (a decompression
+    bomb, or a map larger than any building) or would not fit in memory as a map."""
+    from PIL import Image
+
+    w, h = im.size
+    if Image.MAX_IMAGE_PIXELS and w * h > Image.MAX_IMAGE_PIXELS:
+        raise InputError(path, f"image too large: {w} x {h} pixels, more than {Image.MAX_IMAGE_PIXELS}")
+    check_memory(w * h * IMAGE_BYTES_PER_PIXEL, str(path), f"a {w} x {h} pixel map")
 
 
 def grey8(im) -> np.ndarray:

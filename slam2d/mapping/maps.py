@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from slam2d.errors import InputError
+from slam2d.config import MAX_RESOLUTION, MIN_RESOLUTION
+from slam2d.errors import InputError, not_a_file
 from slam2d.mapping.export import LOADED_LOG_ODDS, load_map_server
 from slam2d.mapping.grid import OccupancyGrid
 from slam2d.mapping.image import read_grey
@@ -42,15 +43,16 @@ def load_map(path, resolution: float | None = None) -> OccupancyGrid:
     if path.is_dir() and (path / "map.yaml").is_file():
         path = path / "map.yaml"
     if not path.is_file():
-        raise InputError(path, "map file not found (a map.yaml, a results folder, a floor-plan image or a .map)")
+        raise InputError(path, not_a_file(path) or "map file not found (a map.yaml, a results folder, a floor-plan "
+                         "image or a .map)")
     suffix = path.suffix.lower()
     if suffix in _MAP_YAML:
         return load_map_server(path)
     if suffix == ".map":
         free = read_movingai_map(path)
         return OccupancyGrid(np.where(free, -LOADED_LOG_ODDS, LOADED_LOG_ODDS).astype(np.float32), 1.0, (0.0, 0.0))
-    if resolution is not None and not 0 < resolution < np.inf:
-        raise InputError("resolution", f"must be > 0 m/px, got {resolution}")
+    if resolution is not None and not MIN_RESOLUTION <= resolution <= MAX_RESOLUTION:
+        raise InputError("resolution", f"expected {MIN_RESOLUTION:g} to {MAX_RESOLUTION:g} m/px, got {resolution}")
     grey = read_grey(path)[::-1]  # rows up in y
     lo = np.where(grey <= FLOOR_PLAN_OCCUPIED_MAX, LOADED_LOG_ODDS,
                   np.where(grey >= FLOOR_PLAN_FREE_MIN, -LOADED_LOG_ODDS, 0.0))  # fmt: skip

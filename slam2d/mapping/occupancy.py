@@ -30,6 +30,7 @@ from numba import njit
 from slam2d import geometry
 from slam2d.config import MappingConfig
 from slam2d.errors import InputError
+from slam2d.limits import check_memory
 from slam2d.mapping.grid import OccupancyGrid, logit
 from slam2d.types import Scan
 
@@ -50,6 +51,7 @@ MARGIN_M = 0.5
 """Unknown border added around the mapped extent, m."""
 
 MAX_CELLS = 100_000_000
+GRID_BYTES_PER_CELL = 12  # the log-odds (float32) and the two marks of the ray casting (int32)
 """Largest grid build_grid will allocate (12 bytes a cell while building)."""
 
 
@@ -144,6 +146,7 @@ def _empty_grid(points: np.ndarray, resolution: float) -> OccupancyGrid:
             f"the scans span {hi[0] - lo[0]:.0f} m x {hi[1] - lo[1]:.0f} m: {h} x {w} cells at "
             f"{resolution} m exceed {MAX_CELLS:.0e} (diverged poses, or set mapping.max_range)"
         )
+    check_memory(w * h * GRID_BYTES_PER_CELL, "mapping.resolution", f"a {h} x {w} map grid at {resolution} m")
     return OccupancyGrid(np.zeros((h, w), np.float32), resolution, (lo[0], lo[1]))
 
 

@@ -39,7 +39,7 @@ import networkx as nx
 import numpy as np
 from scipy import ndimage
 
-from slam2d.errors import InputError
+from slam2d.errors import InputError, not_a_file
 
 __all__ = ["region_graph", "cell_to_world", "world_to_cell", "save_graph", "load_graph", "draw_graph"]
 
@@ -185,7 +185,7 @@ def load_graph(path) -> nx.Graph:
     """Read a graph written by :func:`save_graph` (tuples restored: centres, portal cells)."""
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "graph file not found")
+        raise InputError(path, not_a_file(path) or "graph file not found")
     try:
         data = json.loads(path.read_text())
         g = nx.node_link_graph(data, edges="edges")

@@ -43,9 +43,9 @@ class DwaConfig(Section):
 
     period: float = Field(0.1, gt=0, description="s, control period: the window's width and the command's duration")
     horizon: float = Field(1.5, gt=0, description="s, how far ahead each arc is simulated")
-    steps: int = Field(15, ge=2, description="trajectory samples per arc")
-    v_samples: int = Field(9, ge=2)
-    w_samples: int = Field(21, ge=3)
+    steps: int = Field(15, ge=2, le=1000, description="trajectory samples per arc")
+    v_samples: int = Field(9, ge=2, le=1000)
+    w_samples: int = Field(21, ge=3, le=1000)
     margin: float = Field(0.05, ge=0, description="m, kept between the robot's disc and any laser point")
     lookahead: float = Field(0.8, gt=0, description="m along the path to the carrot")
     decel: float = Field(0.5, gt=0, le=1, description="fraction of max_accel planned for stopping at the goal")

@@ -19,7 +19,7 @@ class PlanningConfig(Section):
         "none", description="none (A*), jps (Jump Point Search), jps_plus (JPS over precomputed jump distances), "
         "hpa (square clusters) or rooms (the room graph of a segmentation)"
     )
-    cluster_size: int = Field(16, gt=1, description="HPA* cluster side, cells")
+    cluster_size: int = Field(16, gt=1, le=4096, description="HPA* cluster side, cells")
     corridor: bool = Field(
         False, description="rooms: one A* over all the route's rooms (the shortest path inside the rooms crossed) "
         "instead of one per room"
@@ -32,7 +32,7 @@ class PlanningConfig(Section):
     start: tuple[float, float] | None = Field(None, description="x, y in m (with goal: one query)")
     goal: tuple[float, float] | None = Field(None, description="x, y in m")
     queries: int = Field(
-        0, ge=0, description="instead of start and goal: this many seeded random start-goal pairs that A* "
+        0, ge=0, le=100_000, description="instead of start and goal: this many seeded random start-goal pairs that A* "
         "connects, each planned by A* and by the chosen planner (suboptimality, speed-up)"
     )
     min_distance: float = Field(10.0, ge=0, description="m; preferred straight-line distance between a query's ends")

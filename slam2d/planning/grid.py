@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from slam2d.errors import InputError
+from slam2d.errors import InputError, not_a_file
 from slam2d.mapping.export import map_yaml_free_thresh
 from slam2d.mapping.maps import is_map_yaml, load_map, read_movingai_map
 from slam2d.types import GridFrame
@@ -222,7 +222,7 @@ def load_scenarios(path) -> Scenarios:
     """Moving AI ``.scen`` (``version 1``, then one scenario a line). One map per file."""
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "scenario file not found")
+        raise InputError(path, not_a_file(path) or "scenario file not found")
     lines = path.read_text(errors="replace").splitlines()
     if not lines or not lines[0].strip().startswith("version"):
         raise InputError(f"{path}:1", f"expected 'version 1', got {lines[0] if lines else ''!r}")

@@ -12,7 +12,7 @@ import numpy as np
 from PIL import Image
 from scipy import ndimage
 
-from slam2d.errors import InputError
+from slam2d.errors import InputError, check_inside, not_a_file
 from slam2d.planning.astar import AStar, PlanResult, check_path, path_length
 from slam2d.planning.base import GLOBAL_PLANNERS
 from slam2d.planning.grid import PlanningGrid, load_grid
@@ -68,7 +68,7 @@ def _labels(labels, grid: PlanningGrid, segmentation=None, seed: int = 0) -> np.
     if isinstance(labels, (str, Path)):
         path = Path(labels)
         if not path.is_file():
-            raise InputError(path, "labels file not found")
+            raise InputError(path, not_a_file(path) or "labels file not found")
         labels = _read_labels(path)
     labels = np.asarray(labels)
     if labels.shape != shape:
@@ -159,6 +159,8 @@ def plan_on_map(
     if not 0 <= robot_radius < np.inf:
         raise InputError("robot_radius", f"must be a finite number >= 0 m, got {robot_radius}")
     grid = load_grid(map_path, resolution=resolution)
+    check_inside("start", start, grid.extent)
+    check_inside("goal", goal, grid.extent)
     free = grid.inflated(robot_radius)
     t0 = time.perf_counter()
     name = planner_name(hierarchical)

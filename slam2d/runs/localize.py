@@ -23,7 +23,7 @@ import numpy as np
 from slam2d import config as config_mod
 from slam2d import geometry
 from slam2d.datasets.registry import open_dataset
-from slam2d.errors import InputError
+from slam2d.errors import InputError, check_inside
 from slam2d.evaluation.trajectory import read_tum, write_tum
 from slam2d.localization.config import LocalizeConfig
 from slam2d.localization.maps import KnownMap
@@ -94,6 +94,7 @@ def localize(known: KnownMap, cfg: LocalizeConfig, out: Path, map_path: Path | N
         start = loc.initial_pose if loc.initial_pose is not None else stream.truth[0]
         if not np.isfinite(np.asarray(start, dtype=np.float64)).all():
             raise InputError("initial_pose", "tracking needs an initial pose (no reference pose at the first scan)")
+        check_inside("initial_pose", start, known.extent)
         pf.init_pose(start)
     with progress_bar("localising (scans)", len(stream.scans), quiet) as advance:
         track = replay(pf, stream, "updates" if cfg.output.figures else (), view, advance)

@@ -24,7 +24,7 @@ from pydantic import Field
 from slam2d import config as config_mod
 from slam2d.config import ExperimentConfig
 from slam2d.datasets.simulator import route_start
-from slam2d.errors import InputError
+from slam2d.errors import InputError, check_inside
 from slam2d.evaluation.trajectory import write_tum
 from slam2d.localization import KnownMap
 from slam2d.localization.base import LOCALIZERS
@@ -104,6 +104,9 @@ def simulate(cfg: ExperimentConfig, progress=None) -> NavigationRun:
     world = load_world(sim.world, sim.resolution)
     start = np.asarray(nav.start if nav.start is not None else route_start(sim.world), float)
     goal = np.asarray(nav.goal, float)
+    (x0, y0), (x1, y1) = world.bounds
+    check_inside("navigation.start", start, (x0, x1, y0, y1), f"the world '{sim.world}'")
+    check_inside("navigation.goal", goal, (x0, x1, y0, y1), f"the world '{sim.world}'")
     options = navigator_config(nav.options, nav.slam)
     rng = np.random.default_rng(cfg.seed)
     keep = (np.array([start[:2], goal[:2]]), np.array([1.0, 1.0]))

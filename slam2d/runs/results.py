@@ -8,6 +8,7 @@ and infinities are written as null.
 
 from __future__ import annotations
 
+import errno
 import itertools
 import json
 import logging
@@ -24,7 +25,9 @@ import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
+from slam2d.config import MAX_NAME_BYTES
 from slam2d.errors import InputError
+from slam2d.processes import claim, release, stale
 from slam2d.runs.report import write_run_report
 from slam2d.runs.signals import check_stop
 
@@ -37,18 +40,68 @@ def results_folder(root: str | Path, name: str, key: str = "output.root"):
     ``run.log``) and a list that receives the final path once the block succeeds.
     On failure the temporary folder is removed, so no half-written folder remains.
     ``key`` names ``root`` in errors (the config key or the CLI option)."""
-    root = output_root(root, key)
-    work = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=root))
+    root, name = output_root(root, key), fit_name(name)
+    remove_stale(root)
+    try:
+        work = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=root))
+    except OSError as err:
+        raise InputError(key, f"cannot write in {root} ({err.strerror})") from None
     published: list[Path] = []
     try:
+        claim(work)
         with log_to(work / "run.log"):
             yield work, published
         check_stop()  # a signal whose exception was swallowed still leaves no folder
         write_run_report(work, name)
+        release(work)
         published.append(_publish(work, root, name))
-    except BaseException:
+    except BaseException as err:
         shutil.rmtree(work, ignore_errors=True)
+        if isinstance(err, OSError) and err.errno in WRITE_ERRORS:
+            raise write_error(err, work) from None
         raise
+
+
+WRITE_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG}
+"""OSErrors that filling a results folder turns into an InputError naming the path: the disk is full,
+read-only or refuses (a name too long, no permission)."""
+
+
+def write_error(err: OSError, where) -> InputError:
+    """The InputError of a write that failed with ``err`` (one of WRITE_ERRORS): its file (else ``where``)
+    and the reason."""
+    return InputError(err.filename or where, f"cannot write ({err.strerror or err})")
+
+
+@contextmanager
+def writes(where):
+    """In the block an OSError of WRITE_ERRORS becomes an InputError (:func:`write_error`)."""
+    try:
+        yield
+    except OSError as err:
+        if err.errno in WRITE_ERRORS:
+            raise write_error(err, where) from None
+        raise
+
+
+def fit_name(name: str) -> str:
+    """``name`` cut to MAX_NAME_BYTES bytes of UTF-8 (at a character boundary), so that the folder's name
+    with its date stays within a file system's 255 bytes (a default name holds a map file's name)."""
+    data = name.encode("utf-8", "surrogatepass")
+    return name if len(data) <= MAX_NAME_BYTES else data[:MAX_NAME_BYTES].decode("utf-8", "ignore")
+
+
+def remove_stale(root: Path, ownerless: bool = False) -> int:
+    """Remove the hidden work folders under ``root`` whose process was killed outright (see
+    :func:`slam2d.processes.stale`; ``ownerless``: those without an owner record too); log and return their count."""
+    removed = 0
+    for folder in root.glob(".?*-*"):
+        if folder.is_dir() and stale(folder, ownerless):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed += not folder.exists()
+    if removed:
+        log.info("%s: removed %d hidden folder%s left by killed runs", root, removed, "s" * (removed != 1))
+    return removed
 
 
 def output_root(root: str | Path, key: str = "output.root") -> Path:

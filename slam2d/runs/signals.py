@@ -5,12 +5,17 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
+import time
 from contextlib import contextmanager
+
+from slam2d.processes import die_with_parent, parent_gone
 
 _STOPPED = False  # whether SIGINT or SIGTERM has arrived in this process (in a sweep worker: no new variant)
 
 
 _RUNNING_VARIANT = False  # in a sweep worker: whether a variant is running
+_SIGNAL = 0  # the first SIGINT or SIGTERM that arrived (0: none)
 
 
 def _handler(stop):
@@ -22,6 +27,8 @@ def _handler(stop):
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
             return
+        global _SIGNAL
+        _SIGNAL = _SIGNAL or signum
         stop()
 
     return handler
@@ -51,27 +58,60 @@ def stopped() -> bool:
     return _STOPPED
 
 
+def exit_code() -> int:
+    """The exit status of a command the first signal stopped, as shells give it: 130 (SIGINT), 143 (SIGTERM)."""
+    return 128 + (_SIGNAL or signal.SIGINT)
+
+
 def check_stop() -> None:
     """KeyboardInterrupt if a signal has arrived: its own exception may have been swallowed (in a ``__del__``)."""
     if _STOPPED:
         raise KeyboardInterrupt
 
 
-def init_sweep_worker() -> None:
-    """The first SIGINT or SIGTERM stops a sweep worker: its running variant is interrupted (its folder
-    removed) and queued ones are not started; later signals are ignored so that the clean-up finishes."""
+_PARENTS: tuple[int, int] | None = None  # in a sweep worker: (its parent, the sweep's process)
+
+
+def init_sweep_worker(owner: int | None = None) -> None:
+    """A sweep worker ignores SIGINT (the sweep's process stops it) and dies with its parent. The first
+    SIGTERM stops it: its running variant is interrupted (its folder removed) and queued ones are not
+    started; later signals are ignored so that the clean-up finishes. ``owner``: the sweep's process,
+    whose end also stops the worker (see :func:`orphaned`)."""
+    global _PARENTS
 
     def stop():
         global _STOPPED
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         _STOPPED = True
         if _RUNNING_VARIANT:
             raise KeyboardInterrupt
 
-    handler = _handler(stop)
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
+    _PARENTS = (os.getppid(), owner)
+    die_with_parent(_PARENTS[0], signal.SIGTERM)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _handler(stop))
+    threading.Thread(target=_watch_owner, name="slam2d-owner-watch", daemon=True).start()
+
+
+WATCH_S = 0.2  # how often a sweep worker checks that the sweep's process runs
+GRACE_S = 30.0  # how long an orphaned worker's running variant may take to remove its folder
+
+
+def _watch_owner() -> None:
+    """In a sweep worker (a thread): once the sweep's process is gone, stop the running variant as SIGTERM
+    does, or exit at once when none runs; exit anyway after GRACE_S. (The forkserver the worker was made
+    by lives as long as its workers do, so the parent-death signal alone would not come.)"""
+    while not orphaned():
+        time.sleep(WATCH_S)
+    if _RUNNING_VARIANT:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(GRACE_S)
+    os._exit(143)
+
+
+def orphaned() -> bool:
+    """In a sweep worker: whether the sweep's process is gone (no further variant is started)."""
+    return _PARENTS is not None and parent_gone(*_PARENTS)
 
 
 @contextmanager

@@ -10,6 +10,7 @@ import itertools
 import json
 import logging
 import multiprocessing
+import os
 import re
 import shutil
 import tarfile
@@ -36,12 +37,7 @@ from slam2d.evaluation.tables import (
 from slam2d.plugins import resolve
 from slam2d.runs import signals
 from slam2d.runs.commands import command_of, resolved, run_command
-from slam2d.runs.results import (
-    new_folder,
-    output_root,
-    progress_console,
-    shows_progress,
-)
+from slam2d.runs.results import new_folder, output_root, progress_console, remove_stale, shows_progress, writes
 
 log = logging.getLogger("slam2d")
 
@@ -105,11 +101,20 @@ def read_sweep(path: str | Path, overrides: list[str] = (), grid: list[str] = ()
         raise InputError(path, "variant names must be unique")
     for v in variants:  # validate every variant, its frontend included, before running any
         _check_variant(base, v, path, model)
-    workers = sweep.get("workers", 2)
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise InputError(f"{path}: workers", f"expected a positive integer, got {config_mod.short_repr(workers)}")
+    workers = check_workers(sweep.get("workers", 2), f"{path}: workers")
     summary = check_summary(sweep["summary"], f"{path}: summary") if "summary" in sweep else None
     return Sweep(base, variants, workers, model, summary, command.main_metrics)
+
+
+MAX_WORKERS = 256
+"""Most worker processes a sweep runs at once."""
+
+
+def check_workers(workers, key: str) -> int:
+    """``workers`` if it is an integer from 1 to MAX_WORKERS, else an InputError naming ``key``."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= MAX_WORKERS:
+        raise InputError(key, f"expected a positive integer up to {MAX_WORKERS}, got {config_mod.short_repr(workers)}")
+    return workers
 
 
 def grid_axis(text: str) -> tuple[str, list[Any]]:
@@ -201,16 +206,23 @@ def variant_config(base: dict[str, Any], variant: Variant, root: Path, source: s
 
 def _run_variant(cfg: ExperimentConfig) -> tuple[str, dict[str, Any] | None, str | None]:
     """Worker: (folder, metrics, error)."""
+    if signals.orphaned():  # the sweep's process is gone: start nothing, write nothing
+        os._exit(143)
     if signals.stopped():
         raise KeyboardInterrupt
-    with signals.variant_running():
-        try:
-            folder = run_command(cfg, quiet=True)
-            return str(folder), json.loads((folder / "metrics.json").read_text()), None
-        except Exception as err:  # reported in the table, the sweep goes on
-            if signals.stopped():  # a signal can surface as another error (an interrupted import raises ImportError)
-                raise KeyboardInterrupt from err
-            return "", None, f"{type(err).__name__}: {err}"
+    try:
+        with signals.variant_running():
+            try:
+                folder = run_command(cfg, quiet=True)
+                return str(folder), json.loads((folder / "metrics.json").read_text()), None
+            except Exception as err:  # reported in the table, the sweep goes on
+                if signals.stopped():  # a signal can surface as another error (an interrupted import: ImportError)
+                    raise KeyboardInterrupt from err
+                return "", None, f"{type(err).__name__}: {err}"
+    except KeyboardInterrupt:
+        if signals.orphaned():  # its folder is removed; nobody is left to tell
+            os._exit(143)
+        raise
 
 
 class SweepStopped(KeyboardInterrupt):
@@ -235,11 +247,14 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
     """
     if executor not in EXECUTORS:
         raise InputError("--executor", f"unknown executor '{executor}' ({', '.join(EXECUTORS)})")
+    if workers is not None:
+        check_workers(workers, "--workers")
     sweep = read_sweep(path, overrides, grid)
     base, variants = sweep.base, sweep.variants
     if executor == "ray":
         _connect_ray()  # before the sweep folder: an unreachable cluster leaves none
-    root = _sweep_folder(path, base, resume, sweep.model)
+    with writes("output.root" if resume is None else resume):
+        root = _sweep_folder(path, base, resume, sweep.model)
     cfgs = [variant_config(base, v, root / "runs", model=sweep.model) for v in variants]
     outcomes = [_finished(root / "runs", c.name) for c in cfgs]
     todo = [i for i, o in enumerate(outcomes) if o is None]
@@ -251,9 +266,11 @@ def run_sweep(path: str | Path, workers: int | None = None, executor: str = "loc
     except BaseException as err:
         if not (isinstance(err, KeyboardInterrupt) or signals.stopped()):
             raise
-        _write_sweep_table(root, variants, outcomes, sweep.summary, sweep.main_metrics)
+        with writes(root):
+            _write_sweep_table(root, variants, outcomes, sweep.summary, sweep.main_metrics)
         raise SweepStopped(root, sum(o is not None and not o[2] for o in outcomes), len(variants)) from None
-    return root, _write_sweep_table(root, variants, outcomes, sweep.summary, sweep.main_metrics)
+    with writes(root):
+        return root, _write_sweep_table(root, variants, outcomes, sweep.summary, sweep.main_metrics)
 
 
 def _sweep_folder(path, base: dict[str, Any], resume, model=None) -> Path:
@@ -262,10 +279,11 @@ def _sweep_folder(path, base: dict[str, Any], resume, model=None) -> Path:
         root = Path(resume).expanduser()
         if not (root / "sweep.yaml").is_file():
             raise InputError(root, "not a sweep folder (no sweep.yaml): give the folder 'slam2d ablate' printed")
-        if (root / "sweep.yaml").read_bytes() != Path(path).read_bytes():
-            log.warning("%s differs from the sweep %s was started with; variants are matched by name", path, root)
-        for stale in (root / "runs").glob(".*"):  # left by a process killed outright
-            shutil.rmtree(stale, ignore_errors=True)
+        if config_mod.load_dict(root / "sweep.yaml") != config_mod.load_dict(path):
+            raise InputError(f"--resume {root}", f"its sweep.yaml differs from {path}: resume with the sweep file it "
+                             "was started with (or start a new sweep)")
+        if (root / "runs").is_dir():
+            remove_stale(root / "runs", ownerless=True)  # left by a process killed outright
         return root
     name = str(config_mod.load_dict(path).get("name") or Path(path).stem)
     config_mod.validate({"name": name}, f"{path}: name")  # a folder name
@@ -405,7 +423,7 @@ def _execute_local(cfgs: list[ExperimentConfig], workers: int):
     # forkserver, not fork: a worker forked from a process that has run numba's parallel kernels (GNU
     # OpenMP) aborts as soon as it runs them itself (a localize sweep started after a localisation)
     pool = ProcessPoolExecutor(max_workers=max(1, workers), mp_context=multiprocessing.get_context("forkserver"),
-                               initializer=signals.init_sweep_worker)
+                               initializer=signals.init_sweep_worker, initargs=(os.getpid(),))
     try:
         futures = {pool.submit(_run_variant, c): i for i, c in enumerate(cfgs)}
         for fut in as_completed(futures):

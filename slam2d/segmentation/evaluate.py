@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from slam2d.errors import InputError
+from slam2d.errors import InputError, not_a_file
 
 __all__ = ["load_floor_plan", "load_ground_truth", "score", "contingency", "FREE_THRESHOLD", "MIN_ROOM_PX"]
 
@@ -49,7 +49,7 @@ def _read_gray(path) -> np.ndarray:
 
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "file not found")
+        raise InputError(path, not_a_file(path) or "file not found")
     return read_grey(path)
 
 

@@ -30,7 +30,7 @@ from scipy import linalg, sparse
 from scipy.sparse.linalg import eigsh
 from threadpoolctl import threadpool_limits
 
-from slam2d.config import Section
+from slam2d.config import MAX_BEAMS, Resolution, Section
 from slam2d.errors import InputError
 from slam2d.registry import Choice, validation_error
 from slam2d.segmentation.base import SEGMENTATION_METHODS, SIMILARITY_MEASURES, register_method
@@ -76,7 +76,7 @@ class SpectralConfig(Section):
 
     similarity: Annotated[str, Choice("similarity_measures")] = "visibility"
     spacing_m: float = Field(1.2, gt=0, description="viewpoint lattice step, m")
-    beams: int = Field(360, gt=3, description="beams per virtual scan over 360 deg")
+    beams: int = Field(360, gt=3, le=MAX_BEAMS, description="beams per virtual scan over 360 deg")
     max_range: float = Field(20.0, gt=0, description="virtual scan range, m")
     clearance_m: float = Field(0.2, ge=0, description="least distance of a viewpoint to an obstacle, m")
     clutter_m: float = Field(1.0, ge=0, description="obstacles smaller than this do not stop virtual beams, m")
@@ -89,7 +89,7 @@ class SpectralConfig(Section):
     )
     k: int | None = Field(None, gt=0, description="fixed cluster count; None chooses k by silhouette")
     k_min: int = Field(2, gt=0, description="smallest k tried")
-    k_max: int = Field(60, gt=0, description="largest k tried (and eigenvectors computed)")
+    k_max: int = Field(60, gt=0, le=1000, description="largest k tried (and eigenvectors computed)")
     eig_threshold: float | None = Field(
         0.8, gt=0, lt=1, description="try k around the count of L_rw eigenvalues below this; None: all of k_min..k_max"
     )
@@ -106,7 +106,7 @@ class SpectralConfig(Section):
     label_rule: Literal["fraction", "vote", "nearest"] = Field(
         "fraction", description="how cells take observation labels (see label_free_cells)"
     )
-    label_cell_m: float = Field(0.1, gt=0, description="cell size of the labelling pass, m")
+    label_cell_m: Resolution = Field(0.1, description="cell size of the labelling pass, m")
     min_segment_m2: float = Field(0.0, ge=0, description="segments smaller than this are absorbed, m^2")
     merge_ratio: float | None = Field(
         0.7, gt=0, description="merge segments whose boundary is at least this fraction of their width; None: off"

@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from slam2d import geometry
-from slam2d.errors import InputError
+from slam2d.errors import InputError, not_a_file
 from slam2d.paths import find_data_path
 
 __all__ = ["World", "Contact", "load_world"]
@@ -158,7 +158,7 @@ class World:
         """
         path = Path(path)
         if not path.is_file():
-            raise InputError(path, "world PNG not found")
+            raise InputError(path, not_a_file(path) or "world PNG not found")
         if not resolution > 0:
             raise InputError(path, f"resolution must be > 0 m per pixel, got {resolution}")
         from slam2d.mapping.image import read_grey

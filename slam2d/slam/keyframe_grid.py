@@ -24,6 +24,7 @@ from numba import njit
 
 from slam2d import geometry
 from slam2d.config import MappingConfig
+from slam2d.limits import check_memory
 from slam2d.mapping.occupancy import MARGIN_M, MAX_CELLS, OccupancyGrid, beam_segments, trace_beams
 from slam2d.types import Scan
 
@@ -220,6 +221,8 @@ class KeyframeGrid:
         if shape[0] * shape[1] > MAX_CELLS:
             raise ValueError(f"the map would need {shape[0]} x {shape[1]} cells, more than {MAX_CELLS:.0e} "
                              "(diverged poses, or set mapping.max_range)")
+        check_memory(4.0 * (shape[0] * shape[1] + h * w), "mapping.resolution",
+                     f"a {shape[0]} x {shape[1]} map grid at {self.cfg.resolution} m")
         grown = np.zeros(tuple(shape), np.float32)
         r, c = self._corner - new_lo
         grown[r : r + h, c : c + w] = self._base

@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from slam2d.config import Section
+from slam2d.config import MAX_RESOLUTION, Resolution, Section
 from slam2d.frontends.common import (
     MaxCorrectionThetaDeg,
     MaxCorrectionXY,
@@ -31,9 +31,9 @@ class IcpConfig(Section):
     )
     min_range: MinRange = 0.1
     max_range: MaxRange = 30.0
-    voxel_size: float = Field(0.0, ge=0, description="m; downsampling of the registered points (0: none)")
-    map_voxel_size: float = Field(0.2, gt=0, description="m; voxel of the local map")
-    map_max_points_per_voxel: int = Field(20, gt=0, description="points kept per map voxel")
+    voxel_size: float = Field(0.0, ge=0, le=MAX_RESOLUTION, description="m; downsampling of the registered points (0: none)")
+    map_voxel_size: Resolution = Field(0.2, description="m; voxel of the local map")
+    map_max_points_per_voxel: int = Field(20, gt=0, le=10_000, description="points kept per map voxel")
     map_window: int = Field(30, ge=0, description="scans kept in the local map (0: all within map_radius)")
     map_radius: float = Field(30.0, gt=0, description="m; map voxels farther than this from the robot are dropped")
     initial_threshold: float = Field(0.5, gt=0, description="m; correspondence scale before any motion statistics")

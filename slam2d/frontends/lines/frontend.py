@@ -9,7 +9,7 @@ import numpy as np
 from pydantic import Field
 
 from slam2d import geometry
-from slam2d.config import Section
+from slam2d.config import Resolution, Section
 from slam2d.frontends.base import FrontendResult, register_frontend
 from slam2d.frontends.common import (
     MaxSigmaThetaDeg,
@@ -63,7 +63,7 @@ class LineFrontend:
         reanchor_every: int = Field(0, ge=0, description="rebuild the map lines from a grid of recent scans every n "
                                     "scans (0: off)")
         reanchor_window: int = Field(300, gt=0, description="recent scans in that grid")
-        reanchor_resolution: float = Field(0.05, gt=0, description="m per cell of that grid")
+        reanchor_resolution: Resolution = Field(0.05, description="m per cell of that grid")
         gate: SimilarityGate.Config = SimilarityGate.Config(min_confidence=0.3)
         # lines correct the heading on nearly every scan; on Intel calibrating it too lowered the heading
         # error but raised the translational one

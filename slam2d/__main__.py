@@ -1,0 +1,5 @@
+"""``python -m slam2d``: the slam2d command (as ``python -m slam2d.cli``)."""
+
+from slam2d.cli import main
+
+main()

@@ -1,0 +1,77 @@
+"""Child processes that never outlive their parent, and folders that name the process owning them."""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+import signal
+import socket
+import sys
+from pathlib import Path
+
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+OWNER_FILE = ".owner"  # in a hidden work folder: "PID HOST" of the process filling it
+
+
+def die_with_parent(parent: int, sig: int = signal.SIGKILL) -> None:
+    """In a child process: receive ``sig`` when the parent thread that made it exits (Linux ``prctl``;
+    a no-op elsewhere), and exit now if ``parent`` (the pid it was made by) is already gone."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+            libc.prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:  # the parent died before prctl took effect
+        os._exit(128 + int(sig))
+
+
+def parent_gone(parent: int, owner: int | None = None) -> bool:
+    """Whether this process's parent is no longer ``parent`` (it died and this one was adopted), or
+    ``owner`` (the process that started the work, further up) no longer runs."""
+    return os.getppid() != parent or (owner is not None and not alive(owner))
+
+
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (one that has exited but is not yet reaped does not); True if unknowable."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return not _zombie(pid)
+
+
+def claim(folder: Path) -> None:
+    """Record in ``folder`` that this process fills it (see :func:`stale`)."""
+    (folder / OWNER_FILE).write_text(f"{os.getpid()} {socket.gethostname()}\n")
+
+
+def release(folder: Path) -> None:
+    """Remove the owner record of ``folder`` (before it is published)."""
+    (folder / OWNER_FILE).unlink(missing_ok=True)
+
+
+def stale(folder: Path, ownerless: bool = False) -> bool:
+    """Whether ``folder``'s owner (:func:`claim`) is a process of this host that no longer runs;
+    ``ownerless``: a folder without an owner record counts as stale too."""
+    try:
+        pid, host = (folder / OWNER_FILE).read_text().split()
+        pid = int(pid)
+    except FileNotFoundError:
+        return ownerless
+    except (OSError, ValueError):
+        return False
+    if host != socket.gethostname():
+        return False  # a folder on a shared disk, filled on another machine
+    return not alive(pid)
+
+
+def _zombie(pid: int) -> bool:
+    """Whether ``pid`` has exited but not been reaped yet (Linux; False elsewhere)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z"
+    except (OSError, IndexError):
+        return False
