@@ -20,6 +20,7 @@ from slam2d.backend import certificate, consistency
 from slam2d.backend import initialization as ini
 from slam2d.backend import robust as rb
 from slam2d.backend.consistency import CHI2_3DOF_99
+from slam2d.backend.lm import levenberg_marquardt
 from slam2d.backend.factors import (
     factor_graph,
     g2o_factor_list,
@@ -91,14 +92,13 @@ def _anchor_prior(graph: g2o.PoseGraphFile, values):
 
 
 def _lm(graph: g2o.PoseGraphFile, fg, initial):
-    """Levenberg-Marquardt (GTSAM defaults) over ``fg`` and the anchor prior from gtsam.Values
-    ``initial``; returns (values, iterations)."""
+    """Levenberg-Marquardt (GTSAM defaults, iteration by iteration: ``lm``) over ``fg`` and the anchor
+    prior from gtsam.Values ``initial``; returns (values, iterations)."""
     import gtsam
 
     anchored = gtsam.NonlinearFactorGraph(fg)
     anchored.add(_anchor_prior(graph, initial))
-    opt = gtsam.LevenbergMarquardtOptimizer(anchored, initial, lm_params())
-    return opt.optimize(), opt.iterations()
+    return levenberg_marquardt(anchored, initial)
 
 
 def _optimize_from(graph: g2o.PoseGraphFile, fg, poses, loss: str | None):
