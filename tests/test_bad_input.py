@@ -247,11 +247,12 @@ def _wait_for(predicate, timeout=120.0):
 
 
 def _stop(proc: subprocess.Popen, sig) -> str:
-    """Send ``sig`` to ``proc`` alone (as a scheduler or `timeout` does); its stderr once it has exited 130."""
+    """Send ``sig`` to ``proc`` alone (as a scheduler or `timeout` does); its stderr once it has exited
+    128 + the signal's number (SIGINT 130, SIGTERM 143)."""
     time.sleep(0.5)
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130, err
+    assert proc.returncode == 128 + sig, err
     return err
 
 

@@ -12,8 +12,8 @@ __all__ = ["app", "main"]
 
 
 def main() -> None:
-    """The ``slam2d`` command. A stopped command exits 130 at once (its clean-up is done): letting
-    the interpreter finish could end the process as by SIGINT instead, when the interrupt arrived
+    """The ``slam2d`` command. A stopped command exits 130 (SIGINT) or 143 (SIGTERM) at once (its clean-up
+    is done): letting the interpreter finish could end the process as by SIGINT instead, when the interrupt arrived
     in code CPython itself ran (it then re-raises the signal at exit)."""
     import os
     import sys
@@ -21,9 +21,9 @@ def main() -> None:
     try:
         app()
     except SystemExit as done:
-        if done.code != 130:
+        if done.code not in (130, 143):
             raise
         logging.shutdown()
         sys.stdout.flush()
         sys.stderr.flush()
-        os._exit(130)
+        os._exit(done.code)

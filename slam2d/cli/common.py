@@ -1,5 +1,6 @@
 """What every slam2d command shares: the typer app, the common options, the logging set-up, the frame that
-turns bad input into one line and exit 2 and a signal into exit 130, and building a command's config.
+turns bad input into one line and exit 2 and a signal into exit 130 (SIGINT) / 143 (SIGTERM), and building a
+command's config.
 
 Heavy imports happen inside the commands so that ``slam2d --help`` is instant.
 """
@@ -62,14 +63,16 @@ def _fail(err: Exception) -> None:
 
 
 def _stopped(what: str) -> None:
-    """Report a SIGINT / SIGTERM; exit 130 as shells do."""
+    """Report a SIGINT / SIGTERM; exit 128 + the signal's number as shells do (130, 143)."""
+    from slam2d.runs.signals import exit_code
+
     typer.secho(f"stopped: {what}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(130)
+    raise typer.Exit(exit_code())
 
 
 @contextmanager
 def _stoppable(what: str):
-    """SIGINT or SIGTERM in the block: "stopped: WHAT" and exit 130, whatever error the signal became."""
+    """SIGINT or SIGTERM in the block: "stopped: WHAT" and exit 130 / 143, whatever error the signal became."""
     from slam2d.runs.signals import stop_on_signals, stopped
 
     try:
@@ -85,7 +88,8 @@ def _stoppable(what: str):
 
 @contextmanager
 def _command(quiet: bool, what: str = "no results folder written"):
-    """A command's frame: logging set up; bad input -> "error: ..." and exit 2; a signal -> "stopped: WHAT", 130."""
+    """A command's frame: logging set up; bad input -> "error: ..." and exit 2; a signal -> "stopped: WHAT",
+    130 / 143."""
     _setup_logging(quiet)
     with _stoppable(what):
         try:

@@ -246,8 +246,8 @@ def optimize(
             "verify": verify, "output.root": root})
         folder = run_optimize(cfg)
     if not as_json:
-        _echo_metrics(folder, ("gtsam_error", "iterations", "seconds", "verified", "certified", "loops_rejected",
-                               "precision", "recall", "rmse_to_reference"), digits=6)
+        _echo_metrics(folder, ("kept_edges_error", "robust_cost", "iterations", "gnc_steps", "seconds", "verified",
+                               "certified", "loops_rejected", "precision", "recall", "rmse_to_reference"), digits=6)
     _results("optimize", folder, as_json)
 
 

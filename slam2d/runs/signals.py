@@ -8,6 +8,7 @@ import signal
 from contextlib import contextmanager
 
 _STOPPED = False  # whether SIGINT or SIGTERM has arrived in this process (in a sweep worker: no new variant)
+_SIGNAL: int | None = None  # the first of them to arrive
 
 
 _RUNNING_VARIANT = False  # in a sweep worker: whether a variant is running
@@ -18,10 +19,12 @@ def _handler(stop):
     pid = os.getpid()
 
     def handler(signum, frame):
+        global _SIGNAL
         if os.getpid() != pid:
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
             return
+        _SIGNAL = _SIGNAL or signum
         stop()
 
     return handler
@@ -49,6 +52,12 @@ def stop_on_signals():
 def stopped() -> bool:
     """Whether SIGINT or SIGTERM has arrived since :func:`stop_on_signals`."""
     return _STOPPED
+
+
+def exit_code() -> int:
+    """The shell's exit status for the signal that stopped the process: 128 + its number (SIGINT 130,
+    SIGTERM 143; 130 when none is known)."""
+    return 128 + int(_SIGNAL or signal.SIGINT)
 
 
 def check_stop() -> None:
