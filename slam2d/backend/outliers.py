@@ -25,7 +25,7 @@ import numpy as np
 
 from slam2d.backend import consistency
 from slam2d.backend import initialization as ini
-from slam2d.backend.consistency import CHI2_3DOF_99, edge_chi2, noise_scale, subgraph
+from slam2d.backend.consistency import CHI2_3DOF_99, edge_chi2, noise_ratio, noise_scale, subgraph
 from slam2d.backend.factors import (
     factor_graph,
     g2o_factor_list,
@@ -39,6 +39,13 @@ from slam2d.datasets import g2o
 
 SCREEN_READMIT_CHI2 = 10 * CHI2_3DOF_99  # pc_dcs: loops within this squared whitened residual after the
 # screened DCS enter its second DCS (M3500: a true loop closing a detour has 21.7 there, random false ones ~10^3)
+DCS_CALIBRATED_PHI = 30.0  # pc_dcs: DCS's Phi at least this times the noise ratio measured at the first DCS
+# solution. With calibrated information Phi = 1 drops true loops (a simulated grid: 8-15 %, the test's laps:
+# 8 of 41), Phi = 10 does not; the ratio at a DCS solution reads low (the laps: 0.38 there, 0.62 at the
+# optimum, whose residuals absorb part of the noise)
+INLIER_GATE = CHI2_3DOF_99  # a loop's final gate (chi-square); residuals at the optimum are smaller than the
+# noise (the laps of the tests: 0.62 of it), so calibrated true loops beyond it are rarer than 1 %
+FINAL_ROUNDS = 4  # least-squares solves at most in the final judgement of the loops
 GNC_MAX_STEPS = 20  # graduation steps at most (each one warm-started weighted least squares)
 GNC_MU_STEP = 1.4  # GTSAM's factor between steps; larger when the schedule would need more steps
 GNC_TLS_WARM_MU = 10.0  # TLS from a robust start: weight 1 below 0.91 x the gate, 0 beyond 1.1 x
@@ -92,9 +99,13 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
        and from the chordal start of that screened graph, the lower DCS cost kept (the spanning
        tree suits mutually consistent false loops that pass the screen, the chordal start a graph
        whose information makes DCS from the odometry stop short); ``init`` names a single start;
-    2. the noise scale measured on the screened loops there; DCS again from that solution over the
-       odometry and every loop within ``SCREEN_READMIT_CHI2`` (times the scale);
-    3. least squares over the odometry and the loops within ``CHI2_3DOF_99`` (times the scale)."""
+    2. the noise ratio measured on the screened loops there (``consistency.noise_ratio``); when it
+       asks for a wider Phi (at least ``DCS_CALIBRATED_PHI`` times the ratio, ``phi`` times the noise
+       scale), DCS over the screened loops again from there;
+    3. DCS from that solution over the odometry and every loop within ``SCREEN_READMIT_CHI2`` (times
+       the noise scale);
+    4. least squares over the odometry and the loops within ``INLIER_GATE`` (times the scale), judged
+       again at its solution (``least_squares_kept``)."""
     t0 = time.perf_counter()
     odometry = g2o.odometry_mask(graph)
     screened = consistency.pairwise_support(graph)
@@ -113,16 +124,39 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
         if best is None or cost < best[0]:
             best = (cost, poses, name)
     _, poses, name = best
-    scale = noise_scale(graph, poses, screened & ~odometry)
-    if scale > 1.0:
-        robust = g2o_factor_list(graph, "dcs", phi * scale, plain_odometry=True)
+    ratio = noise_ratio(graph, poses, screened & ~odometry)
+    scale = max(1.0, ratio)
+    phi_used = max(phi * scale, DCS_CALIBRATED_PHI * ratio)
+    if phi_used != phi:  # DCS again from there with Phi in the graph's own noise units
+        robust = g2o_factor_list(graph, "dcs", phi_used, plain_odometry=True)
+        poses, n = _solve(graph, _pick(robust, screened), poses)
+        iterations += n
     keep = odometry | (edge_chi2(graph, poses) <= SCREEN_READMIT_CHI2 * scale)
     poses, n = _solve(graph, _pick(robust, keep), poses)
     iterations += n
-    keep = odometry | (edge_chi2(graph, poses) <= CHI2_3DOF_99 * scale)
-    poses, n = _solve(graph, _pick(plain, keep), poses)
+    keep, poses, n = least_squares_kept(graph, plain, poses, INLIER_GATE * scale)
     seconds["solve"] = time.perf_counter() - t0
     return Solution(poses, keep, iterations + n, 0, scale, name, seconds)
+
+
+def least_squares_kept(graph: g2o.PoseGraphFile, plain: list, poses, gate: float, rounds: int = FINAL_ROUNDS):
+    """Least squares over the odometry and the loops within ``gate`` (chi-square) at ``poses`` (N, 3),
+    the loops judged again at its solution until the set stays (at most ``rounds`` solves): a robust
+    solution biases the residuals of true loops, the least-squares one over the true loops does not.
+    Returns (kept (M,) bool, poses, LM iterations)."""
+    odometry = g2o.odometry_mask(graph)
+    keep, iterations = odometry | (edge_chi2(graph, poses) <= gate), 0
+    for _ in range(rounds):
+        poses, n = _solve(graph, _pick(plain, keep), poses)
+        iterations += n
+        again = odometry | (edge_chi2(graph, poses) <= gate)
+        if np.array_equal(again, keep):
+            break
+        keep = again
+    else:
+        poses, n = _solve(graph, _pick(plain, keep), poses)
+        iterations += n
+    return keep, poses, iterations
 
 
 def _weights(chi2: np.ndarray, mu: float, gate: float, loss: str) -> np.ndarray:
@@ -139,7 +173,7 @@ def _weights(chi2: np.ndarray, mu: float, gate: float, loss: str) -> np.ndarray:
 
 def gnc(graph: g2o.PoseGraphFile, plain: list, start, loss: str = "tls", scale: float = 1.0,
         warm: bool = True, init: str = "pc_dcs", max_steps: int = GNC_MAX_STEPS) -> Solution:
-    """GNC from ``start`` (N, 3) with the odometry as known inliers, the gate ``CHI2_3DOF_99 * scale``,
+    """GNC from ``start`` (N, 3) with the odometry as known inliers, the gate ``INLIER_GATE * scale``,
     then least squares over the loops of weight >= ``GNC_OUTLIER_WEIGHT``. ``warm``: ``start`` is a
     robust solution, so the graduation begins near the target kernel (TLS: mu = ``GNC_TLS_WARM_MU``,
     Geman-McClure: ``GNC_GM_WARM_MU``) instead of at GTSAM's convex end; the steps' factor grows from
@@ -147,7 +181,7 @@ def gnc(graph: g2o.PoseGraphFile, plain: list, start, loss: str = "tls", scale: 
     are binary and unchanged."""
     t0 = time.perf_counter()
     odometry = g2o.odometry_mask(graph)
-    gate = CHI2_3DOF_99 * scale
+    gate = INLIER_GATE * scale
     poses, iterations, steps = np.asarray(start, dtype=np.float64), 0, 0
     chi2 = edge_chi2(graph, poses)
     top = float(chi2[~odometry].max(initial=0.0))
@@ -191,7 +225,7 @@ def robust_cost(graph: g2o.PoseGraphFile, poses, method: str, param: float, scal
         return float(factor_graph(robust).error(g2o_values(graph.ids, poses)))
     chi2 = edge_chi2(graph, poses)
     loops = ~g2o.odometry_mask(graph)
-    gate = CHI2_3DOF_99 * scale
+    gate = INLIER_GATE * scale
     rho = chi2.copy()
     rho[loops] = (np.minimum(chi2, gate) if method == "tls" else gate * chi2 / (gate + chi2))[loops]
     return 0.5 * float(rho.sum())
