@@ -156,16 +156,16 @@ def _solve_outliers(graph: g2o.PoseGraphFile, robust: str, robust_param: float, 
     t0 = time.perf_counter()
     plain = g2o_factor_list(graph)
     loss = rb.gnc_loss(robust)
-    screen_init = None if loss or not init else str(init).lower()
-    sol = outliers.pc_dcs(graph, plain, robust_param, screen_init)
+    init = None if init is None or str(init).lower() == "pc_dcs" else str(init).lower()  # "pc_dcs": GNC's default
+    sol = outliers.pc_dcs(graph, plain, robust_param, None if loss else init)
     timings = dict(sol.seconds)
     method = "pc_dcs"
     if loss:
         method = loss
         if init:
-            start = ini.initial_poses(graph, str(init).lower())
+            start = ini.initial_poses(graph, init)
             scale = outliers.noise_scale(graph, start, ~g2o.odometry_mask(graph) & consistency.pairwise_support(graph))
-            sol = outliers.gnc(graph, plain, start, loss, scale, warm=False, init=str(init).lower())
+            sol = outliers.gnc(graph, plain, start, loss, scale, warm=False, init=init)
         else:
             sol = outliers.gnc(graph, plain, sol.poses, loss, sol.scale)
         timings.update(sol.seconds)

@@ -220,7 +220,8 @@ def optimize(
     graph_path: Optional[Path] = typer.Argument(None, help="2D pose graph, g2o or TORO (the config's graph)"),
     config: Optional[Path] = CONFIG_OPT,
     init: Optional[str] = typer.Option(None, help="chordal, spanning_tree or file (default: chordal; "
-                                       "spanning_tree under an M-estimator; both under GNC, the lower cost kept)"),
+                                       "spanning_tree under an M-estimator; pc_dcs: spanning tree and screened "
+                                       "chordal, the lower DCS cost kept; GNC: from pc_dcs's solution)"),
     robust: Optional[str] = typer.Option(None, help="none, huber, cauchy, dcs, gnc (TLS), gnc_tls, gnc_gm or "
                                          "pc_dcs (pairwise-consistency screen, then DCS: for false loop closures)"),
     robust_param: Optional[float] = typer.Option(None, help="M-estimator width, whitened units (sigmas); Phi of "
