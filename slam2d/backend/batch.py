@@ -167,7 +167,9 @@ def _solve_outliers(graph: g2o.PoseGraphFile, robust: str, robust_param: float, 
             scale = outliers.noise_scale(graph, start, ~g2o.odometry_mask(graph) & consistency.pairwise_support(graph))
             sol = outliers.gnc(graph, plain, start, loss, scale, warm=False, init=init)
         else:
+            first = sol.iterations
             sol = outliers.gnc(graph, plain, sol.poses, loss, sol.scale)
+            sol.iterations += first
         timings.update(sol.seconds)
     seconds = time.perf_counter() - t0
     verified = certified = None
