@@ -52,8 +52,9 @@ class BatchResult:
     the same error (None: not checked); ``inlier`` (M,) bool per edge (odometry always; for pc_dcs
     and GNC the loops of their final least squares, else a loop within the chi-square 99 % gate);
     ``certified``: SE-Sync's certificate holds next to the result (``certificate.certify`` on the
-    kept edges: every edge of an outlier-free least-squares solve; None when not checked); ``scale``: the noise scale of the
-    gates (``consistency.noise_scale``); ``timings``: wall time (s) of each step."""
+    kept edges: every edge of an outlier-free least-squares solve; None when not checked);
+    ``scale``: the noise scale of the gates (``consistency.noise_scale``); ``timings``: wall time (s)
+    of each step."""
 
     poses: np.ndarray
     initial_error: float
@@ -163,9 +164,8 @@ def _solve_outliers(graph: g2o.PoseGraphFile, robust: str, robust_param: float, 
     if loss:
         method = loss
         if init:
-            start = ini.initial_poses(graph, init)
-            scale = outliers.noise_scale(graph, start, ~g2o.odometry_mask(graph) & consistency.pairwise_support(graph))
-            sol = outliers.gnc(graph, plain, start, loss, scale, warm=False, init=init)
+            start = ini.initial_poses(graph, init)  # a start's residuals say nothing of the noise: nominal gate
+            sol = outliers.gnc(graph, plain, start, loss, 1.0, warm=False, init=init)
         else:
             first = sol.iterations
             sol = outliers.gnc(graph, plain, sol.poses, loss, sol.scale)

@@ -25,7 +25,12 @@ import numpy as np
 
 from slam2d.backend import consistency
 from slam2d.backend import initialization as ini
-from slam2d.backend.consistency import CHI2_3DOF_99, edge_chi2, noise_ratio, noise_scale, subgraph
+from slam2d.backend.consistency import (
+    CHI2_3DOF_99,
+    edge_chi2,
+    noise_ratio,
+    subgraph,
+)
 from slam2d.backend.factors import (
     factor_graph,
     g2o_factor_list,
