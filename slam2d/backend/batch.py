@@ -176,7 +176,8 @@ def _solve_outliers(graph: g2o.PoseGraphFile, robust: str, robust_param: float, 
     if verify:
         verified, certified, more = _verify_kept(graph, sol.poses, sol.inlier)
         timings.update(more)
-    cost = lambda p: outliers.robust_cost(graph, p, method, robust_param, sol.scale)
+    phi = sol.phi if method == "pc_dcs" else robust_param
+    cost = lambda p: outliers.robust_cost(graph, p, method, phi, sol.scale)
     start = ini.spanning_tree(graph) if sol.init in ("pc_dcs", "chordal_screened") else _start(graph, sol.init)
     kept_error = g2o_error(consistency.subgraph(graph, sol.inlier), sol.poses)
     out = BatchResult(sol.poses, cost(graph.poses), cost(sol.poses), sol.iterations, seconds, sol.init, cost(start),

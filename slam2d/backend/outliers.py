@@ -64,7 +64,8 @@ GNC_OUTLIER_WEIGHT = 0.5  # a loop whose final weight is below this is rejected
 class Solution:
     """A method's result: poses (N, 3) in vertex order, ``inlier`` (M,) bool (odometry always; the
     loops of its final least squares), LM iterations, GNC graduation steps (0 for pc_dcs), the
-    noise scale its gates used, the start's name and per-step wall times (s)."""
+    noise scale its gates used, the start's name, per-step wall times (s) and the Phi of pc_dcs's
+    DCS (whitened units)."""
 
     poses: np.ndarray
     inlier: np.ndarray
@@ -73,6 +74,7 @@ class Solution:
     scale: float
     init: str
     seconds: dict = field(default_factory=dict)
+    phi: float = float("nan")
 
 
 def _poses(values, ids) -> np.ndarray:
@@ -141,7 +143,7 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
     iterations += n
     keep, poses, n = least_squares_kept(graph, plain, poses, INLIER_GATE * scale)
     seconds["solve"] = time.perf_counter() - t0
-    return Solution(poses, keep, iterations + n, 0, scale, name, seconds)
+    return Solution(poses, keep, iterations + n, 0, scale, name, seconds, phi_used)
 
 
 def least_squares_kept(graph: g2o.PoseGraphFile, plain: list, poses, gate: float, rounds: int = FINAL_ROUNDS):
@@ -220,13 +222,13 @@ def gnc(graph: g2o.PoseGraphFile, plain: list, start, loss: str = "tls", scale: 
     return Solution(poses, keep, iterations + n, steps, scale, init, {"gnc": time.perf_counter() - t0})
 
 
-def robust_cost(graph: g2o.PoseGraphFile, poses, method: str, param: float, scale: float) -> float:
+def robust_cost(graph: g2o.PoseGraphFile, poses, method: str, phi: float, scale: float) -> float:
     """The cost a method minimises, at ``poses`` (N, 3), over every edge (odometry plain): for
-    ``pc_dcs`` GTSAM's error under DCS with Phi ``param * scale``; for GNC 0.5 * the sum of squared
+    ``pc_dcs`` GTSAM's error under DCS with Phi ``phi``; for GNC 0.5 * the sum of squared
     whitened residuals, each loop's truncated at the gate ``CHI2_3DOF_99 * scale`` (TLS) or under
     Geman-McClure of that width."""
     if method == "pc_dcs":
-        robust = g2o_factor_list(graph, "dcs", param * scale, plain_odometry=True)
+        robust = g2o_factor_list(graph, "dcs", phi, plain_odometry=True)
         return float(factor_graph(robust).error(g2o_values(graph.ids, poses)))
     chi2 = edge_chi2(graph, poses)
     loops = ~g2o.odometry_mask(graph)
