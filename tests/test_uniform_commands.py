@@ -71,7 +71,7 @@ def test_map_and_optimize_take_a_config_and_run_as_one_variant_sweeps(tmp_path, 
         assert [r["variant"] for r in rows] == ["only"] and rows[0]["error"] == "", rows
         assert (folder / rows[0]["folder"] / "metrics.json").is_file()
         header = (folder / "table.md").read_text().splitlines()[0]
-        main = {"map": "sparse.bytes", "optimize": "gtsam_error"}[command]
+        main = {"map": "sparse.bytes", "optimize": "kept_edges_error"}[command]
         assert main in COMMANDS[command].main_metrics and main in header  # the command's main metric shown
 
 

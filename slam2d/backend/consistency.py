@@ -32,6 +32,7 @@ from slam2d.errors import InputError
 
 SUPPORT_WINDOW = 10  # vertices: the most each end of a partner loop (or a loop's own ends) may lie apart
 CHI2_3DOF_99 = 11.344866730144373  # chi-square 99 % quantile, 3 degrees of freedom
+CHI2_3DOF_MEDIAN = 2.3659738843753377  # chi-square median, 3 degrees of freedom
 
 
 def _sandwich(a: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -150,3 +151,26 @@ def pairwise_support(graph: g2o.PoseGraphFile, window: int = SUPPORT_WINDOW,
     out = np.ones(len(graph.i), bool)
     out[loops] = support
     return out
+
+
+def noise_ratio(graph: g2o.PoseGraphFile, poses, loops) -> float:
+    """How much larger the loops' squared whitened residuals at ``poses`` (N, 3) are than the graph's
+    information matrices predict: their median over the ``loops`` (M,) bool mask divided by the
+    chi-square median (3 dof); 1 when no loop is given. Below 1: the information understates the
+    precision (M3500: 0.0085); about 1: calibrated; above 1: the information overstates it."""
+    chi2 = edge_chi2(graph, poses)[np.asarray(loops, bool)]
+    return float(np.median(chi2)) / CHI2_3DOF_MEDIAN if len(chi2) else 1.0
+
+
+def noise_scale(graph: g2o.PoseGraphFile, poses, loops) -> float:
+    """``noise_ratio`` at least 1: gates in whitened units are multiplied by it, so a graph whose
+    information overstates its precision keeps its true loops, and one whose information understates
+    it keeps the nominal gates."""
+    return max(1.0, noise_ratio(graph, poses, loops))
+
+
+def subgraph(graph: g2o.PoseGraphFile, keep) -> g2o.PoseGraphFile:
+    """``graph`` with the edges where ``keep`` (M,) bool is set; every vertex stays."""
+    keep = np.asarray(keep, bool)
+    return g2o.PoseGraphFile(graph.ids, graph.poses, graph.i[keep], graph.j[keep], graph.measurements[keep],
+                             graph.information[keep])

@@ -115,3 +115,20 @@ def g2o_factors(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: fl
                 plain_odometry: bool = False):
     """gtsam graph of a g2o file's edges (no prior); see ``g2o_factor_list``."""
     return factor_graph(g2o_factor_list(graph, robust, robust_param, plain_odometry))
+
+
+def g2o_weighted_factors(graph: g2o.PoseGraphFile, weights, plain: list | None = None) -> list:
+    """Between factors of the edges whose weight (M,) is positive, each information matrix scaled by
+    its weight (GNC's weighted least squares); an edge of weight 1 reuses its factor from ``plain``
+    (``g2o_factor_list(graph)``) when given. Information matrices are taken as checked."""
+    import gtsam
+
+    w = np.asarray(weights, dtype=np.float64)
+    out = []
+    for k in np.flatnonzero(w > 0).tolist():
+        if plain is not None and w[k] == 1.0:
+            out.append(plain[k])
+        else:
+            model = gtsam.noiseModel.Gaussian.Information(w[k] * graph.information[k])
+            out.append(between_factor(int(graph.i[k]), int(graph.j[k]), graph.measurements[k], model))
+    return out

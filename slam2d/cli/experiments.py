@@ -222,7 +222,8 @@ def optimize(
     graph_path: Optional[Path] = typer.Argument(None, help="2D pose graph, g2o or TORO (the config's graph)"),
     config: Optional[Path] = CONFIG_OPT,
     init: Optional[str] = typer.Option(None, help="chordal, spanning_tree or file (default: chordal; "
-                                       "spanning_tree under an M-estimator; both under GNC, the lower cost kept)"),
+                                       "spanning_tree under an M-estimator; pc_dcs: spanning tree and screened "
+                                       "chordal, the lower DCS cost kept; GNC: from pc_dcs's solution)"),
     robust: Optional[str] = typer.Option(None, help="none, huber, cauchy, dcs, gnc (TLS), gnc_tls, gnc_gm or "
                                          "pc_dcs (pairwise-consistency screen, then DCS: for false loop closures)"),
     robust_param: Optional[float] = typer.Option(None, help="M-estimator width, whitened units (sigmas); Phi of "
@@ -248,8 +249,8 @@ def optimize(
             "verify": verify, "output.root": root})
         folder = run_optimize(cfg)
     if not as_json:
-        _echo_metrics(folder, ("gtsam_error", "iterations", "seconds", "verified", "certified", "loops_rejected",
-                               "precision", "recall", "rmse_to_reference"), digits=6)
+        _echo_metrics(folder, ("kept_edges_error", "robust_cost", "iterations", "gnc_steps", "seconds", "verified",
+                               "certified", "loops_rejected", "precision", "recall", "rmse_to_reference"), digits=6)
     _results("optimize", folder, as_json)
 
 

@@ -63,8 +63,8 @@ for _name, _command in {
         "grid.dense_uint8_bytes", "sparse.bytes", "quadtree.bytes", "quadtree.trinary_bytes", "lines.bytes",
         "mesh.bytes"), 'Mapping layers of a map: sparse grid, quadtrees, line map, wall mesh.'),
     "optimize": Command("slam2d.runs.optimize:OptimizeConfig", "slam2d.runs.optimize:run_optimize", (
-        "gtsam_error", "iterations", "seconds", "verified", "certified", "loops_rejected", "precision", "recall",
-        "rmse_to_reference"), 'One batch optimisation of a g2o / TORO pose graph, with false loops if asked.'),
+        "kept_edges_error", "robust_cost", "iterations", "seconds", "verified", "certified", "loops_rejected",
+        "precision", "recall", "rmse_to_reference"), 'One batch optimisation of a g2o / TORO pose graph, with false loops if asked.'),
 }.items():
     register_command(_name, _command)
 

@@ -30,7 +30,8 @@ class OptimizeConfig(Section):
     seed: int = Field(0, ge=0, lt=2**63, description="seed of the outlier injection")
     graph: str | None = Field(None, description="2D pose graph, g2o or TORO (relative: here, then SLAM2D_DATA)")
     init: str | None = Field(None, description="chordal, spanning_tree or file (default: chordal; spanning_tree "
-                             "under an M-estimator; both under GNC, the lower cost kept)")
+                             "under an M-estimator; pc_dcs: the spanning tree and the screened chordal start, the "
+                             "lower DCS cost kept; GNC: warm-started from pc_dcs's solution)")
     robust: str = Field("none", description="none, huber, cauchy, dcs, gnc (TLS), gnc_tls, gnc_gm or pc_dcs "
                         "(pairwise-consistency screen, then DCS: for false loop closures)")
     robust_param: float = Field(1.0, description="M-estimator width, whitened units (sigmas); Phi of dcs, pc_dcs")

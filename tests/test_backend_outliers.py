@@ -1,0 +1,102 @@
+"""The batch back end under false loops (``slam2d optimize``): gates that follow each graph's information,
+GNC in a bounded number of warm-started steps, verification on the kept edges, named errors, and a
+solve that a signal stops promptly."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from test_pose_graph_global import lap_graph, laps, manhattan, rmse
+
+from slam2d.backend import outliers
+from slam2d.backend.batch import g2o_metrics, loop_metrics, solve_g2o
+from slam2d.backend.factors import g2o_factor_list
+from slam2d.datasets.g2o import PoseGraphFile, inject_outliers, odometry_mask
+
+
+def scaled(graph: PoseGraphFile, factor: float) -> PoseGraphFile:
+    """``graph`` with every information matrix multiplied by ``factor``."""
+    return PoseGraphFile(graph.ids, graph.poses, graph.i, graph.j, graph.measurements, graph.information * factor)
+
+
+@pytest.mark.parametrize("factor", [0.1, 10.0])
+@pytest.mark.parametrize("robust", ["pc_dcs", "gnc", "gnc_gm"])
+def test_scaled_information_keeps_true_loops(robust, factor):
+    """The false-loop methods' gates follow the graph's noise; an M-estimator's width stays the user's
+    (Huber, Cauchy, DCS of width 1 drop true loops of this graph with its information scaled by 10)."""
+    clean = scaled(lap_graph(laps(), noise=1.0, seed=3), factor)  # calibrated information, then scaled
+    reference = solve_g2o(clean).poses
+    true_loops = ~odometry_mask(clean)
+    result = solve_g2o(clean, robust=robust)
+    assert result.inlier[true_loops].all()  # every true loop kept
+    assert rmse(result.poses, reference) < 1e-4  # least squares over every loop: the plain optimum
+    graph, injected = inject_outliers(clean, 20, "random", seed=4)
+    if robust in ("pc_dcs", "gnc"):
+        result = solve_g2o(graph, robust=robust)
+        m = loop_metrics(result.inlier, injected)
+        assert m["outliers_rejected"] == 20 and m["true_rejected"] == 0
+        assert rmse(result.poses, reference) < 1e-4
+
+
+def test_no_false_loop_every_false_loop_method_returns_the_plain_optimum():
+    clean = manhattan()
+    plain = solve_g2o(clean)
+    for robust in ("pc_dcs", "gnc", "gnc_gm"):
+        result = solve_g2o(clean, robust=robust, verify=True)
+        assert result.inlier.all() and rmse(result.poses, plain.poses) < 1e-5
+        assert result.kept_error == pytest.approx(plain.final_error, rel=1e-6)
+        assert result.verified and result.certified
+        assert {"screen", "solve", "verify", "certify"} <= set(result.timings)
+
+
+def test_gnc_with_1000_false_loops_graduates_in_bounded_steps():
+    clean = manhattan(n=1000, seed=5)
+    reference = solve_g2o(clean).poses
+    graph, injected = inject_outliers(clean, 1000, "random", seed=6)
+    result = solve_g2o(graph, robust="gnc")
+    assert result.init == "pc_dcs" and 0 < result.steps <= outliers.GNC_MAX_STEPS
+    assert result.iterations < 100
+    m = loop_metrics(result.inlier, injected)
+    true_loops = ~odometry_mask(graph) & ~injected
+    assert m["outliers_rejected"] == 1000
+    assert np.sum(result.inlier & true_loops) >= 0.99 * true_loops.sum()
+    assert rmse(result.poses, reference) < 0.05
+    cold = outliers.gnc(graph, g2o_factor_list(graph), graph.poses, "tls", warm=False, init="file", max_steps=5)
+    assert cold.steps <= 5  # the schedule's factor grows so that the bound holds from any start
+
+
+def test_metrics_name_each_error():
+    clean = lap_graph(laps(), noise=1.0, seed=3)
+    graph, injected = inject_outliers(clean, 20, "random", seed=4)
+    for robust in ("pc_dcs", "gnc"):
+        result = solve_g2o(graph, robust=robust)
+        metrics = g2o_metrics(graph, result, injected)
+        assert metrics["kept_edges_error"] == pytest.approx(solve_g2o(clean).final_error, rel=1e-6)
+        assert metrics["all_edges_error"] > 100 * metrics["kept_edges_error"]  # the false loops' error
+        assert metrics["robust_cost"] >= metrics["kept_edges_error"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_signal_during_a_long_solve_stops_promptly(tmp_path, data_file, sig):
+    root = tmp_path / "results"
+    proc = subprocess.Popen([sys.executable, "-m", "slam2d.cli", "optimize", str(data_file("posegraphs/M3500.g2o")),
+                             "--outliers", "1000", "--out", str(root), "-q"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    end = time.monotonic() + 120
+    while not (root.is_dir() and any(root.iterdir())):  # the work folder: the graph is read, the solve starts
+        assert time.monotonic() < end and proc.poll() is None, "the solve did not start"
+        time.sleep(0.1)
+    time.sleep(2.0)  # inside least squares over the 1000 false loops (about 100 s in all)
+    assert proc.poll() is None
+    proc.send_signal(sig)
+    sent = time.monotonic()
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + sig, err
+    assert time.monotonic() - sent < 10  # one LM iteration at most (about 1 s), the clean-up, the exit
+    assert "stopped: no results folder written" in err
+    assert list(root.iterdir()) == []
