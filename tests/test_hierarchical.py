@@ -190,3 +190,21 @@ def test_room_graph_corridor_is_shortest_inside_the_route_rooms():
         assert_valid(free, r, s, t) and r.info["mode"] == "corridor"
         ref = AStar(grid).plan(s, t).length  # rooms 1-3 hold every path: the corridor is exact
         assert r.length == pytest.approx(ref) and r.length <= stitched.plan(s, t).length + 1e-9
+
+
+@pytest.mark.parametrize("corridor", [False, True])
+def test_room_graph_corridor_bounds_the_detour_where_portal_routing_detours(data_file, corridor):
+    """office_b's morphological rooms: routing portal to portal detours by over 50 % on some queries; the
+    corridor search over the route's rooms and those near them is exact on all of them."""
+    from slam2d.planning.config import PlanConfig
+    from slam2d.planning.query import plan_queries
+
+    cfg = PlanConfig.model_validate({"map": str(data_file("rooms/office_b.png")), "planning": {
+        "hierarchy": "rooms", "queries": 40, "min_distance": 10.0, "corridor": corridor},
+        "segmentation": {"method": "morphological"}})  # fmt: skip
+    m = plan_queries(cfg.map, cfg)
+    assert m["failures"] == 0
+    if corridor:
+        assert m["max_subopt_pct"] <= 5.0 and m["mean_subopt_pct"] <= 1.0
+    else:
+        assert m["max_subopt_pct"] > 50.0

@@ -36,6 +36,8 @@ from slam2d.planning.smoothing import smooth_octile
 
 __all__ = ["RoomGraphPlanner"]
 
+CORRIDOR_RINGS = 3  # regions around the route that the corridor search may also cross (portals away)
+
 
 def _default_region_graph(labels: np.ndarray, grid: PlanningGrid):
     """``slam2d.mapping.topological.region_graph`` of ``labels`` (rows of the grid go up)."""
@@ -63,9 +65,9 @@ class RoomGraphPlanner:
     mean of its free cells), two portals of one region joined at their octile
     distance, the grid distance across an empty room.
 
-    ``corridor``: instead of stitching one A* per room, one A* over the union of the route's rooms and
-    portals: the shortest path inside the rooms the route crosses, so a detour is only what leaving
-    those rooms would save (slower: the search spans the whole corridor).
+    ``corridor``: instead of stitching one A* per room, one A* over the union of the route's rooms, the
+    rooms next to them and the portals among those: the shortest path there, so a detour is only what
+    leaving them would save (slower: the search spans the whole corridor).
     """
 
     def __init__(self, grid: PlanningGrid | np.ndarray, labels: np.ndarray, graph=None, connectivity: int = 8,
@@ -200,6 +202,14 @@ class RoomGraphPlanner:
             b.zone[self.portal_cells[self.portal_ptr[p] : self.portal_ptr[p + 1]]] = z
         return z
 
+    def _widened(self, pieces) -> tuple[np.ndarray, np.ndarray]:
+        """The route's regions with every region up to ``CORRIDOR_RINGS`` portals from one of them, and the
+        portals among those."""
+        pr, regions = self.portal_regions, np.asarray(pieces)
+        for _ in range(CORRIDOR_RINGS):
+            regions = np.union1d(regions, pr[np.isin(pr, regions).any(axis=1)].ravel())
+        return regions, np.flatnonzero(np.isin(pr, regions).all(axis=1))
+
     def plan(self, start, goal) -> PlanResult:
         """Path between (row, col) cells; found=False with a reason when there is none."""
         t0 = time.perf_counter()
@@ -215,9 +225,8 @@ class RoomGraphPlanner:
         route = self._route(start, goal, rs, rg)
         expanded, mode, cells = 0, "regions", None
         if route is not None and self.corridor:
-            ports, pieces = route
             mode = "corridor"
-            found, expanded = lo.search(s, t, zstamp=self._mark(pieces, ports))
+            found, expanded = lo.search(s, t, zstamp=self._mark(*self._widened(route[1])))
             cells = _trace_from(lo.buf.parent, s, t, lo.width) if found else None
         elif route is not None:
             ports, pieces = route
