@@ -24,6 +24,7 @@ from slam2d.runs.commands import command_model
     ("plan", "planning.queries=10000000", r"key 'planning.queries': .*less than or equal to 100000"),
     ("plan", "resolution=1e-9", r"key 'resolution'"),
     ("segment", "resolution=100", r"key 'resolution'"),
+    ("optimize", "outliers=100000000", r"key 'outliers': .*less than or equal to 1000000"),
     ("run", "frontend.options={map_voxel_size: 1.0e-9}", r"frontend.options.map_voxel_size: .*greater than or equal"),
     ("run", "frontend.options={voxel_size: 100}", r"frontend.options.voxel_size: .*less than or equal to 10"),
     ("segment", "segmentation.params={label_cell_m: 1.0e-6}", r"label_cell_m"),

@@ -35,7 +35,7 @@ class OptimizeConfig(Section):
     robust: str = Field("none", description="none, huber, cauchy, dcs, gnc (TLS), gnc_tls, gnc_gm or pc_dcs "
                         "(pairwise-consistency screen, then DCS: for false loop closures)")
     robust_param: float = Field(1.0, description="M-estimator width, whitened units (sigmas); Phi of dcs, pc_dcs")
-    outliers: int = Field(0, ge=0, description="false loop closures to inject before optimising")
+    outliers: int = Field(0, ge=0, le=1_000_000, description="false loop closures to inject before optimising")
     outlier_kind: Literal["random", "local", "group"] = Field("random", description="group: clusters of 10")
     reference: str | None = Field(None, description="g2o whose poses are the reference for the RMSE")
     verify: bool = Field(True, description="also optimise from two other starts and check they agree")
