@@ -7,6 +7,7 @@ import ctypes.util
 import os
 import signal
 import socket
+import subprocess
 import sys
 from pathlib import Path
 
@@ -25,6 +26,57 @@ def die_with_parent(parent: int, sig: int = signal.SIGKILL) -> None:
             pass
     if os.getppid() != parent:  # the parent died before prctl took effect
         os._exit(128 + int(sig))
+
+
+_REAPER = """
+import os, signal, sys, time
+parent = int(sys.argv[1])
+
+def family():
+    links = {}
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/stat") as stat:
+                fields = stat.read().rsplit(")", 1)[1].split()
+            links[int(pid)] = (int(fields[1]), fields[19])  # parent, start time
+        except (OSError, IndexError, ValueError):
+            pass
+    found, todo = {}, [parent]
+    while todo:
+        p = todo.pop()
+        for pid, (ppid, start) in links.items():
+            if ppid == p and pid != os.getpid() and pid not in found:
+                found[pid] = start
+                todo.append(pid)
+    return found
+
+known = {}
+while os.getppid() == parent:
+    known = family()
+    time.sleep(0.5)
+for pid, start in known.items():
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            if stat.read().rsplit(")", 1)[1].split()[19] == start:
+                os.kill(pid, signal.SIGKILL)
+    except (OSError, IndexError):
+        pass
+"""
+
+
+_WATCHING = False  # whether this process has started its watchdog
+
+
+def reap_when_gone() -> None:
+    """Start (once) a watchdog that, within a second of this process's exit (``kill -9`` included), kills
+    what were its descendants then: processes a library starts that do not watch their parent (a local Ray
+    instance's servers and agents). Linux; a no-op elsewhere."""
+    global _WATCHING
+    if _WATCHING or not sys.platform.startswith("linux"):
+        return
+    _WATCHING = True
+    subprocess.Popen([sys.executable, "-c", _REAPER, str(os.getpid())], stdin=subprocess.DEVNULL,
+                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
 
 
 def parent_gone(parent: int, owner: int | None = None) -> bool:

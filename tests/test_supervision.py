@@ -76,6 +76,35 @@ def test_kill_9_ablate_takes_its_pool_along(tmp_path):
     _kill_9_leaves_nothing_running(proc, tmp_path / "res", 5)
 
 
+def test_kill_9_ablate_on_ray_takes_its_local_ray_along(tmp_path):
+    pytest.importorskip("ray")
+    sweep = _sweep(tmp_path, [{"name": f"v{i}", "set": {"seed": i}} for i in range(3)], workers=2)
+    proc = _cli("ablate", "-q", sweep, "--executor", "ray")
+    parent = psutil.Process(proc.pid)
+
+    def session():  # the local Ray instance's session folder, once its task workers run
+        cmds = [" ".join(p.cmdline()) for p in parent.children(recursive=True) if p.is_running()]
+        found = [a for c in cmds for a in c.split() if "/session_" in a]
+        return any("ray::" in c for c in cmds) and len(found) and found[0].split("/session_")[1].split("/")[0]
+
+    marker = "/session_" + _wait_for(session, timeout=180)
+    time.sleep(1.0)
+    family = parent.children(recursive=True)  # Ray's agents included: their titles no longer name the session
+    assert any("Agent" in " ".join(p.cmdline()) for p in family)
+    proc.kill()
+    proc.wait(timeout=30)
+    time.sleep(2.0)
+
+    def holds_marker(p):
+        try:
+            return marker in " ".join(p.cmdline())
+        except psutil.Error:
+            return False
+
+    assert [(p.pid, p.name()) for p in _living(psutil.process_iter()) if holds_marker(p)] == []
+    assert [(p.pid, p.cmdline()) for p in _living(family)] == []
+
+
 def test_a_later_run_removes_only_folders_of_dead_owners(tmp_path, caplog):
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()

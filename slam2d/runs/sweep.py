@@ -35,6 +35,7 @@ from slam2d.evaluation.tables import (
     write_table,
 )
 from slam2d.plugins import resolve
+from slam2d.processes import reap_when_gone
 from slam2d.runs import signals
 from slam2d.runs.commands import command_of, resolved, run_command
 from slam2d.runs.results import new_folder, output_root, progress_console, remove_stale, shows_progress, writes
@@ -368,6 +369,7 @@ def _connect_ray():
         import ray
     except ImportError:
         raise InputError("--executor ray", "ray is not installed: pip install 'slam2d[ray]'") from None
+    reap_when_gone()  # a local instance's processes end with this one, however it ends
     try:
         ray.init(ignore_reinit_error=True, log_to_driver=False)
     except ConnectionError as err:
