@@ -143,7 +143,7 @@ def test_build_is_timed_and_counted():
     free[10:20, 10:20] = False
     p = SubgoalGraph(free)
     assert p.build_seconds >= 0 and p.subgoals == 4 and p.edges >= 4
-    assert p.indptr[-1] == 2 * p.edges  # stored both ways
+    assert p.arcs == 2 * p.edges == len(p.wgt)  # stored both ways
 
 
 def test_registered_name_resolves():

@@ -34,8 +34,7 @@ import time
 import numpy as np
 from numba import njit
 
-from slam2d.planning.astar import _DC, _DR, PlanResult, SearchBuffers, _octile, _pop, _sift_up, \
-    endpoint_problem, move_mask  # fmt: skip
+from slam2d.planning.astar import _DC, _DR, SQRT2, PlanResult, _pop, _sift_up, endpoint_problem, move_mask
 from slam2d.planning.base import register_planner
 from slam2d.planning.grid import PlanningGrid
 
@@ -55,73 +54,101 @@ def subgoal_mask(free: np.ndarray) -> np.ndarray:
     return core & out
 
 
+@njit(cache=True)
+def _clearances(free, sgid, h, w, dr_of, dc_of):
+    """((h + 2) (w + 2), 4) int32: per free padded cell and axial move (astar.py's order), the free
+    non-subgoal cells passed before a blocked cell or a subgoal."""
+    width = w + 2
+    clear = np.zeros(((h + 2) * width, 4), np.int32)
+    for k in range(4):
+        dr = dr_of[k]
+        dc = dc_of[k]
+        step = dr * width + dc
+        r_first, r_last, r_inc = (h, 0, -1) if dr > 0 else (1, h + 1, 1)
+        c_first, c_last, c_inc = (w, 0, -1) if dc > 0 else (1, w + 1, 1)
+        for r in range(r_first, r_last, r_inc):
+            for c in range(c_first, c_last, c_inc):
+                n = r * width + c
+                m = n + step
+                if free[n] != 0 and free[m] != 0 and sgid[m] < 0:
+                    clear[n, k] = clear[m, k] + 1
+    return clear
+
+
 @njit(inline="always")
-def _line(free, sgid, x, step, mx, goal, out, m):
-    """Scan the straight line from ``x`` by ``step``: at most ``mx`` free non-subgoal cells, then a
-    subgoal (or the goal) at ``mx + 1`` at the farthest. Returns (free cells passed, m, goal met)."""
-    p = 0
-    y = x
-    met = False
-    while p <= mx:
-        y += step
-        if y == goal:
-            met = True
-        if free[y] == 0:
-            break
+def _line(clear, sgid, x, xr, xc, k, step, dr, dc, mx, gr, gc, out, m):
+    """The straight line from ``x`` = (xr, xc) by move ``k`` = (dr, dc): at most ``mx`` free non-subgoal
+    cells, then a subgoal (recorded in ``out``) or the goal at ``mx + 1`` at the farthest. Returns
+    (free cells passed, m, whether the goal (gr, gc) is on it)."""
+    c = clear[x, k]
+    p = min(c, mx)
+    if c <= mx:
+        y = x + (c + 1) * step
         if sgid[y] >= 0:
             out[m] = y
             m += 1
-            break
-        if p == mx:
-            break
-        p += 1
+    if dr == 0:
+        q = (gc - xc) * dc
+        met = gr == xr and 1 <= q <= p + 1
+    else:
+        q = (gr - xr) * dr
+        met = gc == xc and 1 <= q <= p + 1
     return p, m, met
 
 
 @njit(cache=True)
-def _scan(free, moves, sgid, width, s, goal, out, dr_of, dc_of):
+def _scan(clear, moves, sgid, width, s, goal, out, dr_of, dc_of):
     """The subgoals direct-h-reachable from padded cell ``s`` (module docstring) into ``out``, as
-    padded cells; returns (their number, whether ``goal`` lies in the scanned region)."""
+    padded cells; returns (their number, whether ``goal`` (-1: none) lies in the scanned region)."""
     m = 0
     met = False
     big = 1 << 40
-    clear = np.empty(4, np.int64)
+    sr = s // width
+    sc = s - sr * width
+    gr = goal // width if goal >= 0 else -(1 << 40)
+    gc = goal - gr * width if goal >= 0 else -(1 << 40)
+    cl = np.empty(4, np.int64)
     for k in range(4):
-        c, m, hit = _line(free, sgid, s, dr_of[k] * width + dc_of[k], big, goal, out, m)
-        clear[k] = c
+        dr = dr_of[k]
+        dc = dc_of[k]
+        cl[k], m, hit = _line(clear, sgid, s, sr, sc, k, dr * width + dc, dr, dc, big, gr, gc, out, m)
         met = met or hit
     for k in range(4, 8):
         dr = dr_of[k]
         dc = dc_of[k]
         kv = 0 if dr < 0 else 1
         kh = 2 if dc < 0 else 3
-        mv = clear[kv]
-        mh = clear[kh]
+        mv = cl[kv]
+        mh = cl[kh]
         step = dr * width + dc
         x = s
+        xr = sr
+        xc = sc
         while (moves[x] >> k) & 1:
             x += step
+            xr += dr
+            xc += dc
             if x == goal:
                 met = True
             if sgid[x] >= 0:
                 out[m] = x
                 m += 1
                 break
-            mv, m, hit = _line(free, sgid, x, dr * width, mv, goal, out, m)
+            mv, m, hit = _line(clear, sgid, x, xr, xc, kv, dr * width, dr, 0, mv, gr, gc, out, m)
             met = met or hit
-            mh, m, hit = _line(free, sgid, x, dc, mh, goal, out, m)
+            mh, m, hit = _line(clear, sgid, x, xr, xc, kh, dc, 0, dc, mh, gr, gc, out, m)
             met = met or hit
     return m, met
 
 
 @njit(cache=True)
-def _all_edges(free, moves, sgid, cells, width, out, dr_of, dc_of):
+def _all_edges(clear, moves, sgid, cells, width, out, dr_of, dc_of):
     """(src, dst) subgoal ids of every scan from every subgoal (one direction each)."""
     src = np.empty(16 * len(cells) + 16, np.int64)
     dst = np.empty_like(src)
     n = 0
     for i in range(len(cells)):
-        m, _ = _scan(free, moves, sgid, width, cells[i], -1, out, dr_of, dc_of)
+        m, _ = _scan(clear, moves, sgid, width, cells[i], -1, out, dr_of, dc_of)
         if n + m > len(src):
             grow = max(2 * len(src), n + m)
             src2 = np.empty(grow, np.int64)
@@ -137,26 +164,26 @@ def _all_edges(free, moves, sgid, cells, width, out, dr_of, dc_of):
 
 
 @njit(inline="always")
-def _cost(a, b, width):
-    ar = a // width
-    br = b // width
-    return _octile(ar, a - ar * width, br, b - br * width, True)
+def _oct(ar, ac, br, bc):
+    dy = abs(ar - br)
+    dx = abs(ac - bc)
+    return dx + dy + (SQRT2 - 2.0) * min(dx, dy)
 
 
 @njit(cache=True)
-def _astar(indptr, nbr, cell, n_sub, width, s_node, t_node, s_list, ns, direct, goal_mark, stamp,
+def _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, goal_mark, stamp,
            g, parent, state, hk, hg, hn, hpos):  # fmt: skip
-    """A* over the subgoal graph plus the start and goal nodes (``cell[node]`` padded cells); the
-    start's links are ``s_list[:ns]`` when it is no subgoal, ``direct`` links it to the goal, and
-    ``goal_mark[u] == stamp`` links subgoal ``u`` to the goal. Returns (found, nodes expanded)."""
+    """A* over the subgoal graph (arcs ``nbr`` of cost ``wgt``, CSR) plus the start and goal nodes
+    (node ``i`` at padded row ``nr[i]``, column ``nc[i]``); the start's links are ``s_list[:ns]`` when
+    it is no subgoal, ``direct`` links it to the goal, and ``goal_mark[u] == stamp`` links subgoal ``u``
+    to the goal. Returns (found, nodes expanded)."""
     reached = 2 * stamp
-    t = cell[t_node]
-    tr = t // width
-    tc = t - tr * width
+    tr = nr[t_node]
+    tc = nc[t_node]
     state[s_node] = reached
     g[s_node] = 0.0
     parent[s_node] = -1
-    _sift_up(hk, hg, hn, hpos, 0, _cost(cell[s_node], t, width), 0.0, s_node)
+    _sift_up(hk, hg, hn, hpos, 0, _oct(nr[s_node], nc[s_node], tr, tc), 0.0, s_node)
     size = 1
     expanded = 0
     while size > 0:
@@ -165,33 +192,41 @@ def _astar(indptr, nbr, cell, n_sub, width, s_node, t_node, s_list, ns, direct, 
         expanded += 1
         if u == t_node:
             return True, expanded
-        cu = cell[u]
+        ur = nr[u]
+        uc = nc[u]
         gu = g[u]
-        if u < n_sub:
-            lo, hi, src = indptr[u], indptr[u + 1], nbr
-        else:
-            lo, hi, src = 0, ns, s_list
-        extra = (u == s_node and direct) or (u < n_sub and goal_mark[u] == stamp)
+        sub = u < n_sub
+        lo, hi = (indptr[u], indptr[u + 1]) if sub else (0, ns)
+        extra = (u == s_node and direct) or (sub and goal_mark[u] == stamp)
         for j in range(lo, hi + (1 if extra else 0)):
-            v = src[j] if j < hi else t_node
+            if j < hi:
+                v = nbr[j] if sub else s_list[j]
+                if state[v] == reached + 1:
+                    continue
+                ng = gu + (wgt[j] if sub else _oct(ur, uc, nr[v], nc[v]))
+            else:
+                v = t_node
+                ng = gu + _oct(ur, uc, tr, tc)
             sv = state[v]
-            if sv == reached + 1:
-                continue
-            cv = cell[v]
-            ng = gu + _cost(cu, cv, width)
             if sv < reached:
                 state[v] = reached
                 g[v] = ng
                 parent[v] = u
-                vr = cv // width
-                _sift_up(hk, hg, hn, hpos, size, ng + _octile(vr, cv - vr * width, tr, tc, True), ng, v)
+                _sift_up(hk, hg, hn, hpos, size, ng + _oct(nr[v], nc[v], tr, tc), ng, v)
                 size += 1
-            elif ng < g[v] - 1e-12:
+            elif sv == reached and ng < g[v] - 1e-12:
                 i = hpos[v]
                 _sift_up(hk, hg, hn, hpos, i, ng + hk[i] - g[v], ng, v)
                 g[v] = ng
                 parent[v] = u
     return False, expanded
+
+
+def _octile_np(a: np.ndarray, b: np.ndarray, width: int) -> np.ndarray:
+    """Octile distances (cells) between padded flat cells ``a`` and ``b``."""
+    dy = np.abs(a // width - b // width)
+    dx = np.abs(a % width - b % width)
+    return (dx + dy + (SQRT2 - 2.0) * np.minimum(dx, dy)).astype(np.float64)
 
 
 @njit(inline="always")
@@ -281,7 +316,7 @@ def _refine(free, moves, width, parent, cell, t_node):
     for j in range(nodes):
         a = chain[j]
         b = chain[j + 1]
-        length += _cost(a, b, width)
+        length += _oct(a // width, a % width, b // width, b % width)
         if _diag_first_ok(free, moves, width, a, b):
             i = _write_segment(a, b, width, out, i, True)
         else:  # found from b: diagonal first from b, written backwards
@@ -290,11 +325,26 @@ def _refine(free, moves, width, parent, cell, t_node):
 
 
 @njit(cache=True)
-def _query(free, moves, sgid, indptr, nbr, cell, n_sub, h, w, sr, sc, gr, gc, out, s_list, goal_mark, stamp,
-           g, parent, state, hk, hg, hn, hpos, dr_of, dc_of):  # fmt: skip
+def _query(maps, clear, gi, wgt, n_sub, n_arcs, h, w, sr, sc, gr, gc, scratch, fbuf, ibuf, stamp):
     """One query between unpadded cells: (code, expanded, path, length, nodes on the path) with code 0
-    found, 1 start unusable, 2 goal unusable, 3 unreachable."""
+    found, 1 start unusable, 2 goal unusable, 3 unreachable. Few arguments (a call's overhead grows with
+    them): ``maps`` rows free, moves; ``gi`` sgid, indptr, arcs, node cells, rows, columns in a row;
+    ``scratch`` rows: one scan's cells, the start's links; ``fbuf`` rows g, heap f, heap g; ``ibuf``
+    rows parent, state, heap node, heap slot, goal marks."""
     width = w + 2
+    free = maps[0]
+    moves = maps[1]
+    npad = free.size
+    sgid = gi[:npad]
+    indptr = gi[npad : npad + n_sub + 1]
+    o = npad + n_sub + 1
+    nbr = gi[o : o + n_arcs]
+    o += n_arcs
+    cell = gi[o : o + n_sub + 2]
+    nr = gi[o + n_sub + 2 : o + 2 * (n_sub + 2)]
+    nc = gi[o + 2 * (n_sub + 2) : o + 3 * (n_sub + 2)]
+    out = scratch[0]
+    s_list = scratch[1]
     empty = np.zeros((0, 2), np.int64)
     if not (0 <= sr < h and 0 <= sc < w and free[(sr + 1) * width + sc + 1] != 0):
         return 1, 0, empty, np.inf, 0
@@ -311,15 +361,19 @@ def _query(free, moves, sgid, indptr, nbr, cell, n_sub, h, w, sr, sc, gr, gc, ou
     t_node = sgid[t] if sgid[t] >= 0 else n_sub + 1
     cell[n_sub] = s
     cell[n_sub + 1] = t
-    ns, direct = _scan(free, moves, sgid, width, s, t, out, dr_of, dc_of)
+    nr[n_sub], nc[n_sub] = sr + 1, sc + 1
+    nr[n_sub + 1], nc[n_sub + 1] = gr + 1, gc + 1
+    goal_mark = ibuf[4]
+    ns, direct = _scan(clear, moves, sgid, width, s, t, out, _DR, _DC)
     for j in range(ns):
         s_list[j] = sgid[out[j]]
     if t_node == n_sub + 1:
-        m, _ = _scan(free, moves, sgid, width, t, -1, out, dr_of, dc_of)
+        m, _ = _scan(clear, moves, sgid, width, t, -1, out, _DR, _DC)
         for j in range(m):
             goal_mark[sgid[out[j]]] = stamp
-    found, expanded = _astar(indptr, nbr, cell, n_sub, width, s_node, t_node, s_list, ns, direct, goal_mark, stamp,
-                             g, parent, state, hk, hg, hn, hpos)  # fmt: skip
+    parent = ibuf[0]
+    found, expanded = _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, goal_mark, stamp,
+                             fbuf[0], parent, ibuf[1], fbuf[1], fbuf[2], ibuf[2], ibuf[3])  # fmt: skip
     if not found:
         return 3, expanded, empty, np.inf, 0
     path, length, nodes = _refine(free, moves, width, parent, cell, t_node)
@@ -349,28 +403,35 @@ class SubgoalGraph:
         sub = np.pad(subgoal_mask(grid.free), 1).ravel()
         cells = np.flatnonzero(sub).astype(np.int64)
         n = len(cells)
-        self.sgid = np.full(self.free_p.size, -1, np.int64)
-        self.sgid[cells] = np.arange(n)
-        self.out = np.zeros(8 * (h + w + 4), np.int64)  # one scan's subgoals: <= 1 a line
-        src, dst = _all_edges(self.free_p, self.moves, self.sgid, cells, width, self.out, _DR, _DC)
+        sgid = np.full(self.free_p.size, -1, np.int64)
+        sgid[cells] = np.arange(n)
+        out = np.zeros(8 * (h + w + 4), np.int64)  # one scan's subgoals: <= 1 a line
+        self.clear = _clearances(self.free_p, sgid, h, w, _DR, _DC)
+        src, dst = _all_edges(self.clear, self.moves, sgid, cells, width, out, _DR, _DC)
         key = np.unique(np.concatenate([src * n + dst, dst * n + src]))
-        self.nbr = (key % max(n, 1)).astype(np.int64)
-        self.indptr = np.searchsorted(key // max(n, 1), np.arange(n + 1)).astype(np.int64)
-        self.cell = np.concatenate([cells, np.zeros(2, np.int64)])
-        self.subgoals, self.edges = n, len(key) // 2
-        self.s_list = np.zeros(len(self.out), np.int64)
-        self.buf = SearchBuffers(n + 2)
+        nbr = key % max(n, 1)
+        indptr = np.searchsorted(key // max(n, 1), np.arange(n + 1))
+        cell = np.concatenate([cells, [0, 0]])
+        self.wgt = _octile_np(cells[key // max(n, 1)], cells[nbr], width)
+        self.subgoals, self.edges, self.arcs = n, len(key) // 2, len(key)
+        self.gi = np.concatenate([sgid, indptr, nbr, cell, cell // width, cell % width]).astype(np.int64)
+        self.maps = np.stack([self.free_p, self.moves])
+        self.scratch = np.zeros((2, len(out)), np.int64)
+        self.fbuf = np.zeros((3, n + 2), np.float64)
+        self.ibuf = np.zeros((5, n + 2), np.int32)
+        self.stamp = 0
         self.build_seconds = time.perf_counter() - t0
 
     def plan(self, start, goal) -> PlanResult:
         """Path between (row, col) cells; found=False with A*'s reasons when there is none."""
         t0 = time.perf_counter()
-        b = self.buf
-        stamp = b.next_stamp()
+        self.stamp += 1
+        if self.stamp >= 2**30 - 2:  # stamps wrap around: clear the states and goal marks
+            self.ibuf[1:] = 0
+            self.stamp = 1
         code, expanded, path, length, nodes = _query(
-            self.free_p, self.moves, self.sgid, self.indptr, self.nbr, self.cell, self.subgoals, *self.shape,
-            int(start[0]), int(start[1]), int(goal[0]), int(goal[1]), self.out, self.s_list, b.mark, stamp,
-            b.g, b.parent, b.state, b.hk, b.hg, b.hn, b.hpos, _DR, _DC)  # fmt: skip
+            self.maps, self.clear, self.gi, self.wgt, self.subgoals, self.arcs, *self.shape, int(start[0]),
+            int(start[1]), int(goal[0]), int(goal[1]), self.scratch, self.fbuf, self.ibuf, self.stamp)
         if code == 0:
             return PlanResult(path, length, expanded, time.perf_counter() - t0, True, "", length,
                               self.grid.resolution, {"subgoals": nodes})  # fmt: skip
