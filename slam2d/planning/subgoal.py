@@ -172,11 +172,12 @@ def _oct(ar, ac, br, bc):
 
 @njit(cache=True)
 def _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, goal_mark, stamp,
-           g, parent, state, hk, hg, hn, hpos):  # fmt: skip
+           g, parent, state, hk, hg, hn, hpos, stack):  # fmt: skip
     """A* over the subgoal graph (arcs ``nbr`` of cost ``wgt``, CSR) plus the start and goal nodes
     (node ``i`` at padded row ``nr[i]``, column ``nc[i]``); the start's links are ``s_list[:ns]`` when
     it is no subgoal, ``direct`` links it to the goal, and ``goal_mark[u] == stamp`` links subgoal ``u``
-    to the goal. Returns (found, nodes expanded)."""
+    to the goal. A node whose f equals its parent's is expanded next from ``stack``, without the heap
+    (as in jps.py). Returns (found, nodes expanded)."""
     reached = 2 * stamp
     tr = nr[t_node]
     tc = nc[t_node]
@@ -185,9 +186,14 @@ def _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, 
     parent[s_node] = -1
     _sift_up(hk, hg, hn, hpos, 0, _oct(nr[s_node], nc[s_node], tr, tc), 0.0, s_node)
     size = 1
+    top = 0
     expanded = 0
-    while size > 0:
-        u, size = _pop(hk, hg, hn, hpos, size)
+    while size > 0 or top > 0:
+        if top > 0:
+            top -= 1
+            u = stack[top]
+        else:
+            u, size = _pop(hk, hg, hn, hpos, size)
         state[u] = reached + 1
         expanded += 1
         if u == t_node:
@@ -195,6 +201,7 @@ def _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, 
         ur = nr[u]
         uc = nc[u]
         gu = g[u]
+        fu = gu + _oct(ur, uc, tr, tc)
         sub = u < n_sub
         lo, hi = (indptr[u], indptr[u + 1]) if sub else (0, ns)
         extra = (u == s_node and direct) or (sub and goal_mark[u] == stamp)
@@ -212,11 +219,18 @@ def _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, 
                 state[v] = reached
                 g[v] = ng
                 parent[v] = u
-                _sift_up(hk, hg, hn, hpos, size, ng + _oct(nr[v], nc[v], tr, tc), ng, v)
-                size += 1
+                fv = ng + _oct(nr[v], nc[v], tr, tc)
+                if fv <= fu + 1e-9:  # f does not grow: next, without the heap
+                    hpos[v] = -1
+                    stack[top] = v
+                    top += 1
+                else:
+                    _sift_up(hk, hg, hn, hpos, size, fv, ng, v)
+                    size += 1
             elif sv == reached and ng < g[v] - 1e-12:
                 i = hpos[v]
-                _sift_up(hk, hg, hn, hpos, i, ng + hk[i] - g[v], ng, v)
+                if i >= 0:
+                    _sift_up(hk, hg, hn, hpos, i, ng + hk[i] - g[v], ng, v)
                 g[v] = ng
                 parent[v] = u
     return False, expanded
@@ -330,7 +344,7 @@ def _query(maps, clear, gi, wgt, n_sub, n_arcs, h, w, sr, sc, gr, gc, scratch, f
     found, 1 start unusable, 2 goal unusable, 3 unreachable. Few arguments (a call's overhead grows with
     them): ``maps`` rows free, moves; ``gi`` sgid, indptr, arcs, node cells, rows, columns in a row;
     ``scratch`` rows: one scan's cells, the start's links; ``fbuf`` rows g, heap f, heap g; ``ibuf``
-    rows parent, state, heap node, heap slot, goal marks."""
+    rows parent, state, heap node, heap slot, goal marks, stack."""
     width = w + 2
     free = maps[0]
     moves = maps[1]
@@ -373,7 +387,7 @@ def _query(maps, clear, gi, wgt, n_sub, n_arcs, h, w, sr, sc, gr, gc, scratch, f
             goal_mark[sgid[out[j]]] = stamp
     parent = ibuf[0]
     found, expanded = _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, goal_mark, stamp,
-                             fbuf[0], parent, ibuf[1], fbuf[1], fbuf[2], ibuf[2], ibuf[3])  # fmt: skip
+                             fbuf[0], parent, ibuf[1], fbuf[1], fbuf[2], ibuf[2], ibuf[3], ibuf[5])  # fmt: skip
     if not found:
         return 3, expanded, empty, np.inf, 0
     path, length, nodes = _refine(free, moves, width, parent, cell, t_node)
@@ -418,7 +432,7 @@ class SubgoalGraph:
         self.maps = np.stack([self.free_p, self.moves])
         self.scratch = np.zeros((2, len(out)), np.int64)
         self.fbuf = np.zeros((3, n + 2), np.float64)
-        self.ibuf = np.zeros((5, n + 2), np.int32)
+        self.ibuf = np.zeros((6, n + 2), np.int32)
         self.stamp = 0
         self.build_seconds = time.perf_counter() - t0
 
