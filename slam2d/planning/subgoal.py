@@ -381,11 +381,16 @@ def _query(maps, clear, gi, wgt, n_sub, n_arcs, h, w, sr, sc, gr, gc, scratch, f
     ns, direct = _scan(clear, moves, sgid, width, s, t, out, _DR, _DC)
     for j in range(ns):
         s_list[j] = sgid[out[j]]
+    parent = ibuf[0]
+    if direct:  # the octile distance: a shortest path, no search needed
+        parent[s_node] = -1
+        parent[t_node] = s_node
+        path, length, nodes = _refine(free, moves, width, parent, cell, t_node)
+        return 0, 1, path, length, nodes
     if t_node == n_sub + 1:
         m, _ = _scan(clear, moves, sgid, width, t, -1, out, _DR, _DC)
         for j in range(m):
             goal_mark[sgid[out[j]]] = stamp
-    parent = ibuf[0]
     found, expanded = _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, goal_mark, stamp,
                              fbuf[0], parent, ibuf[1], fbuf[1], fbuf[2], ibuf[2], ibuf[3], ibuf[5])  # fmt: skip
     if not found:
