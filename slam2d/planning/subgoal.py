@@ -34,7 +34,16 @@ import time
 import numpy as np
 from numba import njit
 
-from slam2d.planning.astar import _DC, _DR, SQRT2, PlanResult, _pop, _sift_up, endpoint_problem, move_mask
+from slam2d.planning.astar import (
+    _DC,
+    _DR,
+    SQRT2,
+    PlanResult,
+    _pop,
+    _sift_up,
+    endpoint_problem,
+    move_mask,
+)
 from slam2d.planning.base import register_planner
 from slam2d.planning.grid import PlanningGrid
 
