@@ -14,13 +14,16 @@ Preprocessing (``build_seconds``, wall time):
   clearance scan: walk each diagonal while its moves are allowed; from every
   cell on it scan the two straight lines of that quadrant, each no farther than
   the previous line reached (so the scanned region is a free staircase), and
-  stop every line and the diagonal at the first subgoal. Edges are stored both
-  ways (CSR), the cost of an edge is the octile distance.
+  stop every line and the diagonal at the first subgoal. A table of axial
+  clearances (free non-subgoal cells before the next blocked cell or subgoal,
+  int32, 4 a cell) makes each line one look-up. Edges are stored both ways
+  (CSR), the cost of an edge is the octile distance.
 
 A query scans from the start and the goal the same way (start and goal join
-the graph as extra nodes; one that is a subgoal is that node), links the start
-to the goal directly when the start's scan meets it, and runs A* (octile
-heuristic, consistent here) over the graph. The subgoal path is refined into
+the graph as extra nodes; one that is a subgoal is that node). When the
+start's scan meets the goal, the octile distance is the answer without search;
+otherwise A* (octile heuristic, consistent here; a node whose f equals its
+parent's is expanded next from a stack) runs over the graph. The subgoal path is refined into
 cells, each edge diagonal first then straight from whichever end that path
 was found (it is free by construction), so the result is
 :class:`~slam2d.planning.astar.PlanResult` with A*'s optimal length.
