@@ -184,12 +184,14 @@ def _oct(ar, ac, br, bc):
 
 @njit(cache=True)
 def _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, goal_mark, stamp,
-           g, parent, state, hk, hg, hn, hpos, stack):  # fmt: skip
-    """A* over the subgoal graph (arcs ``nbr`` of cost ``wgt``, CSR) plus the start and goal nodes
+           g, parent, state, hk, hg, hn, hpos, stack, fwd):  # fmt: skip
+    """A* over the subgoal graph (arcs ``nbr`` of cost ``|wgt|``, CSR; negative when the arc's cells
+    run diagonally first from its head, not its tail) plus the start and goal nodes
     (node ``i`` at padded row ``nr[i]``, column ``nc[i]``); the start's links are ``s_list[:ns]`` when
     it is no subgoal, ``direct`` links it to the goal, and ``goal_mark[u] == stamp`` links subgoal ``u``
     to the goal. A node whose f equals its parent's is expanded next from ``stack``, without the heap
-    (as in jps.py). Returns (found, nodes expanded)."""
+    (as in jps.py). ``fwd[v]`` is 1 when the cells from ``parent[v]`` to ``v`` run diagonally first
+    from ``parent[v]``, 0 when from ``v``. Returns (found, nodes expanded)."""
     reached = 2 * stamp
     tr = nr[t_node]
     tc = nc[t_node]
@@ -222,7 +224,7 @@ def _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, 
                 v = nbr[j] if sub else s_list[j]
                 if state[v] == reached + 1:
                     continue
-                ng = gu + (wgt[j] if sub else _oct(ur, uc, nr[v], nc[v]))
+                ng = gu + (abs(wgt[j]) if sub else _oct(ur, uc, nr[v], nc[v]))
             else:
                 v = t_node
                 ng = gu + _oct(ur, uc, tr, tc)
@@ -231,6 +233,7 @@ def _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, 
                 state[v] = reached
                 g[v] = ng
                 parent[v] = u
+                fwd[v] = (wgt[j] > 0 if sub else True) if j < hi else False  # goal links: from the goal
                 fv = ng + _oct(nr[v], nc[v], tr, tc)
                 if fv <= fu + 1e-9:  # f does not grow: next, without the heap
                     hpos[v] = -1
@@ -245,14 +248,8 @@ def _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, 
                     _sift_up(hk, hg, hn, hpos, i, ng + hk[i] - g[v], ng, v)
                 g[v] = ng
                 parent[v] = u
+                fwd[v] = (wgt[j] > 0 if sub else True) if j < hi else False
     return False, expanded
-
-
-def _octile_np(a: np.ndarray, b: np.ndarray, width: int) -> np.ndarray:
-    """Octile distances (cells) between padded flat cells ``a`` and ``b``."""
-    dy = np.abs(a // width - b // width)
-    dx = np.abs(a % width - b % width)
-    return (dx + dy + (SQRT2 - 2.0) * np.minimum(dx, dy)).astype(np.float64)
 
 
 @njit(inline="always")
@@ -285,9 +282,19 @@ def _diag_first_ok(free, moves, width, a, b):
 
 
 @njit(cache=True)
+def _diag_first_all(free, moves, width, a, b):
+    """:func:`_diag_first_ok` of every pair ``a[i]``, ``b[i]`` (bool)."""
+    ok = np.empty(len(a), np.bool_)
+    for i in range(len(a)):
+        ok[i] = _diag_first_ok(free, moves, width, a[i], b[i])
+    return ok
+
+
+@njit(cache=True)
 def _write_segment(a, b, width, out, i, forward):
     """Write the cells after ``a`` up to ``b`` (diagonal first from ``a``) into ``out`` from row ``i``
-    on (or, ``forward`` False, the same cells from ``b`` back to ``a`` excluded). Returns the next row."""
+    on (or, ``forward`` False, those cells reversed: ``b`` left out, ``a`` written last). Returns the
+    next row."""
     ar = a // width
     ac = a - ar * width
     br = b // width
@@ -308,15 +315,16 @@ def _write_segment(a, b, width, out, i, forward):
         if forward or j < n - 1:
             out[row, 0] = r - 1
             out[row, 1] = c - 1
-    if not forward:
-        out[i + n - 1, 0] = br - 1
-        out[i + n - 1, 1] = bc - 1
+    if not forward:  # the walk's origin ``a`` ends the written cells
+        out[i + n - 1, 0] = ar - 1
+        out[i + n - 1, 1] = ac - 1
     return i + n
 
 
 @njit(cache=True)
-def _refine(free, moves, width, parent, cell, t_node):
-    """(L, 2) unpadded cells from the root to ``t_node``, the path's length and number of nodes."""
+def _refine(width, parent, fwd, cell, t_node):
+    """(L, 2) unpadded cells from the root to ``t_node`` (each edge diagonal first from the end
+    ``fwd`` names, see :func:`_astar`), the path's length and number of nodes."""
     nodes = 0
     cells = 1
     v = t_node
@@ -331,19 +339,19 @@ def _refine(free, moves, width, parent, cell, t_node):
     chain = np.empty(nodes + 1, np.int64)
     v = t_node
     for j in range(nodes, -1, -1):
-        chain[j] = cell[v]
+        chain[j] = v
         v = parent[v]
     out = np.empty((cells, 2), np.int64)
-    r = chain[0] // width
+    r = cell[chain[0]] // width
     out[0, 0] = r - 1
-    out[0, 1] = chain[0] - r * width - 1
+    out[0, 1] = cell[chain[0]] - r * width - 1
     i = 1
     length = 0.0
     for j in range(nodes):
-        a = chain[j]
-        b = chain[j + 1]
+        a = cell[chain[j]]
+        b = cell[chain[j + 1]]
         length += _oct(a // width, a % width, b // width, b % width)
-        if _diag_first_ok(free, moves, width, a, b):
+        if fwd[chain[j + 1]]:
             i = _write_segment(a, b, width, out, i, True)
         else:  # found from b: diagonal first from b, written backwards
             i = _write_segment(b, a, width, out, i, False)
@@ -356,7 +364,7 @@ def _query(maps, clear, gi, wgt, n_sub, n_arcs, h, w, sr, sc, gr, gc, scratch, f
     found, 1 start unusable, 2 goal unusable, 3 unreachable. Few arguments (a call's overhead grows with
     them): ``maps`` rows free, moves; ``gi`` sgid, indptr, arcs, node cells, rows, columns in a row;
     ``scratch`` rows: one scan's cells, the start's links; ``fbuf`` rows g, heap f, heap g; ``ibuf``
-    rows parent, state, heap node, heap slot, goal marks, stack."""
+    rows parent, state, heap node, heap slot, goal marks, stack, edge sides."""
     width = w + 2
     free = maps[0]
     moves = maps[1]
@@ -397,17 +405,19 @@ def _query(maps, clear, gi, wgt, n_sub, n_arcs, h, w, sr, sc, gr, gc, scratch, f
     if direct:  # the octile distance: a shortest path, no search needed
         parent[s_node] = -1
         parent[t_node] = s_node
-        path, length, nodes = _refine(free, moves, width, parent, cell, t_node)
+        ibuf[6, t_node] = 1
+        path, length, nodes = _refine(width, parent, ibuf[6], cell, t_node)
         return 0, 1, path, length, nodes
     if t_node == n_sub + 1:
         m, _ = _scan(clear, moves, sgid, width, t, -1, out, _DR, _DC)
         for j in range(m):
             goal_mark[sgid[out[j]]] = stamp
     found, expanded = _astar(indptr, nbr, wgt, nr, nc, n_sub, s_node, t_node, s_list, ns, direct, goal_mark, stamp,
-                             fbuf[0], parent, ibuf[1], fbuf[1], fbuf[2], ibuf[2], ibuf[3], ibuf[5])  # fmt: skip
+                             fbuf[0], parent, ibuf[1], fbuf[1], fbuf[2], ibuf[2], ibuf[3], ibuf[5],
+                             ibuf[6])  # fmt: skip
     if not found:
         return 3, expanded, empty, np.inf, 0
-    path, length, nodes = _refine(free, moves, width, parent, cell, t_node)
+    path, length, nodes = _refine(width, parent, ibuf[6], cell, t_node)
     return 0, expanded, path, length, nodes
 
 
@@ -443,13 +453,16 @@ class SubgoalGraph:
         nbr = key % max(n, 1)
         indptr = np.searchsorted(key // max(n, 1), np.arange(n + 1))
         cell = np.concatenate([cells, [0, 0]])
-        self.wgt = _octile_np(cells[key // max(n, 1)], cells[nbr], width)
+        tail, head = cells[key // max(n, 1)], cells[nbr]
+        ok = _diag_first_all(self.free_p, self.moves, width, tail, head)  # else: diagonal first from the head
+        dy, dx = np.abs(tail // width - head // width), np.abs(tail % width - head % width)
+        self.wgt = np.where(ok, 1.0, -1.0) * (dx + dy + (SQRT2 - 2.0) * np.minimum(dx, dy))
         self.subgoals, self.edges, self.arcs = n, len(key) // 2, len(key)
         self.gi = np.concatenate([sgid, indptr, nbr, cell, cell // width, cell % width]).astype(np.int64)
         self.maps = np.stack([self.free_p, self.moves])
         self.scratch = np.zeros((2, len(out)), np.int64)
         self.fbuf = np.zeros((3, n + 2), np.float64)
-        self.ibuf = np.zeros((6, n + 2), np.int32)
+        self.ibuf = np.zeros((7, n + 2), np.int32)
         self.stamp = 0
         self.build_seconds = time.perf_counter() - t0
 
