@@ -1,7 +1,7 @@
-"""JPS and JPS+ against slam2d's A* on the Moving AI maps and the floor plans, in one run.
+"""JPS, JPS+ and Simple Subgoal Graphs (SSG) against slam2d's A* on the Moving AI maps and floor plans.
 
 1. Correctness: every Moving AI scenario and every floor-plan query planned by
-   JPS and JPS+; a mismatch is a length differing from A*'s (and, on Moving AI,
+   JPS, JPS+ and SSG; a mismatch is a length differing from A*'s (and, on Moving AI,
    from the scenario's optimal length) by more than 1e-5 relative, or an invalid
    path (blocked cell, cut corner, wrong ends).
 2. Speed on long queries (optimal length >= ``--min-length`` cells, default
@@ -11,14 +11,14 @@
    per pixel, obstacles inflated by ``--radius`` m as ``slam2d plan`` does):
    ``--queries`` seeded start-goal pairs per map at least ``--min-length``
    cells apart in a straight line (so their paths are long too).
-3. Preprocessing: JPS+ table build (wall-clock, best of 3, numba compiled
-   beforehand) and its size, beside the map's size: the rebuild a changed map
-   costs.
+3. Preprocessing: JPS+ table build and SSG graph build (wall-clock, best of 3,
+   numba compiled beforehand), the table's size, the graph's subgoals and
+   (undirected) edges, beside the map's size: the rebuild a changed map costs.
 
 Times are process CPU time (``time.process_time``), the best of ``--repeat``
 runs of each query; the planners take turns query by query (the machine's load
 changes alike for all); each planner is built and warmed up (compiled) on the
-map before timing. A*, JPS and JPS+ are
+map before timing. A*, JPS, JPS+ and SSG are
 all single-threaded numba called from Python, so each query includes the same
 few microseconds of call overhead.
 
@@ -40,12 +40,14 @@ from slam2d.planning.grid import load_grid, load_movingai_map, load_scenarios
 from slam2d.planning.jps import JPS
 from slam2d.planning.jps_plus import JPSPlus
 from slam2d.planning.query import sample_queries
+from slam2d.planning.subgoal import SubgoalGraph
 
 DEFAULT_DATA = Path(os.environ.get("SLAM2D_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets"))
 MAPS = ("arena", "den312d", "16room_000")
 PLANS = ("Freiburg52_scan", "Freiburg79_scan", "lab_a_scan", "lab_b_scan", "lab_c_scan", "lab_d_scan", "lab_ipa",
          "office_a", "office_b", "office_c", "office_d")  # fmt: skip
 REL_TOL = 1e-5
+FAST = ("JPS", "JPS+", "SSG")  # compared with A*
 
 
 def table(header: list[str], rows: list[list]) -> str:
@@ -65,9 +67,9 @@ def best_cpu(fn, s, g, repeat: int):
     return out, best
 
 
-def build_seconds(free: np.ndarray, repeat: int = 3) -> float:
-    """Best wall time of building JPS+ (grid arrays and jump distances) on ``free``."""
-    return min(JPSPlus(free).build_seconds for _ in range(repeat))
+def build_seconds(cls, free: np.ndarray, repeat: int = 3) -> float:
+    """Best wall time of building JPS+ (grid arrays, jump distances) or SSG (subgoals, edges) on ``free``."""
+    return min(cls(free).build_seconds for _ in range(repeat))
 
 
 def mismatches(grid, planners, pairs, optimal=None) -> dict:
@@ -87,8 +89,8 @@ def mismatches(grid, planners, pairs, optimal=None) -> dict:
 
 def speed(planners, pairs, repeat: int) -> tuple[dict, dict]:
     """Per planner name: (L,) best CPU seconds of each query and (L,) nodes expanded (cells for A*, jump
-    points for JPS and JPS+); the planners take turns on each query (so a change of load on the shared
-    machine hits all of them alike)."""
+    points for JPS and JPS+, graph nodes for SSG); the planners take turns on each query (so a change of
+    load on the shared machine hits all of them alike)."""
     for p in planners.values():
         p.plan(*pairs[0])  # compiled and cached outside the timings
     secs = {name: np.zeros(len(pairs)) for name in planners}
@@ -106,26 +108,29 @@ def med(values):
 
 
 def run_map(name, grid, check_pairs, long_pairs, optimal, repeat):
-    """One row of figures for a map, and the per-query speed-ups of JPS and JPS+."""
-    planners = {"A*": AStar(grid), "JPS": JPS(grid), "JPS+": JPSPlus(grid)}
+    """One row of figures for a map, and the per-query speed-ups of JPS, JPS+ and SSG."""
+    planners = {"A*": AStar(grid), "JPS": JPS(grid), "JPS+": JPSPlus(grid), "SSG": SubgoalGraph(grid)}
     bad = mismatches(grid, planners, check_pairs, optimal)
     t, e = speed(planners, long_pairs, repeat) if long_pairs else (None, None)
-    up = {k: t["A*"] / np.maximum(t[k], 1e-9) for k in ("JPS", "JPS+")} if t else {"JPS": [], "JPS+": []}
+    up = {k: t["A*"] / np.maximum(t[k], 1e-9) if t else [] for k in FAST}
     h, w = grid.shape
-    build = build_seconds(grid.free)
-    ms = [med(1e3 * t[k]) if t else "–" for k in ("A*", "JPS", "JPS+")]
-    ex = " / ".join(f"{med(e[k]):.0f}" for k in ("A*", "JPS", "JPS+")) if e else "–"
-    row = [name, f"{w}x{h}", len(check_pairs), f"{bad['JPS']} / {bad['JPS+']}", len(long_pairs), *ms, ex,
-           med(up["JPS"]), med(up["JPS+"]), 1e3 * build, planners["JPS+"].table_bytes / 2**20]  # fmt: skip
+    ssg = planners["SSG"]
+    ms = [med(1e3 * t[k]) if t else "–" for k in ("A*", *FAST)]
+    ex = " / ".join(f"{med(e[k]):.0f}" for k in ("A*", *FAST)) if e else "–"
+    row = [name, f"{w}x{h}", len(check_pairs), " / ".join(str(bad[k]) for k in FAST), len(long_pairs), *ms, ex,
+           *(med(up[k]) for k in FAST), 1e3 * build_seconds(JPSPlus, grid.free),
+           planners["JPS+"].table_bytes / 2**20, 1e3 * build_seconds(SubgoalGraph, grid.free),
+           f"{ssg.subgoals} / {ssg.edges}"]  # fmt: skip
     return row, up
 
 
-HEADER = ["map", "size", "checked", "mismatches JPS / JPS+", "long queries", "A* ms", "JPS ms", "JPS+ ms",
-          "expanded A* / JPS / JPS+", "JPS speed-up", "JPS+ speed-up", "JPS+ build ms", "table MB"]  # fmt: skip
+HEADER = ["map", "size", "checked", "mismatches JPS / JPS+ / SSG", "long queries", "A* ms", "JPS ms", "JPS+ ms",
+          "SSG ms", "expanded A* / JPS / JPS+ / SSG", "JPS speed-up", "JPS+ speed-up", "SSG speed-up",
+          "JPS+ build ms", "table MB", "SSG build ms", "subgoals / edges"]  # fmt: skip
 
 
 def movingai(data: Path, maps, sample: int, min_length: float, repeat: int, seed: int):
-    rows, ups = [], {"JPS": [], "JPS+": []}
+    rows, ups = [], {k: [] for k in FAST}
     for name in maps:
         grid = load_movingai_map(data / "movingai" / f"{name}.map")
         sc = load_scenarios(data / "movingai" / f"{name}.map.scen")
@@ -142,7 +147,7 @@ def movingai(data: Path, maps, sample: int, min_length: float, repeat: int, seed
 
 
 def floor_plans(data: Path, plans, queries: int, min_length: float, radius: float, repeat: int, seed: int):
-    rows, ups = [], {"JPS": [], "JPS+": []}
+    rows, ups = [], {k: [] for k in FAST}
     for name in plans:
         grid = load_grid(data / "rooms" / f"{name}.png", resolution=0.05).inflated(radius)
         pairs = sample_queries(grid, AStar(grid), queries, min_length * grid.resolution, seed, name)
@@ -159,9 +164,9 @@ def summary(label: str, ups: dict) -> str:
     n = len(ups["JPS"])
     if not n:
         return f"{label}: no long queries"
-    return (f"{label}: {n} long queries, median speed-up over A*: JPS {np.median(ups['JPS']):.1f}x, "
-            f"JPS+ {np.median(ups['JPS+']):.1f}x (quartiles JPS+ {np.percentile(ups['JPS+'], 25):.1f}-"
-            f"{np.percentile(ups['JPS+'], 75):.1f}x)")  # fmt: skip
+    meds = ", ".join(f"{k} {np.median(ups[k]):.1f}x" for k in FAST)
+    quart = "; ".join(f"{k} {np.percentile(ups[k], 25):.1f}-{np.percentile(ups[k], 75):.1f}x" for k in ("JPS+", "SSG"))
+    return f"{label}: {n} long queries, median speed-up over A*: {meds} (quartiles {quart})"
 
 
 def main() -> None:

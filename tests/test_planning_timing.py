@@ -91,7 +91,7 @@ def office(tmp_path, shape=(80, 120)):
     return path
 
 
-@pytest.mark.parametrize("hierarchical", [None, "hpa", "rooms", "jps_plus"])
+@pytest.mark.parametrize("hierarchical", [None, "hpa", "rooms", "jps_plus", "subgoal"])
 def test_plan_on_map_writes_figures_and_metrics(tmp_path, hierarchical):
     from slam2d.planning.query import plan_on_map
     from slam2d.runs.plan import write_plan

@@ -54,7 +54,7 @@ BUILT_INS = {
     "datasets": ["simulator", "rosbag", "carmen"],
     "frontends": ["odometry", "icp", "lines", "corners", "fuzzy_vertex", "fused"],
     "backends": ["none", "pose_graph"],
-    "global_planners": ["astar", "hpa", "rooms", "jps", "jps_plus"],
+    "global_planners": ["astar", "hpa", "rooms", "jps", "jps_plus", "subgoal"],
     "local_planners": ["dwa", "fsm"],
     "recovery_behaviours": ["backoff"],
     "exploration_strategies": ["nearest_frontier", "explore_lite", "nearest_candidate", "farthest_candidate",
@@ -107,7 +107,7 @@ def test_every_role_lists_its_built_ins_with_a_description():
 
 def test_unknown_names_list_the_available_ones_and_aliases():
     with pytest.raises(InputError, match=r"^planning.hierarchy: unknown planner 'quad' \(available: astar, hpa, "
-                                         r"rooms, jps, jps_plus, none \(= astar\)\)$"):
+                                         r"rooms, jps, jps_plus, subgoal, none \(= astar\)\)$"):
         GLOBAL_PLANNERS.get("quad")
     assert SIMILARITY_MEASURES.canonical("knn") == "nearest_neighbour" and "knn" in SIMILARITY_MEASURES
     with pytest.raises(InputError, match=r"config: key 'exploration.strategy': unknown strategy 'greedy' "

@@ -159,7 +159,7 @@ def plan(
     config: Optional[Path] = CONFIG_OPT,
     start: Optional[str] = typer.Option(None, help="x,y in metres (planning.start)"),
     goal: Optional[str] = typer.Option(None, help="x,y in metres (planning.goal)"),
-    hierarchical: Optional[str] = typer.Option(None, help="jps, jps_plus (exact, faster than A*), hpa (square "
+    hierarchical: Optional[str] = typer.Option(None, help="jps, jps_plus, subgoal (exact, faster than A*), hpa (square "
                                                "clusters) or rooms (planning.hierarchy)"),
     labels: Optional[Path] = typer.Option(None, help="room label image (labels.png of slam2d segment); default: "
                                           "the map's segmentation (segmentation.*, morphological)"),

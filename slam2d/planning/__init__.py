@@ -23,6 +23,7 @@ _EXPORTS = {
     "JPS": "jps",
     "JPSPlus": "jps_plus",
     "RoomGraphPlanner": "room_graph",
+    "SubgoalGraph": "subgoal",
     "shortcut": "smoothing",
     "TrajectoryLimits": "timing",
     "time_parametrize": "timing",

@@ -19,7 +19,7 @@ GLOBAL_PLANNERS = Registry(
     "global_planners", "planner", key="planning.hierarchy", options_key="planning",
     builtins={"astar": "slam2d.planning.astar", "hpa": "slam2d.planning.hierarchical",
               "rooms": "slam2d.planning.room_graph", "jps": "slam2d.planning.jps",
-              "jps_plus": "slam2d.planning.jps_plus"},
+              "jps_plus": "slam2d.planning.jps_plus", "subgoal": "slam2d.planning.subgoal"},
     aliases={"none": "astar"})
 """The global planners by name: ``create(name, options, grid, labels=..., graph=...)`` builds one on
 ``grid``; the room-graph planner takes the room ``labels`` (H, W) aligned with the grid (rows up) and

@@ -17,7 +17,8 @@ class PlanningConfig(Section):
 
     hierarchy: Annotated[str, Choice("global_planners", canonical=False)] = Field(
         "none", description="none (A*), jps (Jump Point Search), jps_plus (JPS over precomputed jump distances), "
-        "hpa (square clusters) or rooms (the room graph of a segmentation)"
+        "subgoal (Simple Subgoal Graph over obstacle corners), hpa (square clusters) or rooms (the room graph of a "
+        "segmentation)"
     )
     cluster_size: int = Field(16, gt=1, le=4096, description="HPA* cluster side, cells")
     corridor: bool = Field(
