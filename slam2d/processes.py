@@ -30,9 +30,9 @@ def die_with_parent(parent: int, sig: int = signal.SIGKILL) -> None:
 
 _REAPER = """
 import os, signal, sys, time
-parent = int(sys.argv[1])
+parent, markers = int(sys.argv[1]), [m.encode() for m in sys.argv[2:]]
 
-def family():
+def table():
     links = {}
     for pid in filter(str.isdigit, os.listdir("/proc")):
         try:
@@ -41,42 +41,84 @@ def family():
             links[int(pid)] = (int(fields[1]), fields[19])  # parent, start time
         except (OSError, IndexError, ValueError):
             pass
-    found, todo = {}, [parent]
+    return links
+
+def watchdog(pid):
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as cmdline:
+            return b"def watchdog(pid)" in cmdline.read()
+    except OSError:
+        return False
+
+def family(links, roots):
+    found, todo = {}, list(roots)
     while todo:
         p = todo.pop()
         for pid, (ppid, start) in links.items():
-            if ppid == p and pid != os.getpid() and pid not in found:
+            if ppid == p and pid not in found and not watchdog(pid):
                 found[pid] = start
                 todo.append(pid)
     return found
 
+def marked(links):
+    found = {}
+    for pid, (_, start) in links.items():
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as cmdline:
+                if any(m in cmdline.read() for m in markers) and not watchdog(pid):
+                    found[pid] = start
+        except OSError:
+            pass
+    return found
+
 known = {}
 while os.getppid() == parent:
-    known = family()
+    known = family(table(), [parent])
     time.sleep(0.5)
-for pid, start in known.items():
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            if stat.read().rsplit(")", 1)[1].split()[19] == start:
-                os.kill(pid, signal.SIGKILL)
-    except (OSError, IndexError):
-        pass
+def send(pids, sig, links):
+    for pid, start in pids.items():
+        if links.get(pid, (0, None))[1] == start:
+            try:
+                os.kill(pid, sig)
+            except OSError:
+                pass
+
+for _ in range(3):  # frozen first, so that none starts another process while the others are killed
+    links = table()
+    known.update(family(links, known))  # started since the last look
+    known.update(marked(links) if markers else {})
+    send(known, signal.SIGSTOP, links)
+    time.sleep(0.05)
+send(known, signal.SIGKILL, table())
 """
+_WATCHING: set[str] = set()  # the markers this process's watchdogs look for ("" : its descendants only)
 
 
-_WATCHING = False  # whether this process has started its watchdog
-
-
-def reap_when_gone() -> None:
-    """Start (once) a watchdog that, within a second of this process's exit (``kill -9`` included), kills
-    what were its descendants then: processes a library starts that do not watch their parent (a local Ray
-    instance's servers and agents). Linux; a no-op elsewhere."""
-    global _WATCHING
-    if _WATCHING or not sys.platform.startswith("linux"):
+def reap_when_gone(marker: str = "") -> None:
+    """Start a watchdog that, within a second of this process's exit (``kill -9`` included), kills what were
+    its descendants then and, with ``marker``, every process whose command line holds it: processes a library
+    starts that do not watch their parent (a local Ray instance's servers and agents, some of which leave
+    the process tree; ``marker``: its session folder). A marker counts only if a child of this process holds
+    it (an instance it started, not one it joined). Once per marker; Linux, a no-op elsewhere."""
+    if marker in _WATCHING or not sys.platform.startswith("linux") or (marker and not _children_with(marker)):
         return
-    _WATCHING = True
-    subprocess.Popen([sys.executable, "-c", _REAPER, str(os.getpid())], stdin=subprocess.DEVNULL,
-                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    _WATCHING.add(marker)
+    subprocess.Popen([sys.executable, "-c", _REAPER, str(os.getpid()), *([marker] if marker else [])],
+                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                     start_new_session=True)
+
+
+def _children_with(marker: str) -> bool:
+    """Whether a child of this process has ``marker`` in its command line (Linux /proc)."""
+    me, wanted = str(os.getpid()), marker.encode()
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            ppid = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1]
+            if ppid == me and wanted in Path(f"/proc/{pid}/cmdline").read_bytes():
+                return True
+        except (OSError, IndexError):
+            pass
+    return False
 
 
 def parent_gone(parent: int, owner: int | None = None) -> bool:

@@ -371,9 +371,10 @@ def _connect_ray():
         raise InputError("--executor ray", "ray is not installed: pip install 'slam2d[ray]'") from None
     reap_when_gone()  # a local instance's processes end with this one, however it ends
     try:
-        ray.init(ignore_reinit_error=True, log_to_driver=False)
+        context = ray.init(ignore_reinit_error=True, log_to_driver=False)
     except ConnectionError as err:
         raise InputError("RAY_ADDRESS", f"cannot reach the Ray cluster ({err})") from None
+    reap_when_gone(context.address_info.get("session_dir") or "")  # also those that left the process tree
     return ray
 
 
