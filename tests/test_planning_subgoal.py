@@ -7,42 +7,13 @@ import math
 
 import numpy as np
 import pytest
+from test_planning_jps import assert_same_as_astar, random_map
 
-from slam2d.planning.astar import AStar, check_path, path_length
+from slam2d.planning.astar import AStar, check_path
 from slam2d.planning.base import GLOBAL_PLANNERS
 from slam2d.planning.grid import PlanningGrid, load_movingai_map, load_scenarios
 from slam2d.planning.query import make_planner
 from slam2d.planning.subgoal import SubgoalGraph, subgoal_mask
-
-
-def random_map(rng: np.random.Generator) -> np.ndarray:
-    """Noise, rectangles (rooms and pillars) or a mix, 2 to 48 cells a side."""
-    h, w = (int(v) for v in rng.integers(2, 48, size=2))
-    kind = rng.integers(3)
-    free = rng.random((h, w)) > (rng.uniform(0.0, 0.45) if kind != 1 else 1.0)
-    if kind >= 1:
-        for _ in range(rng.integers(1, 12)):
-            r, c = rng.integers(0, h), rng.integers(0, w)
-            free[r : r + rng.integers(1, 10), c : c + rng.integers(1, 10)] = False
-    return free
-
-
-def assert_same_as_astar(free, planner, queries, rng):
-    astar = AStar(free)
-    cells = np.argwhere(free)
-    for _ in range(queries):
-        s, t = cells[rng.integers(len(cells), size=2)]
-        ref = astar.plan(s, t)
-        r = planner.plan(s, t)
-        assert r.found == ref.found, (s, t, r.reason)
-        if not ref.found:
-            assert "unreachable" in r.reason and r.path.shape == (0, 2) and math.isinf(r.length)
-            continue
-        assert r.length == pytest.approx(ref.length, rel=1e-9, abs=1e-9), (s, t)
-        assert check_path(free, r.path) == ""  # no blocked cell, no gap, no cut corner
-        assert tuple(r.path[0]) == tuple(s) and tuple(r.path[-1]) == tuple(t)
-        assert path_length(r.path) == pytest.approx(r.length)
-        assert r.cost == r.length and r.info["subgoals"] <= len(r.path)
 
 
 def test_equal_lengths_to_astar_on_random_maps_and_queries():
@@ -52,7 +23,7 @@ def test_equal_lengths_to_astar_on_random_maps_and_queries():
         free = random_map(rng)
         if free.sum() < 1:
             continue
-        assert_same_as_astar(free, SubgoalGraph(free), 4, rng)
+        assert_same_as_astar(free, [SubgoalGraph(free)], 4, rng)
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -65,7 +36,7 @@ def test_equal_lengths_on_open_and_large_maps(seed):
     for r in range(20, 200, 40):
         free[r - 20 : r - 17, ::50] = True
     free[::40, 25:28] = True
-    assert_same_as_astar(free, SubgoalGraph(free), 60, rng)
+    assert_same_as_astar(free, [SubgoalGraph(free)], 60, rng)
 
 
 def test_subgoals_are_convex_corners_without_corner_cutting():
