@@ -156,3 +156,25 @@ def test_signal_to_the_group_during_ablate(tmp_path, sig, code):
 def test_python_dash_m_slam2d_is_the_command():
     done = subprocess.run([sys.executable, "-m", "slam2d", "--version"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and done.stdout.startswith("slam2d "), done.stderr
+
+
+def test_interrupt_python_cannot_raise_is_quiet_and_raised_later(monkeypatch):
+    """A signal landing in a ``__del__`` (or an at-fork callback) prints no traceback; the next check stops."""
+    from slam2d.runs import signals
+
+    monkeypatch.setattr(signals, "_STOPPED", False)
+    monkeypatch.setattr(signals, "_SIGNAL", 0)
+    unraisable = []
+    monkeypatch.setattr(sys, "unraisablehook", unraisable.append)  # where Python prints "Exception ignored"
+
+    class SignalledWhileCollected:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(10_000):  # the handler runs here, inside __del__
+                pass
+
+    with pytest.raises(KeyboardInterrupt), signals.stop_on_signals():
+        SignalledWhileCollected()
+        assert signals.stopped()
+        signals.check_stop()
+    assert unraisable == []

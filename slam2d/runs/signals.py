@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 import threading
 import time
 from contextlib import contextmanager
@@ -46,11 +47,25 @@ def stop_on_signals():
 
     handler = _handler(stop)
     previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_interrupt(previous_hook)
     try:
         yield
     finally:
+        sys.unraisablehook = previous_hook
         for sig, old in previous.items():
             signal.signal(sig, old)
+
+
+def _quiet_interrupt(hook):
+    """An unraisable-exception hook that drops the KeyboardInterrupt a signal raised where Python cannot
+    propagate it (a ``__del__``, an at-fork callback): :func:`check_stop` raises it again later."""
+
+    def quiet(unraisable):
+        if not (_STOPPED and isinstance(unraisable.exc_value, KeyboardInterrupt)):
+            hook(unraisable)
+
+    return quiet
 
 
 def stopped() -> bool:

@@ -15,7 +15,7 @@ import re
 import shutil
 import tarfile
 import tempfile
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import nullcontext
 from dataclasses import dataclass
 from datetime import datetime
@@ -235,6 +235,7 @@ class SweepStopped(KeyboardInterrupt):
 
 
 EXECUTORS = ("local", "ray")
+WAIT_S = 0.5  # how often a sweep waiting for its variants checks for a signal (s)
 
 
 def run_sweep(path: str | Path, workers: int | None = None, executor: str = "local", quiet: bool = False,
@@ -355,8 +356,10 @@ def _execute_ray(cfgs: list[ExperimentConfig]):
     pending = {task.remote(_with_root(c, str(runs.resolve()))): i for i, c in enumerate(cfgs)}
     try:
         while pending:
-            (ref,), _ = ray.wait(list(pending), num_returns=1)
-            yield pending.pop(ref), _collect(runs, ray.get(ref), type(cfgs[0]))
+            done, _ = ray.wait(list(pending), num_returns=1, timeout=WAIT_S)
+            signals.check_stop()  # a signal whose KeyboardInterrupt was swallowed
+            for ref in done:
+                yield pending.pop(ref), _collect(runs, ray.get(ref), type(cfgs[0]))
     except BaseException:
         for ref in pending:
             ray.cancel(ref)
@@ -429,8 +432,12 @@ def _execute_local(cfgs: list[ExperimentConfig], workers: int):
                                initializer=signals.init_sweep_worker, initargs=(os.getpid(),))
     try:
         futures = {pool.submit(_run_variant, c): i for i, c in enumerate(cfgs)}
-        for fut in as_completed(futures):
-            yield futures[fut], fut.result()
+        pending = set(futures)
+        while pending:
+            done, pending = wait(pending, timeout=WAIT_S, return_when=FIRST_COMPLETED)
+            signals.check_stop()  # a signal whose KeyboardInterrupt was swallowed (in an at-fork callback)
+            for fut in done:
+                yield futures[fut], fut.result()
     except BaseException:
         _stop_pool(pool)
         raise
