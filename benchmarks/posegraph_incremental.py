@@ -8,12 +8,19 @@ optimisation the SLAM back end runs at the end. Reports the median wall seconds 
 runs, the iSAM2 updates run and the GTSAM error before and after the final batch, beside the
 batch solve (chordal start + LM, as ``slam2d optimize``; median of as many runs, after one to warm up).
 
+With ``--latency`` it reports instead, for each graph, the wall time a SLAM run waits per keyframe
+at one update per keyframe under the default thresholds (adding the keyframe, its loops and the
+updates: the time from one keyframe's arrival to the next's), its median, p90, p99 and max over
+all keyframes and ``--repeat`` runs, and the final estimate's error against the batch optimum's.
+
     nice .venv/bin/python benchmarks/posegraph_incremental.py [--graph M3500] [--every 1 10] [--repeat 3]
+    nice .venv/bin/python benchmarks/posegraph_incremental.py --latency --graph M3500 intel MIT CSAIL
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import statistics
 import time
@@ -44,6 +51,49 @@ def replay(graph, every: int, threshold, skip: int) -> tuple[float, float, int, 
     return t1 - t0, t3 - t2, pg.isam_updates, before, batch.g2o_error(graph, pg.estimate())
 
 
+def keyframe_latencies(graph) -> tuple[list[float], float]:
+    """(wall s per keyframe: its arrival to the next's, the last one's to the end; error after the final
+    batch) of one replay at one update per keyframe, default relinearisation."""
+    from slam2d.backend import batch
+    from slam2d.backend import pose_graph as pgm
+    from slam2d.config import BackendConfig
+
+    arrivals = []
+    add_keyframe = pgm.PoseGraph.add_keyframe
+
+    def timed(self, *args, **kwargs):
+        arrivals.append(time.perf_counter())
+        return add_keyframe(self, *args, **kwargs)
+
+    pgm.PoseGraph.add_keyframe = timed
+    try:
+        pg = pgm.replay_g2o(graph, BackendConfig(name="pose_graph", robust="none"), every=1)
+        arrivals.append(time.perf_counter())
+    finally:
+        pgm.PoseGraph.add_keyframe = add_keyframe
+    pg.optimize_batch()
+    return [b - a for a, b in itertools.pairwise(arrivals)], batch.g2o_error(graph, pg.estimate())
+
+
+def latency_table(names: list[str], repeat: int) -> None:
+    """Print the per-keyframe latency table of each graph (module docstring)."""
+    import numpy as np
+
+    from slam2d.datasets.g2o import read_g2o
+
+    print("| graph | keyframes | loops | median (ms) | p90 (ms) | p99 (ms) | max (ms) | final error / batch optimum |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name in names:
+        graph = read_g2o(DATA / "posegraphs" / f"{name}.g2o")
+        _, optimum = batch_seconds(graph)
+        runs = [keyframe_latencies(graph) for _ in range(repeat)]
+        ms = 1e3 * np.concatenate([r[0] for r in runs])
+        p50, p90, p99 = np.percentile(ms, [50, 90, 99])
+        loops = len(graph.i) - (len(graph.ids) - 1)
+        print(f"| {name} | {len(graph.ids)} | {loops} | {p50:.2f} | {p90:.2f} | {p99:.1f} | {ms.max():.0f} "
+              f"| {runs[-1][1]:.6f} / {optimum:.6f} |", flush=True)  # fmt: skip
+
+
 def batch_seconds(graph) -> tuple[float, float]:
     """(wall s, error) of the batch solve from the chordal start."""
     from slam2d.backend.batch import g2o_error, optimize_g2o
@@ -63,10 +113,16 @@ def main() -> None:
     from slam2d.datasets.g2o import read_g2o
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--graph", default="M3500", help="name of a graph in SLAM2D_DATA/posegraphs")
+    ap.add_argument("--graph", nargs="+", default=["M3500"], help="names of graphs in SLAM2D_DATA/posegraphs")
+    ap.add_argument("--latency", action="store_true", help="per-keyframe latency table instead")
     ap.add_argument("--every", type=int, nargs="+", default=[1, 10], help="keyframes per PoseGraph.update")
     ap.add_argument("--repeat", type=int, default=3, help="runs of each, medians reported")
     args = ap.parse_args()
+    if args.latency:
+        return latency_table(args.graph, args.repeat)
+    if len(args.graph) > 1:
+        ap.error("--graph: one graph without --latency")
+    args.graph = args.graph[0]
     graph = read_g2o(DATA / "posegraphs" / f"{args.graph}.g2o")
     batch_seconds(graph)  # warm up (imports, first allocations)
     batch_s, batch_err = median_runs(lambda: batch_seconds(graph), args.repeat)
