@@ -42,8 +42,11 @@ from slam2d.backend.factors import (
 from slam2d.backend.lm import levenberg_marquardt
 from slam2d.datasets import g2o
 
-SCREEN_READMIT_CHI2 = 10 * CHI2_3DOF_99  # pc_dcs: loops within this squared whitened residual after the
-# screened DCS enter its second DCS (M3500: a true loop closing a detour has 21.7 there, random false ones ~10^3)
+READMIT_NOISE_CHI2 = 1000 * CHI2_3DOF_99  # pc_dcs: loops whose squared whitened residual after the screened
+# DCS is within this times the noise ratio measured there enter its second DCS. In the graph's own noise units, so
+# the same loops enter at any scale of the information: a solution without a detour's loops is off by far more
+# than the noise (M3500: its two detour loops at 1350 and 2590 noise units there, the 1000 random false loops at
+# 6700 and more, intel's at 28 000 and more); DCS and the final gate judge the loops that enter
 DCS_CALIBRATED_PHI = 30.0  # pc_dcs: DCS's Phi at least this times the noise ratio measured at the first DCS
 # solution. With calibrated information Phi = 1 drops true loops (a simulated grid: 8-15 %, the test's laps:
 # 8 of 41), Phi = 10 does not; the ratio at a DCS solution reads low (the laps: 0.38 there, 0.62 at the
@@ -109,8 +112,8 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
     2. the noise ratio measured on the screened loops there (``consistency.noise_ratio``); when it
        asks for a wider Phi (at least ``DCS_CALIBRATED_PHI`` times the ratio, ``phi`` times the noise
        scale), DCS over the screened loops again from there;
-    3. DCS from that solution over the odometry and every loop within ``SCREEN_READMIT_CHI2`` (times
-       the noise scale);
+    3. DCS from that solution over the odometry and every loop within ``READMIT_NOISE_CHI2`` times the
+       noise ratio (the graph's noise units: the same loops at any scale of the information);
     4. least squares over the odometry and the loops within ``INLIER_GATE`` (times the scale), judged
        again at its solution (``least_squares_kept``)."""
     t0 = time.perf_counter()
@@ -138,7 +141,7 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
         robust = g2o_factor_list(graph, "dcs", phi_used, plain_odometry=True)
         poses, n = _solve(graph, _pick(robust, screened), poses)
         iterations += n
-    keep = odometry | (edge_chi2(graph, poses) <= SCREEN_READMIT_CHI2 * scale)
+    keep = odometry | (edge_chi2(graph, poses) <= READMIT_NOISE_CHI2 * ratio)
     poses, n = _solve(graph, _pick(robust, keep), poses)
     iterations += n
     keep, poses, n = least_squares_kept(graph, plain, poses, INLIER_GATE * scale)
