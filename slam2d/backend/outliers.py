@@ -184,11 +184,13 @@ def _weights(chi2: np.ndarray, mu: float, gate: float, loss: str) -> np.ndarray:
 def gnc(graph: g2o.PoseGraphFile, plain: list, start, loss: str = "tls", scale: float = 1.0,
         warm: bool = True, init: str = "pc_dcs", max_steps: int = GNC_MAX_STEPS) -> Solution:
     """GNC from ``start`` (N, 3) with the odometry as known inliers, the gate ``INLIER_GATE * scale``,
-    then least squares over the loops of weight >= ``GNC_OUTLIER_WEIGHT``. ``warm``: ``start`` is a
+    then least squares over the loops of weight >= ``GNC_OUTLIER_WEIGHT`` (unless the last weighted solve was
+    that one: binary weights). ``warm``: ``start`` is a
     robust solution, so the graduation begins near the target kernel (TLS: mu = ``GNC_TLS_WARM_MU``,
     Geman-McClure: ``GNC_GM_WARM_MU``) instead of at GTSAM's convex end; the steps' factor grows from
     ``GNC_MU_STEP`` so that at most ``max_steps`` weighted solves run. Stops early once TLS's weights
-    are binary and unchanged."""
+    are binary and either unchanged or the solve left the poses as they were (from pc_dcs's solution: one
+    step)."""
     t0 = time.perf_counter()
     odometry = g2o.odometry_mask(graph)
     gate = INLIER_GATE * scale
@@ -214,15 +216,17 @@ def gnc(graph: g2o.PoseGraphFile, plain: list, start, loss: str = "tls", scale: 
             iterations, steps = iterations + n, steps + 1
             chi2 = edge_chi2(graph, poses)
             binary = np.all((weights == 0) | (weights == 1))
-            if loss == "tls" and binary and previous is not None and np.array_equal(weights, previous):
-                break
+            if loss == "tls" and binary and (n == 0 or previous is not None and np.array_equal(weights, previous)):
+                break  # unchanged poses (or weights): TLS's binary weights stay as mu grows
             if loss == "gm" and mu <= 1.0:
                 break
             previous = weights
             mu = mu * step if loss == "tls" else max(1.0, mu / step)
     keep = odometry | (weights >= GNC_OUTLIER_WEIGHT)
-    poses, n = _solve(graph, _pick(plain, keep), poses)
-    return Solution(poses, keep, iterations + n, steps, scale, init, {"gnc": time.perf_counter() - t0})
+    if steps == 0 or not np.array_equal(weights, keep.astype(float)):  # else the last solve was this one
+        poses, n = _solve(graph, _pick(plain, keep), poses)
+        iterations += n
+    return Solution(poses, keep, iterations, steps, scale, init, {"gnc": time.perf_counter() - t0})
 
 
 def robust_cost(graph: g2o.PoseGraphFile, poses, method: str, phi: float, scale: float) -> float:
