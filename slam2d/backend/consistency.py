@@ -162,11 +162,21 @@ def noise_ratio(graph: g2o.PoseGraphFile, poses, loops) -> float:
     return float(np.median(chi2)) / CHI2_3DOF_MEDIAN if len(chi2) else 1.0
 
 
+GATE_NOISE_MAX = 30.0  # a gate is at most this times its quantile of the measured noise (the noise ratio times it)
+
+
+def gate_scale(ratio: float) -> float:
+    """What gates in whitened units are multiplied by, given the ``noise_ratio``: at least 1, so a graph whose
+    information overstates its precision keeps its true loops and a calibrated one the nominal gates, but
+    at most ``GATE_NOISE_MAX`` times the ratio, so the gates of a graph whose information understates its
+    precision follow its noise (M3500: 0.31 at its own information, the same in noise units with its
+    information × 0.1; without the cap, false loops 400-1000 times the noise passed there)."""
+    return min(max(1.0, ratio), GATE_NOISE_MAX * ratio) if ratio > 0 else 1.0
+
+
 def noise_scale(graph: g2o.PoseGraphFile, poses, loops) -> float:
-    """``noise_ratio`` at least 1: gates in whitened units are multiplied by it, so a graph whose
-    information overstates its precision keeps its true loops, and one whose information understates
-    it keeps the nominal gates."""
-    return max(1.0, noise_ratio(graph, poses, loops))
+    """``gate_scale`` of the ``noise_ratio`` of the ``loops`` (M,) bool at ``poses`` (N, 3)."""
+    return gate_scale(noise_ratio(graph, poses, loops))
 
 
 def subgraph(graph: g2o.PoseGraphFile, keep) -> g2o.PoseGraphFile:
