@@ -56,7 +56,7 @@ class BatchResult:
     and GNC the loops of their final least squares, else a loop within the chi-square 99 % gate);
     ``certified``: SE-Sync's certificate holds next to the result (``certificate.certify`` on the
     kept edges: every edge of an outlier-free least-squares solve; None when not checked);
-    ``scale``: the noise scale of the gates (``consistency.noise_scale``); ``timings``: wall time (s)
+    ``scale``: the noise scale of the gates (``consistency.gate_scale``); ``timings``: wall time (s)
     of each step."""
 
     poses: np.ndarray

@@ -181,11 +181,6 @@ def gate_scale(ratio: float) -> float:
     return min(max(1.0, ratio), GATE_NOISE_MAX * ratio) if ratio > 0 else 1.0
 
 
-def noise_scale(graph: g2o.PoseGraphFile, poses, loops) -> float:
-    """``gate_scale`` of the ``noise_ratio`` of the ``loops`` (M,) bool at ``poses`` (N, 3)."""
-    return gate_scale(noise_ratio(graph, poses, loops))
-
-
 def subgraph(graph: g2o.PoseGraphFile, keep) -> g2o.PoseGraphFile:
     """``graph`` with the edges where ``keep`` (M,) bool is set; every vertex stays."""
     keep = np.asarray(keep, bool)
