@@ -4,16 +4,16 @@ an inlier), ``overlay.png`` and ``metrics.json``."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 from pydantic import Field, field_validator
 
 from slam2d import config as config_mod
 from slam2d.backend import batch
+from slam2d.backend.consistency import edge_rows
 from slam2d.config import OutputConfig, Section, folder_name
 from slam2d.datasets import g2o
 from slam2d.errors import InputError
@@ -59,13 +59,18 @@ def run_optimize(cfg: OptimizeConfig, quiet: bool = False) -> Path:
 
 
 def _optimize_into(work: Path, cfg: OptimizeConfig, graph_path: Path, reference: Path | None) -> dict:
-    """Read, inject, solve and write config.yaml, graph.g2o, edges.csv, overlay.png, metrics.json to ``work``."""
+    """Read, inject, solve and write config.yaml, graph.g2o, edges.csv, overlay.png, metrics.json to ``work``;
+    metrics.json's ``timings`` add the wall time (s) of reading (and injecting), writing and the figure to the
+    solve's steps."""
+    t0 = time.perf_counter()
     graph = g2o.read_g2o(graph_path)
     injected = np.zeros(len(graph.i), bool)
     if cfg.outliers:
         graph, injected = g2o.inject_outliers(graph, cfg.outliers, cfg.outlier_kind, cfg.seed)
     ref = batch.reference_poses(graph, g2o.read_g2o(reference)) if reference else None
+    read_s = time.perf_counter() - t0
     result = batch.solve_g2o(graph, cfg.robust, cfg.robust_param, cfg.init, cfg.verify)
+    t0 = time.perf_counter()
     (work / "config.yaml").write_text(config_mod.dump(cfg.model_copy(update={"init": result.init})))
     g2o.write_g2o(work / "graph.g2o", g2o.PoseGraphFile(graph.ids, result.poses, graph.i, graph.j,
                                                          graph.measurements, graph.information))
@@ -75,26 +80,54 @@ def _optimize_into(work: Path, cfg: OptimizeConfig, graph_path: Path, reference:
             result.inlier.tolist())]
     (work / "edges.csv").write_text("\n".join(rows) + "\n")
     metrics = batch.g2o_metrics(graph, result, injected if cfg.outliers else None, ref)
-    (work / "metrics.json").write_text(json_text(metrics) + "\n")
+    write_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
     _overlay_figure(work / "overlay.png", graph, result, ref)
+    steps = {"read": read_s, **metrics["timings"], "write": write_s, "figure": time.perf_counter() - t0}
+    metrics["timings"] = {k: round(v, 6) for k, v in steps.items()}
+    (work / "metrics.json").write_text(json_text(metrics) + "\n")
     return metrics
 
 
+FIGURE_PX = 960  # overlay.png: the longer side of the drawing (px)
+
+
 def _overlay_figure(path: Path, graph, result, reference) -> None:
-    """Start (grey), optimised (blue), reference (green) trajectories and rejected loops (red)."""
-    fig = Figure(figsize=(8, 8))
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
-    rows = {k: n for n, k in enumerate(graph.ids.tolist())}
-    for a, b in zip(graph.i[~result.inlier].tolist(), graph.j[~result.inlier].tolist()):
-        p, q = result.poses[rows[a]], result.poses[rows[b]]
-        ax.plot([p[0], q[0]], [p[1], q[1]], color="tab:red", lw=0.3, alpha=0.5)
-    ax.plot(graph.poses[:, 0], graph.poses[:, 1], color="0.7", lw=0.6, label="file start")
+    """Start (grey), optimised (blue), reference (green) trajectories and rejected loops (red), north up,
+    with a scale bar and a legend. Drawn with PIL: no plotting library is loaded."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    tracks = [graph.poses[:, :2], result.poses[:, :2]] + ([] if reference is None else [reference[:, :2]])
+    every = np.vstack(tracks)
+    low, high = every.min(0), every.max(0)
+    margin, band = 20, 40  # px around the drawing, px below it for the legend
+    scale = (FIGURE_PX - 2 * margin) / max(float((high - low).max()), 1e-9)  # px per m
+    w, h = (np.ceil((high - low) * scale).astype(int) + 2 * margin).tolist()
+    image = Image.new("RGB", (w, h + band), "white")
+    draw, font = ImageDraw.Draw(image), ImageFont.load_default(size=12)
+
+    def px(xy: np.ndarray) -> np.ndarray:
+        return np.column_stack([margin + (xy[:, 0] - low[0]) * scale, h - margin - (xy[:, 1] - low[1]) * scale])
+
+    a, b = edge_rows(graph)
+    rejected = ~result.inlier
+    for x0, y0, x1, y1 in np.hstack([px(result.poses[a[rejected]]), px(result.poses[b[rejected]])]).tolist():
+        draw.line([(x0, y0), (x1, y1)], fill=(214, 39, 40), width=1)
+    legend = [("file start", (179, 179, 179), graph.poses)]
     if reference is not None:
-        ax.plot(reference[:, 0], reference[:, 1], color="tab:green", lw=1.5, label="reference")
-    ax.plot(result.poses[:, 0], result.poses[:, 1], color="tab:blue", lw=0.8, label=f"optimised ({result.init})")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.legend(loc="best")
-    fig.savefig(path, dpi=120, bbox_inches="tight")
+        legend.append(("reference", (44, 160, 44), reference))
+    legend.append((f"optimised ({result.init})", (31, 119, 180), result.poses))
+    for _, colour, poses in legend:
+        draw.line(px(poses).ravel().tolist(), fill=colour, width=2 if colour == (44, 160, 44) else 1)
+    if rejected.any():
+        legend.append((f"rejected loops ({int(rejected.sum())})", (214, 39, 40), None))
+    x = margin
+    for label, colour, _ in legend:
+        draw.line([(x, h + band // 2), (x + 20, h + band // 2)], fill=colour, width=3)
+        draw.text((x + 25, h + band // 2 - 7), label, fill="black", font=font)
+        x += 35 + int(draw.textlength(label, font=font))
+    metres = 10.0 ** np.floor(np.log10(max((high - low).max() / 5, 1e-9)))
+    y = h - 8
+    draw.line([(margin, y), (margin + metres * scale, y)], fill="black", width=3)
+    draw.text((margin, y - 16), f"{metres:g} m", fill="black", font=font)
+    image.save(path, compress_level=1)

@@ -1,0 +1,82 @@
+"""The whole ``slam2d optimize`` command on clean graphs beside a bare GTSAM script, in one run.
+
+The bare script: ``import gtsam``, ``readG2o``, a tight prior on the first pose, GTSAM's
+``LevenbergMarquardtOptimizer`` with default parameters, the error printed. The command:
+``slam2d optimize GRAPH`` with its defaults (chordal start, verification from a second start,
+SE-Sync's certificate, graph.g2o, edges.csv, overlay.png, metrics.json). Both run as fresh
+processes, interleaved ``--repeats`` times so that a loaded machine slows both alike; the table
+gives the median wall time (min-max beside it), the ratio of the medians, and the median of each
+step's wall time as the command records it in ``metrics.json`` (``timings``; "other" is the
+process's wall time not in a step: interpreter start, imports, the results folder).
+
+    SLAM2D_DATA=... nice .venv/bin/python benchmarks/posegraph_overhead.py [--graphs M3500 intel MIT CSAIL]
+        [--repeats 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+DATA = Path(os.environ.get("SLAM2D_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets"))
+BARE = """
+import sys, gtsam
+graph, initial = gtsam.readG2o(sys.argv[1], False)
+first = initial.keys()[0]
+graph.add(gtsam.PriorFactorPose2(first, initial.atPose2(first), gtsam.noiseModel.Diagonal.Sigmas([1e-6] * 3)))
+result = gtsam.LevenbergMarquardtOptimizer(graph, initial, gtsam.LevenbergMarquardtParams()).optimize()
+print(graph.error(result))
+"""
+
+
+def wall(cmd: list[str]) -> float:
+    """Wall time (s) of a process; raises if it fails."""
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    return time.perf_counter() - t0
+
+
+def spread(xs: list[float]) -> str:
+    return f"{statistics.median(xs):.2f} ({min(xs):.2f}-{max(xs):.2f})"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--graphs", nargs="+", default=["M3500", "intel", "MIT", "CSAIL"])
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args()
+    slam2d = [sys.executable, "-m", "slam2d.cli", "optimize"]
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.graphs:
+            path = str(DATA / "posegraphs" / f"{name}.g2o")
+            bare, ours, steps = [], [], []
+            for r in range(args.repeats):
+                bare.append(wall([sys.executable, "-c", BARE, path]))
+                out = Path(tmp) / f"{name}-{r}"
+                ours.append(wall(slam2d + [path, "--out", str(out), "-q"]))
+                metrics = json.loads(next(out.glob("*/metrics.json")).read_text())
+                assert metrics["verified"] and metrics["certified"], metrics
+                steps.append(metrics["timings"])
+            names = list(steps[0])
+            median = {k: statistics.median(s[k] for s in steps) for k in names}
+            other = statistics.median(w - sum(s.values()) for w, s in zip(ours, steps))
+            rows.append((name, spread(bare), spread(ours), statistics.median(ours) / statistics.median(bare),
+                         " ".join(f"{k} {v:.2f}" for k, v in median.items()) + f" other {other:.2f}"))
+            print(f"{name}: done", file=sys.stderr, flush=True)
+    print(f"\n{args.repeats} repeats, median (min-max) wall s\n")
+    print("| graph | bare GTSAM LM script | slam2d optimize (verified, certified) | x bare | command's steps (median s) |")
+    print("|---|---:|---:|---:|---|")
+    for name, b, o, ratio, st in rows:
+        print(f"| {name} | {b} | {o} | {ratio:.2f} | {st} |")
+
+
+if __name__ == "__main__":
+    main()
