@@ -9,7 +9,7 @@ from slam2d import geometry
 from slam2d.datasets.simulator import World
 from slam2d.errors import InputError
 from slam2d.frontends import available_frontends, create_frontend
-from slam2d.frontends.icp import ODOMETRY_OVERRULED_EVENT, STILL_EVENT, IcpFrontend
+from slam2d.frontends.icp import ODOMETRY_OVERRULED_EVENT, STILL_EVENT, STILL_SCAN_MOVED_EVENT, IcpFrontend
 from slam2d.frontends.icp.grid import SearchGrid, knn
 from slam2d.types import Scan
 
@@ -290,6 +290,25 @@ def test_frozen_then_jumping_odometry_is_not_double_counted(room):
     end = _chain(fe, room, true, [*frozen, jump])
     assert_close_pose(geometry.between(true[0], end), geometry.between(true[0], true[6]), xy=0.03, theta_deg=1.0)
     assert fe.events[ODOMETRY_OVERRULED_EVENT] == 1
+
+
+def test_odometry_frozen_while_driving_is_not_taken_for_standing_still(room):
+    """After a registration that agreed with odometry, odometry reports no motion for four scans of a
+    5 cm-per-scan drive, then catches up: the motion filter must not take the frozen scans as still
+    (their ranges changed), so every chained pose follows the truth. The first frozen scan is registered
+    for its changed ranges; its match overrules odometry, so the next ones are registered anyway."""
+    step = np.array([0.05, 0.0, np.deg2rad(1.0)])
+    true = [np.array([1.5, 1.2, 0.0])]
+    for _ in range(6):
+        true.append(geometry.compose(true[-1], step))
+    odometry = [step, *[np.zeros(3)] * 4, geometry.between(true[1], true[6])]
+    fe = create_frontend("icp", {})
+    pose = true[0]
+    fe.process(scan_at(room, pose, seed=0), np.zeros(3))
+    for k, (p, d) in enumerate(zip(true[1:], odometry), start=1):
+        pose = geometry.compose(pose, fe.process(scan_at(room, p, seed=k), d).delta)
+        assert_close_pose(pose, p, xy=0.02, theta_deg=0.5)
+    assert fe.events[STILL_SCAN_MOVED_EVENT] == 1 and not fe.events[STILL_EVENT]
 
 
 def test_a_wild_odometry_step_is_overruled_by_a_good_match(room):

@@ -51,14 +51,19 @@ tightest information, counted in ``events`` under ``STILL_EVENT`` (a third
 of ACES is such scans).
 The filter applies only after a registration that agreed with odometry
 (within ``STILL_TRUST_XY`` and ``STILL_TRUST_THETA``): after a large correction
-the next scan is registered whatever odometry says.
+the next scan is registered whatever odometry says. Nor does it apply to a scan
+whose ranges changed from the last registered scan's by more than
+``STILL_RANGE_CHANGE`` × ``still_distance`` (median over the beams): odometry
+that freezes while the robot moves says "still", the scan does not
+(``STILL_SCAN_MOVED_EVENT``).
 """
 
 from slam2d.frontends.icp.config import IcpConfig
 from slam2d.frontends.icp.frontend import (
     ODOMETRY_OVERRULED_EVENT,
     STILL_EVENT,
+    STILL_SCAN_MOVED_EVENT,
     IcpFrontend,
 )
 
-__all__ = ["IcpFrontend", "IcpConfig", "STILL_EVENT", "ODOMETRY_OVERRULED_EVENT"]
+__all__ = ["IcpFrontend", "IcpConfig", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "ODOMETRY_OVERRULED_EVENT"]

@@ -25,8 +25,10 @@ STILL_EVENT = "scans not registered (no motion)"  # key in ``events``
 ODOMETRY_OVERRULED_EVENT = "odometry overruled by the scan match"  # key in ``events``
 STILL_TRUST_XY = 0.02  # m; a registration corrected by less than this (and ...
 STILL_TRUST_THETA = np.deg2rad(1.0)  # ... this) lets the motion filter skip the next still scans
+STILL_RANGE_CHANGE = 2.0  # a scan whose median range change exceeds this x still_distance is registered
+STILL_SCAN_MOVED_EVENT = "scans registered though odometry said still (the scan changed)"  # key in ``events``
 
-__all__ = ["IcpFrontend", "STILL_EVENT", "ODOMETRY_OVERRULED_EVENT"]
+__all__ = ["IcpFrontend", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "ODOMETRY_OVERRULED_EVENT"]
 
 
 @register_frontend("icp")
@@ -53,6 +55,7 @@ class IcpFrontend:
         self.events: Counter[str] = Counter()
         self._unregistered = np.zeros(3)  # odometry since the last registered scan
         self._trust_still = False  # the last registration agreed with odometry (see STILL_TRUST_*)
+        self._reference_ranges: np.ndarray | None = None  # ranges (n,) m of the last registered scan
         self._last_delta = np.zeros(3)
         self._started = False
 
@@ -69,13 +72,18 @@ class IcpFrontend:
         guess = geometry.compose(self.pose, odom_delta)
         points = scan.points_in_base(cfg.min_range, cfg.max_range)
         if not self._started:
+            self._reference_ranges = scan.ranges
             return self._first(points, guess, odom_delta)
         self._unregistered = geometry.compose(self._unregistered, odom_delta)
         if known and self._trust_still and self._is_still(self._unregistered):
-            self.events[STILL_EVENT] += 1
-            self.pose = guess
-            return FrontendResult(delta=odom_delta.copy(), information=self._still_information.copy(), confidence=1.0)
+            if self._scan_unchanged(scan):
+                self.events[STILL_EVENT] += 1
+                self.pose = guess
+                return FrontendResult(delta=odom_delta.copy(), information=self._still_information.copy(),
+                                      confidence=1.0)
+            self.events[STILL_SCAN_MOVED_EVENT] += 1
         self._unregistered = np.zeros(3)
+        self._reference_ranges = scan.ranges
         if len(points) < cfg.min_points:
             return self._fallback(f"fewer than {cfg.min_points} valid points", guess, odom_delta, points)
         if self.map.empty():
@@ -105,6 +113,17 @@ class IcpFrontend:
             and abs(correction[2]) < STILL_TRUST_THETA
         )
         return self._accept(pose, points, information, fit.matched)
+
+    def _scan_unchanged(self, scan: Scan) -> bool:
+        """Whether ``scan``'s ranges agree with the last registered scan's: their median change is
+        below STILL_RANGE_CHANGE × ``still_distance`` (odometry that freezes while the robot moves
+        says "still", the scan does not)."""
+        reference = self._reference_ranges
+        if reference is None or reference.shape != scan.ranges.shape:
+            return False
+        change = np.abs(scan.ranges - reference)
+        change = change[np.isfinite(change)]
+        return change.size > 0 and float(np.median(change)) < STILL_RANGE_CHANGE * self.config.still_distance
 
     def _is_still(self, motion: np.ndarray) -> bool:
         cfg = self.config
