@@ -31,7 +31,7 @@ class TourConfig(Section):
                                                     "to be chosen")  # fmt: skip
     max_cells: int = Field(400, gt=0, description="frontier cells of the local subspace covered at most (evenly "
                                                   "thinned beyond)")  # fmt: skip
-    solver_ms: float = Field(30.0, gt=0, description="ms the TSP solver's local search may take per tour")
+    solver_ms: float = Field(10.0, gt=0, description="ms the TSP solver's local search may take per tour")
     refresh: int = Field(10, ge=1, description="decisions a subspace's travel costs are kept before they are "
                                                "measured again on the map")  # fmt: skip
 

@@ -51,7 +51,7 @@ def solve_open_tour(cost: np.ndarray, end: int | None = None, initial=None, time
     manager = pywrapcp.RoutingIndexManager(len(c), 1, [0], [end])
     routing = pywrapcp.RoutingModel(manager)
     rows = arcs.tolist()
-    transit = routing.RegisterTransitCallback(lambda i, j: rows[manager.IndexToNode(i)][manager.IndexToNode(j)])
+    transit = routing.RegisterTransitMatrix(rows)
     routing.SetArcCostEvaluatorOfAllVehicles(transit)
     params = pywrapcp.DefaultRoutingSearchParameters()
     params.first_solution_strategy = routing_enums_pb2.FirstSolutionStrategy.PATH_CHEAPEST_ARC
@@ -200,26 +200,23 @@ class TourPlanner:
         found = explorer.frontiers(pose, view, distance, self.live.update(view))
         if not found:
             return None
-        keys, reps, members = _subspaces(view, found, cfg.cell)
-        cost = self._costs(explorer, view, distance, pose, found, reps)
+        keys, goals, paths, members = _subspaces(view, found, cfg.cell, distance)
+        cost = self._costs(explorer, view, pose, goals, paths)
         order = self._global_order(keys, cost, cfg.solver_ms)
         first = order[0]
-        nxt = found[reps[order[1]]].goal if len(order) > 1 else None
+        nxt = goals[order[1]] if len(order) > 1 else None
         cells = members[first]
         if len(cells) > cfg.max_cells:
             cells = cells[np.linspace(0, len(cells) - 1, cfg.max_cells).astype(int)]
         goal, targets = self._local_goal(explorer, view, distance, pose, cells, nxt)
-        if goal is None:  # no viewpoint sees its frontier: the region's own goal
-            f = found[reps[first]]
-            return Goal(f.goal.copy(), "frontier", score=float(f.path))
+        if goal is None:  # no viewpoint sees its frontier: the subspace's own goal
+            return Goal(goals[first].copy(), "frontier", score=float(paths[first]))
         return Goal(goal, "viewpoint", score=float(len(targets)), targets=targets)
 
-    def _costs(self, explorer, view, distance, pose, found, reps) -> np.ndarray:
+    def _costs(self, explorer, view, pose, goals, path) -> np.ndarray:
         """Travel costs (K + 1, K + 1) m between the robot (0) and the subspaces' goals: the robot's grid
         path, between goals the geodesic on the coarse grid (each goal's row kept ``refresh`` decisions), at
         least the straight line and the difference of the robot's paths."""
-        goals = np.array([found[r].goal for r in reps])
-        path = np.array([found[r].path for r in reps])
         pts = np.vstack([pose[:2], goals])
         d = np.concatenate([[0.0], path])
         low = np.maximum(np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1)), np.abs(d[:, None] - d))
@@ -293,17 +290,26 @@ class TourPlanner:
         return xy[first].copy(), view.to_world(cells[sees[first]])
 
 
-def _subspaces(view, found, cell: float):
+def _subspaces(view, found, cell: float, distance: np.ndarray):
     """The subspaces (squares of ``cell`` m fixed in the world) holding frontier cells of the regions ``found``:
-    their keys (K,) (i, j), for each the region with most cells in it (K,) and its frontier cells [(F, 2)]."""
+    their keys [(i, j)], goals (K, 2) m (the reachable frontier cell nearest the centre of the subspace's frontier
+    cells, else the goal of the region with most cells in it), path lengths (K,) m to them, and the frontier
+    cells [(F, 2)] of each."""
     cells = np.concatenate([f.cells for f in found])
     region = np.repeat(np.arange(len(found)), [len(f.cells) for f in found])
     ij = np.floor(view.to_world(cells) / cell).astype(np.int64)
     keys, inv = np.unique(ij, axis=0, return_inverse=True)
     inv = inv.ravel()
-    reps, members = [], []
+    goals, paths, members = np.empty((len(keys), 2)), np.empty(len(keys)), []
     for k in range(len(keys)):
-        mine = inv == k
-        reps.append(int(np.argmax(np.bincount(region[mine], minlength=len(found)))))
-        members.append(cells[mine])
-    return [tuple(int(v) for v in key) for key in keys], reps, members
+        mine = cells[inv == k]
+        d = distance[mine[:, 0], mine[:, 1]]
+        if np.isfinite(d).any():
+            own = mine[np.isfinite(d)]
+            best = own[np.argmin(np.hypot(*(own - mine.mean(axis=0)).T))]
+            goals[k], paths[k] = view.to_world(best), distance[best[0], best[1]]
+        else:
+            f = found[int(np.argmax(np.bincount(region[inv == k], minlength=len(found))))]
+            goals[k], paths[k] = f.goal, f.path
+        members.append(mine)
+    return [tuple(int(v) for v in key) for key in keys], goals, paths, members
