@@ -85,6 +85,7 @@ class Explorer:
         self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest view counted on
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self.strategy = EXPLORATION_STRATEGIES.create(cfg.strategy, cfg.strategy_options)
+        _warm_up(self)
 
     # -- nodes and candidates --------------------------------------------------------------
 
@@ -419,6 +420,24 @@ class Explorer:
         self.inaccessible.append(goal.position.copy())
         if goal.candidate is not None:
             goal.candidate.alive = False
+
+
+_WARM: set = set()  # the strategies whose first decision this process has made
+
+
+def _warm_up(explorer: Explorer) -> None:
+    """One decision of a throwaway explorer of the same strategy on a small room with an opening, the first
+    time a strategy is made in this process: numba's compiled kernels and the strategy's libraries are loaded
+    then, not in the first decision's time."""
+    if explorer.cfg.strategy in _WARM:
+        return
+    _WARM.add(explorer.cfg.strategy)
+    state = np.full((60, 60), UNKNOWN, dtype=np.int8)
+    state[10:50, 10:50] = 0
+    state[9, 9:51] = state[50, 9:51] = state[9:51, 9] = state[9:51, 50] = OCCUPIED
+    state[50, 25:35] = 0  # the opening
+    throwaway = Explorer(explorer.cfg, explorer.radius, explorer.inflation, explorer.range_max)
+    throwaway.decide(np.array([1.5, 1.5, 0.0]), GridView(state, 0.05, (0.0, 0.0)))
 
 
 def _option(goal, candidate: bool, terms) -> dict:
