@@ -1,5 +1,5 @@
 """The tour strategy's parts: the open tour by OR-tools against nearest-first, the greedy set cover of frontier
-cells by line of sight, and the frontier mask kept up to date against a full recomputation."""
+cells by line of sight."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import itertools
 import numpy as np
 import pytest
 
-from slam2d.exploration.frontiers import LiveFrontiers, frontier_mask
+from slam2d.exploration.frontiers import frontier_mask
 from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, geodesic
 from slam2d.exploration.tour import (
     cheapest_insertion,
@@ -109,24 +109,3 @@ def test_a_viewpoint_sees_no_frontier_cell_behind_a_wall_or_out_of_range():
     assert not coverage_matrix(view.state, behind, cells, 100.0).any()
     assert coverage_matrix(view.state, near, cells, 100.0).all()
     assert not coverage_matrix(view.state, near, cells, 2.0).any()  # 0.1 m of range: the cells are farther
-
-
-@pytest.mark.parametrize("seed", range(5))
-def test_the_frontier_mask_kept_up_to_date_equals_a_full_recomputation(seed):
-    """Random scan-like changes (rectangles turned free, walls drawn, cells forgotten) on a growing map: the mask
-    refreshed around the changed cells equals ``frontier_mask`` of the whole grid after every one."""
-    rng = np.random.default_rng(seed)
-    state = np.full((150, 170), UNKNOWN, dtype=np.int8)
-    live = LiveFrontiers(depth=8)
-    for _ in range(25):
-        r, c = rng.integers(0, 150), rng.integers(0, 170)
-        h, w = rng.integers(1, 40, size=2)
-        state[r : r + h, c : c + w] = rng.choice([FREE, FREE, OCCUPIED, UNKNOWN])
-        if rng.random() < 0.5:
-            state[r : r + h, c] = OCCUPIED
-        view = GridView(state.copy(), 0.05, (0.0, 0.0))
-        got = live.update(view)
-        assert np.array_equal(got, frontier_mask(state, depth=8))
-        assert live.cells_recomputed <= state.size + 32 * 32 * 6
-    live.update(GridView(state.copy(), 0.05, (0.0, 0.0)))
-    assert live.cells_recomputed == 0  # nothing changed: nothing recomputed

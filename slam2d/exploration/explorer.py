@@ -172,12 +172,11 @@ class Explorer:
             self.pocket_goals += goal is not None
         return goal
 
-    def frontiers(self, pose, view, distance, mask=None) -> list:
-        """The frontier regions the robot can reach (``find_frontiers``; ``mask`` its frontier cells when known),
-        away from visited and inaccessible goals."""
+    def frontiers(self, pose, view, distance) -> list:
+        """The frontier regions the robot can reach (``find_frontiers``), away from visited and inaccessible goals."""
         avoid = self.visited + self.inaccessible
         return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
-                              self.cfg.avoid_radius, self.width, mask)  # fmt: skip
+                              self.cfg.avoid_radius, self.width)  # fmt: skip
 
     def frontier_goal(self, pose, view, distance, cost=None) -> Goal | None:
         """The goal of the frontier region of lowest ``cost`` (a function of a region; default its path length)."""

@@ -115,60 +115,6 @@ def _occupied_within(state, r, c, k):
     return False
 
 
-class LiveFrontiers:
-    """The frontier mask (``frontier_mask``) of successive views of one map being built, recomputed only in the
-    tiles of ``tile`` cells around the cells whose state changed since the last view (all of it when the grid's
-    frame changed): a decision's frontier cost follows what the last scans changed, not the map's size
-    (Keidar & Kaminka's incremental frontier detection, on tiles)."""
-
-    def __init__(self, depth: int, wall_gap: int = WALL_GAP, tile: int = 32):
-        self.depth, self.wall_gap, self.tile = int(depth), int(wall_gap), int(tile)
-        if self.tile <= max(self.depth + 1, self.wall_gap):
-            raise ValueError(f"tiles of {tile} cells are narrower than a frontier test's reach")
-        self._frame = self._state = self._mask = None
-        self.cells_recomputed = 0  # cells the latest update recomputed
-
-    def update(self, view: GridView) -> np.ndarray:
-        """The frontier mask (H, W) bool of ``view`` (a copy of its own)."""
-        state = np.ascontiguousarray(view.state, dtype=np.int8)
-        frame = state.shape, view.resolution, tuple(np.asarray(view.origin, dtype=float))
-        if frame != self._frame:
-            self._mask = frontier_mask(state, self.wall_gap, self.depth)
-            self.cells_recomputed = state.size
-        else:
-            self._mask = self._refresh(state)
-        self._frame, self._state = frame, state.copy()
-        return self._mask.copy()
-
-    def _refresh(self, state: np.ndarray) -> np.ndarray:
-        """The old mask with the tiles within reach of a changed cell recomputed (a cell's test looks
-        ``max(depth + 1, wall_gap)`` cells around it)."""
-        t, h, w = self.tile, *state.shape
-        changed = state != self._state
-        if not changed.any():
-            self.cells_recomputed = 0
-            return self._mask
-        m = max(self.depth + 1, self.wall_gap)
-        near = ndimage.maximum_filter(_tiles_of(changed, t), size=3)  # tiles are wider than m: neighbours suffice
-        mask = self._mask
-        rows, cols = np.nonzero(near)
-        for r, c in zip(rows, cols):
-            r0, r1, c0, c1 = r * t, min((r + 1) * t, h), c * t, min((c + 1) * t, w)
-            lo_r, lo_c = max(r0 - m, 0), max(c0 - m, 0)
-            sub = _frontier_mask(state[lo_r : min(r1 + m, h), lo_c : min(c1 + m, w)], self.wall_gap, self.depth)
-            mask[r0:r1, c0:c1] = sub[r0 - lo_r : r1 - lo_r, c0 - lo_c : c1 - lo_c]
-        self.cells_recomputed = len(rows) * t * t
-        return mask
-
-
-def _tiles_of(cells: np.ndarray, t: int) -> np.ndarray:
-    """Which tiles of ``t`` × ``t`` cells (ceil(H / t), ceil(W / t)) bool hold a True cell."""
-    h, w = cells.shape
-    padded = np.zeros((-(-h // t) * t, -(-w // t) * t), dtype=bool)
-    padded[:h, :w] = cells
-    return padded.reshape(padded.shape[0] // t, t, padded.shape[1] // t, t).any(axis=(1, 3))
-
-
 def depth_cells(depth: float, resolution: float) -> int:
     """``depth`` m in whole cells of ``resolution`` m."""
     return int(round(depth / resolution))
@@ -219,21 +165,16 @@ def _label8(mask):
 
 
 def find_frontiers(view: GridView, robot_xy, distance: np.ndarray, min_size: float, reach: float,
-                   polygon=None, avoid=(), avoid_radius: float = 0.5, depth: float = 0.0,
-                   mask: np.ndarray | None = None) -> list[Frontier]:  # fmt: skip
+                   polygon=None, avoid=(), avoid_radius: float = 0.5, depth: float = 0.0) -> list[Frontier]:  # fmt: skip
     """Reachable frontier regions of ``view``.
 
     ``distance`` (H, W) m: path length from the robot over traversable cells (inf: unreachable);
     ``min_size`` m: shortest region (cells × resolution); ``reach`` m: how far from the region a
     goal cell may lie; ``polygon`` (K, 2) m: frontier cells outside are ignored; goals within
     ``avoid_radius`` of an ``avoid`` point (visited, inaccessible) are left out; ``depth`` m: how deep
-    the unknown must run on from a frontier cell (``frontier_mask``); ``mask`` (H, W) bool: that mask when
-    known (:class:`LiveFrontiers`), else computed.
+    the unknown must run on from a frontier cell (``frontier_mask``).
     """
-    if mask is None:
-        mask = frontier_mask(view.state, depth=depth_cells(depth, view.resolution))
-    else:
-        mask = mask.copy()
+    mask = frontier_mask(view.state, depth=depth_cells(depth, view.resolution))
     if polygon is not None:
         rows, cols = np.nonzero(mask)
         keep = inside_polygon(view.to_world(np.column_stack([rows, cols])), polygon)

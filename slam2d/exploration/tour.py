@@ -178,11 +178,10 @@ def coarse_grid(passable: np.ndarray, k: int) -> np.ndarray:
 
 
 class TourPlanner:
-    """The ``tour`` strategy's state between decisions: the frontier mask kept up to date (``LiveFrontiers``),
-    the previous global order (by subspace), and the subspaces' travel-cost rows on the coarse grid."""
+    """The ``tour`` strategy's state between decisions: the previous global order (by subspace) and the
+    subspaces' travel-cost rows on the coarse grid."""
 
     def __init__(self):
-        self.live = None  # LiveFrontiers
         self.order: list[tuple[int, int]] = []  # the previous global tour, by subspace
         self._rows: dict = {}  # rep cell -> (coarse distance field, decision it was measured at)
         self._coarse_frame = None
@@ -190,14 +189,10 @@ class TourPlanner:
 
     def choose(self, explorer, pose, view, distance):
         from slam2d.exploration.explorer import Goal
-        from slam2d.exploration.frontiers import LiveFrontiers, depth_cells
 
-        cfg, res = explorer.cfg.tour, view.resolution
+        cfg = explorer.cfg.tour
         self.decisions += 1
-        depth = depth_cells(explorer.width, res)
-        if self.live is None or self.live.depth != depth:
-            self.live = LiveFrontiers(depth)
-        found = explorer.frontiers(pose, view, distance, self.live.update(view))
+        found = explorer.frontiers(pose, view, distance)
         if not found:
             return None
         keys, goals, paths, members = _subspaces(view, found, cfg.cell, distance)
