@@ -109,3 +109,20 @@ def test_a_viewpoint_sees_no_frontier_cell_behind_a_wall_or_out_of_range():
     assert not coverage_matrix(view.state, behind, cells, 100.0).any()
     assert coverage_matrix(view.state, near, cells, 100.0).all()
     assert not coverage_matrix(view.state, near, cells, 2.0).any()  # 0.1 m of range: the cells are farther
+
+
+def test_the_tour_drives_to_a_viewpoint_of_the_opening_and_spends_it_once_its_cells_are_seen():
+    from slam2d.exploration import config as explore_config
+    from slam2d.exploration.explorer import Explorer
+
+    view, cells, _ = room_with_an_opening()
+    ex = Explorer(explore_config.load(None, {"exploration.strategy": "tour"}).exploration, 0.2, 0.05, 12.0)
+    goal = ex.decide(np.array([1.0, 1.0, 0.0]), view)
+    assert goal is not None and goal.kind == "viewpoint"
+    seen = view.to_cell(goal.targets)
+    assert len(seen) and frontier_mask(view.state, depth=8)[seen[:, 0], seen[:, 1]].all()
+    assert np.hypot(*(goal.position - view.to_world(seen).mean(axis=0))) <= 3.0  # within the view range
+    assert not ex.spent(goal, view)
+    state = view.state.copy()
+    state[66:80, 30:60] = FREE  # the unknown beyond the opening seen: its cells are no frontier any more
+    assert ex.spent(goal, GridView(state, view.resolution, view.origin))
