@@ -115,7 +115,7 @@ def test_the_tour_drives_to_a_viewpoint_of_the_opening_and_spends_it_once_its_ce
     from slam2d.exploration import config as explore_config
     from slam2d.exploration.explorer import Explorer
 
-    view, cells, _ = room_with_an_opening()
+    view, _, _ = room_with_an_opening()
     ex = Explorer(explore_config.load(None, {"exploration.strategy": "tour"}).exploration, 0.2, 0.05, 12.0)
     goal = ex.decide(np.array([1.0, 1.0, 0.0]), view)
     assert goal is not None and goal.kind == "viewpoint"
