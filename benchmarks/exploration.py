@@ -3,7 +3,7 @@ SLAM in the loop; coverage, efficiency, the simplified hybrid map and path repet
 
 Usage: nice .venv/bin/python benchmarks/exploration.py [--worlds office rooms] [--rooms NAME ...]
        [--furniture both|with|without] [--seeds N] [--first-seed K] [--strategies ...] [--workers W] [--max-time S]
-       [--log FILE] [--tables LOG [LOG ...] [--figure PNG]]
+       [--log FILE] [--tables LOG [LOG ...] [--figure PNG] [--subject STRATEGY]]
 
 Each run is ``slam2d explore`` without the results folder (``slam2d.exploration.loop.explore``). Worlds:
 the office, and the room plans of ``$SLAM2D_DATA/rooms/`` (0.05 m/px; ``--rooms`` picks some by name,
@@ -67,7 +67,8 @@ def fmt(x, digits=1) -> str:
     return "–" if math.isnan(x) else f"{x:.{digits}f}"
 
 
-def tables(runs: list[dict]) -> str:
+def tables(runs: list[dict], subject: str = "utility") -> str:
+    """The tables of ``runs``; the per-world distances and the paired ratios are ``subject``'s over the others'."""
     out = []
     by = {s: [r for r in runs if r["strategy"] == s] for s in STRATEGIES if any(r["strategy"] == s for r in runs)}
     d99 = {s: med(r["distance_to_99"] for r in rs) for s, rs in by.items()}
@@ -111,8 +112,10 @@ def tables(runs: list[dict]) -> str:
                 a, k = med(r["nodes_all"] for r in rs), med(r["nodes_final"] for r in rs)
                 out.append(f"| {world} | {s} | {len(rs)} | {a:.0f} | {k:.0f} | {100 * k / a:.0f} % |")
     out.append("")
-    out.extend(distances_by_world(runs))
-    out.extend(paired_ratios(runs))
+    trio = ("nearest_frontier", "explore_lite", "utility") if subject == "utility" else (
+        "nearest_frontier", "utility", subject)  # fmt: skip
+    out.extend(distances_by_world(runs, trio))
+    out.extend(paired_ratios(runs, subject, REFERENCES + (("utility",) if subject != "utility" else ())))
     out.append("| strategy | runs | median path repetition | median goals | median inaccessible goals |")
     out.append("|---|---|---|---|---|")
     for s, rs in by.items():
@@ -150,12 +153,12 @@ def paired(runs: list[dict], strategy: str, ref: str, level: int) -> list[tuple[
             if s == strategy and not math.isnan(v) and not math.isnan(d.get((w, seed, ref), math.nan))]  # fmt: skip
 
 
-def paired_ratios(runs: list[dict], strategy: str = "utility") -> list[str]:
-    """The table of ``strategy``'s distance to 90 and 99 % over each reference's on the same world and seed: median,
+def paired_ratios(runs: list[dict], strategy: str = "utility", refs=REFERENCES) -> list[str]:
+    """The table of ``strategy``'s distance to 90 and 99 % over each of ``refs``' on the same world and seed: median,
     quartiles and range over the pairs where both reached that coverage, and how many pairs it was shorter in."""
     out = [f"| {strategy} ÷ | to | pairs (world, seed) | median | quartiles | range | shorter in |",
            "|---|---|---|---|---|---|---|"]
-    for ref in REFERENCES:
+    for ref in refs:
         for level in (90, 99):
             ratios = [x for _, _, x in paired(runs, strategy, ref, level)]
             if len(ratios) < 2:
@@ -247,10 +250,12 @@ def main() -> None:
                     help="only print the tables of these logs (a later run of a world, seed and strategy replaces an "
                          "earlier one)")  # fmt: skip
     ap.add_argument("--figure", metavar="PNG", help="with --tables: also draw the spread over worlds and seeds")
+    ap.add_argument("--subject", default="utility", choices=STRATEGIES,
+                    help="the strategy whose distances the per-world and paired tables set over the others'")
     a = ap.parse_args()
     if a.tables:
         runs = read_logs(a.tables)
-        print(tables(runs))
+        print(tables(runs, a.subject))
         if a.figure:
             figure(runs, a.figure)
         return
@@ -267,7 +272,7 @@ def main() -> None:
             print(f"  {r['world']} {r['strategy']} seed {r['seed']}: {r['stop_reason']}, coverage "
                   f"{100 * r['coverage']:.1f} %, {r['distance']:.0f} m, {r['wall_s']:.0f} s wall", file=sys.stderr,
                   flush=True)  # fmt: skip
-    print(tables(runs))
+    print(tables(runs, a.subject))
 
 
 if __name__ == "__main__":

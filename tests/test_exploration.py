@@ -406,7 +406,7 @@ def two_rooms_png(tmp_path):
     return path
 
 
-@pytest.mark.parametrize("strategy", ["nearest_frontier", "utility"])
+@pytest.mark.parametrize("strategy", ["nearest_frontier", "utility", "tour"])
 def test_exploring_two_rooms_terminates_with_full_coverage(tmp_path, strategy, caplog):
     from slam2d.runs.explore import run_explore
 

@@ -21,7 +21,8 @@ class Strategy(Protocol):
 
 EXPLORATION_STRATEGIES = Registry(
     "exploration_strategies", "strategy", key="exploration.strategy", options_key="exploration.strategy_options",
-    builtins=dict.fromkeys(("nearest_frontier", "explore_lite", "nearest_candidate", "farthest_candidate", "utility"),
+    builtins=dict.fromkeys(("nearest_frontier", "explore_lite", "nearest_candidate", "farthest_candidate", "utility",
+                                        "tour"),
                            "slam2d.exploration.strategies"))
 """The exploration strategies by name; ``create(name, options)`` is one (its options: ``strategy_options``)."""
 

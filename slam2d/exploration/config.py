@@ -14,9 +14,26 @@ from slam2d.exploration.base import EXPLORATION_STRATEGIES
 from slam2d.registry import Choice
 
 STRATEGY_HELP = ("goal choice: Yamauchi's nearest frontier, explore_lite's cost, Li et al.'s candidates "
-                 "(nearest, farthest, utility), or a plugin's strategy")
+                 "(nearest, farthest, utility), a global tour over subspaces with local coverage (tour), "
+                 "or a plugin's strategy")
 STRATEGIES = EXPLORATION_STRATEGIES
 """The strategies by name (iterating gives the names)."""
+
+
+class TourConfig(Section):
+    """The ``tour`` strategy: a global tour over subspaces holding frontier, local viewpoints by set cover."""
+
+    cell: float = Field(4.0, gt=0, description="m, side of the square subspaces the known space is split into")
+    view_range: float = Field(3.0, gt=0, description="m: a viewpoint covers the frontier cells in line of sight "
+                                                      "this close")  # fmt: skip
+    spacing: float = Field(0.3, gt=0, description="m between the viewpoints tried in the local subspace")
+    min_cover: float = Field(0.2, ge=0, description="m of frontier (cells × resolution) a viewpoint must cover "
+                                                    "to be chosen")  # fmt: skip
+    max_cells: int = Field(400, gt=0, description="frontier cells of the local subspace covered at most (evenly "
+                                                  "thinned beyond)")  # fmt: skip
+    solver_ms: float = Field(10.0, gt=0, description="ms the TSP solver's local search may take per tour")
+    refresh: int = Field(10, ge=1, description="decisions a subspace's travel costs are kept before they are "
+                                               "measured again on the map")  # fmt: skip
 
 
 class ExplorationConfig(Section):
@@ -63,6 +80,7 @@ class ExplorationConfig(Section):
                                                                      "(the paper) or the grid path alone")  # fmt: skip
     fallback_frontiers: bool = Field(True, description="nearest / farthest candidate: with no candidate left, "
                                                        "take the nearest frontier (else stop)")  # fmt: skip
+    tour: TourConfig = Field(default_factory=TourConfig, description="the tour strategy's parameters")
     # explore_lite
     potential_scale: float = Field(3.0, ge=0, description="explore_lite: weight of the distance")
     gain_scale: float = Field(1.0, ge=0, description="explore_lite: weight of the frontier size")

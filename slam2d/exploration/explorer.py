@@ -51,7 +51,8 @@ OPTION_TERMS = "gain_m2", "share_m2", "path_m", "L_m", "gamma_rad", "F"
 
 @dataclass(eq=False)
 class Goal:
-    """A chosen goal: ``position`` (x, y) m, ``kind`` ("frontier" / "candidate"), the candidate if any,
+    """A chosen goal: ``position`` (x, y) m, ``kind`` ("frontier" / "candidate" / "pocket" / "viewpoint": a view
+    of frontier cells, ``targets``), the candidate if any,
     ``waypoints`` (x, y) m to pass first (backtracking over the graph), ``score`` of the choice, and for the
     utility the decision's best ``options`` (the chosen goal first): why it went there."""
 
@@ -60,7 +61,7 @@ class Goal:
     candidate: Candidate | None = None
     waypoints: list = field(default_factory=list)
     score: float = float("nan")
-    targets: np.ndarray | None = None  # (K, 2) m: the hidden cells a pocket view was chosen to see
+    targets: np.ndarray | None = None  # (K, 2) m: the hidden cells a pocket view (frontier cells a viewpoint) is to see
     options: list = field(default_factory=list)  # dicts: position, kind, gain_m2, share_m2, path_m, L_m, gamma_rad, F
 
 
@@ -84,6 +85,7 @@ class Explorer:
         self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest view counted on
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self.strategy = EXPLORATION_STRATEGIES.create(cfg.strategy, cfg.strategy_options)
+        _warm_up(self)
 
     # -- nodes and candidates --------------------------------------------------------------
 
@@ -375,18 +377,31 @@ class Explorer:
                 goal.candidate.alive = False
                 return True
             return False
+        if goal.kind == "viewpoint":  # spent when none of the frontier cells it was chosen to see is one still
+            cells = view.to_cell(goal.targets)
+            cells = cells[view.inside(cells)]
+            if len(cells) == 0:
+                return True
+            r0, c0 = cells.min(axis=0)
+            r1, c1 = cells.max(axis=0) + 1
+            mask = self._frontier_window(view, r0, r1, c0, c1)
+            return not mask[cells[:, 0] - r0, cells[:, 1] - c0].any()
         cell = view.to_cell(goal.position)
         k = int(np.ceil((self.radius + 0.3) / view.resolution)) + 1
-        depth = depth_cells(self.width, view.resolution)
         h, w = view.shape
         r0, r1 = max(cell[0] - k, 0), min(cell[0] + k + 1, h)
         c0, c1 = max(cell[1] - k, 0), min(cell[1] + k + 1, w)
         if r0 >= r1 or c0 >= c1:
             return False
+        return not self._frontier_window(view, r0, r1, c0, c1).any()
+
+    def _frontier_window(self, view: GridView, r0, r1, c0, c1) -> np.ndarray:
+        """The frontier cells (``frontier_mask``) of the window rows r0:r1, cols c0:c1 of ``view``."""
+        depth = depth_cells(self.width, view.resolution)
         m = max(depth + 1, WALL_GAP)  # the cells a frontier test looks at around the window
         lo = np.array([max(r0 - m, 0), max(c0 - m, 0)])
         mask = frontier_mask(view.state[lo[0] : r1 + m, lo[1] : c1 + m], depth=depth)
-        return not mask[r0 - lo[0] : r1 - lo[0], c0 - lo[1] : c1 - lo[1]].any()
+        return mask[r0 - lo[0] : r1 - lo[0], c0 - lo[1] : c1 - lo[1]]
 
     def reached(self, goal: Goal) -> None:
         self.visited.append(goal.position.copy())
@@ -397,13 +412,31 @@ class Explorer:
     def _retire(self, goal: Goal) -> None:
         """A pocket view reached (or no longer worth it): the hidden cells it was chosen to see are no
         target any more, seen or not (some are furniture, or need a view the robot cannot take)."""
-        if goal.targets is not None and len(goal.targets):
+        if goal.kind == "pocket" and goal.targets is not None and len(goal.targets):
             self.retired = np.concatenate([self.retired, goal.targets])
 
     def give_up(self, goal: Goal) -> None:
         self.inaccessible.append(goal.position.copy())
         if goal.candidate is not None:
             goal.candidate.alive = False
+
+
+_WARM: set = set()  # the strategies whose first decision this process has made
+
+
+def _warm_up(explorer: Explorer) -> None:
+    """One decision of a throwaway explorer of the same strategy on a small room with an opening, the first
+    time a strategy is made in this process: numba's compiled kernels and the strategy's libraries are loaded
+    then, not in the first decision's time."""
+    if explorer.cfg.strategy in _WARM:
+        return
+    _WARM.add(explorer.cfg.strategy)
+    state = np.full((60, 60), UNKNOWN, dtype=np.int8)
+    state[10:50, 10:50] = 0
+    state[9, 9:51] = state[50, 9:51] = state[9:51, 9] = state[9:51, 50] = OCCUPIED
+    state[50, 25:35] = 0  # the opening
+    throwaway = Explorer(explorer.cfg, explorer.radius, explorer.inflation, explorer.range_max)
+    throwaway.decide(np.array([1.5, 1.5, 0.0]), GridView(state, 0.05, (0.0, 0.0)))
 
 
 def _option(goal, candidate: bool, terms) -> dict:

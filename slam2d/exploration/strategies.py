@@ -60,3 +60,17 @@ class Utility:
 
     def choose(self, explorer, pose, view, distance):
         return explorer.utility_goal(pose, view, distance)
+
+
+@register_strategy("tour")
+class Tour:
+    """TARE's and FUEL's: a global tour (OR-tools) over the subspaces holding frontier, viewpoints covering the
+    first one's frontier cells (greedy set cover) ordered into a local tour joining it; refined each decision."""
+
+    def __init__(self):
+        from slam2d.exploration.tour import TourPlanner
+
+        self.planner = TourPlanner()
+
+    def choose(self, explorer, pose, view, distance):
+        return self.planner.choose(explorer, pose, view, distance)
