@@ -84,6 +84,8 @@ class DatasetConfig(Section):
     path: str | None = Field(None, description="log file; relative paths resolve against SLAM2D_DATA")
     scan_topic: str | None = Field(None, description="rosbag LaserScan topic (default: the only one, or /scan)")
     odom_topic: str | None = Field(None, description="rosbag Odometry topic (default: the only one, or /odom)")
+    first_scan: int = Field(
+        0, ge=0, description="start at this scan of the log (0-based, before skips); max_scans counts from here")
     max_scans: int | None = Field(None, gt=0, description="stop after this many scans")
     max_skipped: float = Field(
         0.05, ge=0, le=1, description="fraction of the scans that may be unusable (bad lines, stamps, poses, "
