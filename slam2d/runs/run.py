@@ -85,6 +85,8 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | N
         "frontend_fallbacks": result.fallbacks,
         "cpu_ms_per_scan": 1000.0 * result.cpu_s / len(result.scans),
     }
+    if session is not None:
+        metrics["saved_scans"] = len(session)  # of the scans, those of the saved session
     metrics.update(_evaluate(cfg, result, relations))
     t_eval = time.perf_counter()
     grid = _write_outputs(cfg, result, out)
