@@ -8,6 +8,10 @@ matcher's score, enters the graph under the robust kernel, and is removed
 after the batch optimisation if the optimised graph cannot accommodate it
 (chi-square test on its residual, see ``PoseGraph.optimize_batch``). Poses
 for every scan are keyframe poses composed with the scan's offset from its keyframe.
+
+A back end can start from a saved :class:`~slam2d.backend.session.Session` (``resume``): the scans
+then continue its last one, or start a trajectory whose first pose a global search of the saved map
+finds (``_place``); ``session`` returns what a later run goes on from.
 """
 
 from __future__ import annotations
@@ -174,6 +178,8 @@ class GraphSlamBackend:
         the first scans in the session's map (:meth:`_place`) and which closes loops with it."""
         if self._scan_keyframe:
             raise ValueError("resume needs a back end that has taken no scan")
+        if localize and self.loops is None:
+            raise InputError("session.localize_in", "placing a session needs backend.loop_closure.enabled")
         odometry = {int(j): (int(i), d, info) for kind, (i, j), d, info in zip(
             session.edge_kind, session.edge_ij, session.edge_delta, session.edge_information) if kind == ODOMETRY}
         for k, pose in enumerate(session.keyframe_poses):
