@@ -5,11 +5,14 @@ at half the scan rate and beams to stay fast."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
 from slam2d import config, geometry
+from slam2d.cli import app
 from slam2d.datasets.registry import open_dataset
 from slam2d.errors import InputError
 from slam2d.evaluation.map_accuracy import free_space_iou
@@ -78,11 +81,15 @@ def test_results_folder_holds_the_session_to_go_on_from(tmp_path):
     one = run_experiment(config.load(None, [*quick, "name=one", "dataset.max_scans=40"]), quiet=True)
     saved = read_session(one)
     assert len(saved) == 40 and saved.num_keyframes == len(np.unique(saved.keyframe))
-    two = run_experiment(config.load(None, [*quick, "name=two", "dataset.first_scan=40", "dataset.max_scans=30",
-                                            f"session.continue_from={one}"]), quiet=True)  # fmt: skip
+    sets = [a for kv in [*quick, "name=two", "dataset.first_scan=40", "dataset.max_scans=30"] for a in ("--set", kv)]
+    res = CliRunner().invoke(app, ["run", "-q", *sets, "--continue", str(one)])
+    assert res.exit_code == 0, res.output
+    two = Path(res.stdout.split("results:")[-1].strip())
     assert len(read_tum(two / "trajectory.tum")) == 70
     assert len(read_session(two / SESSION_FILE)) == 70
-    assert "continue_from" in (two / "config.yaml").read_text()
+    assert str(one) in (two / "config.yaml").read_text()
+    res = CliRunner().invoke(app, ["run", "-q", "--continue", str(one), "--localize-in", str(one)])
+    assert res.exit_code == 2 and "exclude each other" in res.output
     with pytest.raises(InputError, match="no saved session"):
         read_session(tmp_path)
 
