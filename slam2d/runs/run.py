@@ -83,10 +83,10 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | N
         "invalid_beams": getattr(source, "invalid_beams", 0),
         "slam": snake_keys(result.stats),
         "frontend_fallbacks": result.fallbacks,
-        "cpu_ms_per_scan": 1000.0 * result.cpu_s / len(result.scans),
+        "cpu_ms_per_scan": 1000.0 * result.cpu_s / max(len(result.scans) - (len(session) if session else 0), 1),
     }
     if session is not None:
-        metrics["saved_scans"] = len(session)  # of the scans, those of the saved session
+        metrics["saved_scans"] = len(session)  # of the scans, those of the saved session (not in cpu_ms_per_scan)
     metrics.update(_evaluate(cfg, result, relations))
     t_eval = time.perf_counter()
     grid = _write_outputs(cfg, result, out)
