@@ -92,6 +92,10 @@ def test_results_folder_holds_the_session_to_go_on_from(tmp_path):
     assert res.exit_code == 2 and "exclude each other" in res.output
     with pytest.raises(InputError, match="no saved session"):
         read_session(tmp_path)
+    for damaged in (b"", (one / "config.yaml").read_bytes(), (one / SESSION_FILE).read_bytes()[:1000]):
+        (tmp_path / SESSION_FILE).write_bytes(damaged)
+        with pytest.raises(InputError, match="not a readable session"):
+            read_session(tmp_path)
 
 
 def test_one_saved_session_at_a_time():

@@ -42,7 +42,7 @@ def read_session(folder) -> Session:
     try:
         with np.load(path, allow_pickle=False) as arrays:
             return Session.from_arrays({k: arrays[k] for k in arrays.files}, where=str(path))
-    except (OSError, ValueError, zipfile.BadZipFile) as err:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
         raise InputError(path, f"not a readable session ({err})") from None
 
 
