@@ -84,6 +84,8 @@ class DatasetConfig(Section):
     path: str | None = Field(None, description="log file; relative paths resolve against SLAM2D_DATA")
     scan_topic: str | None = Field(None, description="rosbag LaserScan topic (default: the only one, or /scan)")
     odom_topic: str | None = Field(None, description="rosbag Odometry topic (default: the only one, or /odom)")
+    first_scan: int = Field(
+        0, ge=0, description="start at this scan of the log (0-based, before skips); max_scans counts from here")
     max_scans: int | None = Field(None, gt=0, description="stop after this many scans")
     max_skipped: float = Field(
         0.05, ge=0, le=1, description="fraction of the scans that may be unusable (bad lines, stamps, poses, "
@@ -204,6 +206,23 @@ class NavigationConfig(Section):
     )
 
 
+class SessionConfig(Section):
+    """A run that goes on from a saved session: a results folder of ``slam2d run`` (its ``session.npz``)."""
+
+    continue_from: str | None = Field(
+        None, description="results folder this run continues: its scans follow the saved session's last scan "
+        "(the same log, onward); graph, map and trajectory cover both")
+    localize_in: str | None = Field(
+        None, description="results folder whose map this run starts in, from an unknown pose (found by a global "
+        "search of its first scans); the two sessions merge into one graph, map and trajectory")
+
+    @model_validator(mode="after")
+    def _one_session(self):
+        if self.continue_from is not None and self.localize_in is not None:
+            raise ValueError("continue_from and localize_in exclude each other: give one session")
+        return self
+
+
 class ExperimentConfig(Section):
     name: str = Field("sim", description="results folder name: no '/' or '\\', no leading '.'")
     seed: int = Field(0, ge=0, lt=2**63, description="one seed for every random choice")
@@ -218,6 +237,7 @@ class ExperimentConfig(Section):
     evaluation: EvaluationConfig = EvaluationConfig()
     output: OutputConfig = OutputConfig()
     navigation: NavigationConfig = NavigationConfig()
+    session: SessionConfig = SessionConfig()
 
     @field_validator("name")
     @classmethod

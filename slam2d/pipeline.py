@@ -28,6 +28,7 @@ import numpy as np
 
 from slam2d import geometry
 from slam2d.backend.base import BACKENDS
+from slam2d.backend.session import Session
 from slam2d.config import ExperimentConfig
 from slam2d.errors import InputError
 from slam2d.frontends import create_frontend
@@ -51,6 +52,7 @@ class SlamResult:
     stats: dict[str, Any] = field(default_factory=dict)
     graph: Any = None  # the back end's pose graph (the PoseGraph of 'pose_graph'), if it has one
     keyframes: np.ndarray | None = None  # (N,) keyframe key each scan hangs off, if the back end has keyframes
+    session: Session | None = None  # what a later run goes on from (back ends with sessions)
 
     @property
     def fallbacks(self) -> int:
@@ -58,9 +60,11 @@ class SlamResult:
         return int(np.count_nonzero(self.confidences[1:] <= 0.0))
 
 
-def frontend_steps(frontend, scans: Iterable[Scan]) -> Iterator[tuple[Scan, FrontendResult]]:
-    """Each scan with ``frontend``'s result on it; the odometry delta is taken from the previous scan."""
-    previous = None
+def frontend_steps(frontend, scans: Iterable[Scan], previous: Scan | None = None) -> Iterator[tuple[Scan, FrontendResult]]:
+    """Each scan with ``frontend``'s result on it; the odometry delta is taken from the previous scan.
+    ``previous``: the scan before the first (a saved session's last), which the frontend takes first."""
+    if previous is not None:
+        frontend.process(previous, np.zeros(3))
     for scan in scans:
         odom_delta = np.zeros(3) if previous is None else geometry.between(previous.odom, scan.odom)
         yield scan, frontend.process(scan, odom_delta)
@@ -84,7 +88,7 @@ class FrontendWorker:
     here; leaving the ``with`` block early stops the worker.
     """
 
-    def __init__(self, frontend, scans: Iterable[Scan]):
+    def __init__(self, frontend, scans: Iterable[Scan], previous: Scan | None = None):
         self.scans = scans
         self.events: Counter[str] = Counter()
         self.cpu_s = 0.0
@@ -92,7 +96,7 @@ class FrontendWorker:
         self._queue = ctx.Queue()  # unbounded: the worker never waits for the back end
         # the parent-death signal comes when the forking thread ends: only the main thread lives as long as the process
         parent = os.getpid() if threading.current_thread() is threading.main_thread() else None
-        self._process = ctx.Process(target=_work, args=(frontend, scans, self._queue, parent), daemon=True,
+        self._process = ctx.Process(target=_work, args=(frontend, scans, previous, self._queue, parent), daemon=True,
                                     name="slam2d-frontend")
         self._process.start()
 
@@ -150,7 +154,7 @@ def _log_through(out) -> None:
     logging.root.addHandler(logging.handlers.QueueHandler(_QueueSink(out)))
 
 
-def _work(frontend, scans, out, parent: int | None) -> None:
+def _work(frontend, scans, previous, out, parent: int | None) -> None:
     """Worker body: send batches of pairs, then the frontend's events and the reader's counts. It dies
     with ``parent`` and leaves SIGINT to it (the parent stops it)."""
     if parent is not None:
@@ -159,7 +163,7 @@ def _work(frontend, scans, out, parent: int | None) -> None:
     try:
         _log_through(out)
         batch = []
-        for pair in frontend_steps(frontend, scans):
+        for pair in frontend_steps(frontend, scans, previous):
             batch.append(pair)
             if len(batch) == WORKER_BATCH:
                 out.put(("pairs", batch))
@@ -196,26 +200,41 @@ class SlamPipeline:
         """The back end ``backend.name`` names, built from the ``backend`` section."""
         return BACKENDS.create(self.cfg.backend.name, None, self.cfg.backend)
 
-    def run(self, scans: Iterable[Scan], on_scan: Callable[[], None] | None = None, view=None) -> SlamResult:
+    def run(self, scans: Iterable[Scan], on_scan: Callable[[], None] | None = None, view=None,
+            session: Session | None = None, localize: bool = False) -> SlamResult:
         """Process every scan; ``on_scan`` is called after each one (progress); ``view``
-        (a :class:`slam2d.viz.LiveView`) logs each scan, the pose, loops and map as they come."""
+        (a :class:`slam2d.viz.LiveView`) logs each scan, the pose, loops and map as they come.
+
+        ``session``: a saved session the scans go on from (its last scan precedes the first);
+        with ``localize``, a session the scans start somewhere in, unknown where. The result
+        holds both sessions' scans, the saved ones first."""
         t0 = time.process_time()
+        previous = None if session is None or localize else session.scans()[-1]
         if self.cfg.parallel and can_fork():
-            with FrontendWorker(self.frontend, scans) as worker:
-                result = self._consume(worker, scans, on_scan, view)
+            with FrontendWorker(self.frontend, scans, previous) as worker:
+                result = self._consume(worker, scans, on_scan, view, session, localize)
             events, worker_cpu_s = worker.events, worker.cpu_s
         else:
-            result = self._consume(frontend_steps(self.frontend, scans), scans, on_scan, view)
+            steps = frontend_steps(self.frontend, scans, previous)
+            result = self._consume(steps, scans, on_scan, view, session, localize)
             events, worker_cpu_s = getattr(self.frontend, "events", {}), 0.0
         result.stats.update({f"frontend {k}": v for k, v in events.items()})
         result.cpu_s = time.process_time() - t0 + worker_cpu_s
         return result
 
-    def _consume(self, steps, scans, on_scan, view=None) -> SlamResult:
-        """Feed the (scan, result) pairs to a new back end; the result without the frontend's events."""
+    def _consume(self, steps, scans, on_scan, view=None, session=None, localize=False) -> SlamResult:
+        """Feed the (scan, result) pairs to a new back end (resumed from ``session``); the result
+        without the frontend's events."""
         backend = self._new_backend()
         kept: list[Scan] = []
         confidences = []
+        if session is not None:
+            if not hasattr(backend, "resume"):
+                raise InputError("backend.name", f"'{self.cfg.backend.name}' cannot go on from a saved session")
+            backend.resume(session, localize)
+            kept = session.scans()
+            confidences = [np.nan] * len(kept)
+        n_saved = len(kept)
         for scan, result in steps:
             backend.add(scan, result)
             confidences.append(result.confidence)
@@ -224,7 +243,7 @@ class SlamPipeline:
                 view.step(scan, backend)
             if on_scan:
                 on_scan()
-        if not kept:
+        if len(kept) == n_saved:
             skipped = dict(getattr(scans, "skipped", {}))
             raise InputError(getattr(scans, "name", "dataset"), f"no usable scan (skipped: {skipped})")
         poses = backend.finish()
@@ -243,4 +262,5 @@ class SlamPipeline:
             stats=dict(backend.summary()),
             graph=backend.graph,
             keyframes=backend.scan_anchors()[0] if hasattr(backend, "scan_anchors") else None,
+            session=backend.session(kept) if hasattr(backend, "session") else None,
         )

@@ -52,6 +52,7 @@ WINDOW_STEP = 0.5  # m; grown windows are rounded up to this step (each window s
 WIDE_COARSENING = 2  # a wide search runs on a grid this many times coarser than ``resolution``
 WIDE_TOP_BLOCKS = 8  # ... with enough pooled levels for about this many top blocks across the window
 WIDE_MAX_DEPTH = 7  # ... but no more levels than this
+LOCALIZE_COARSENING = 4  # a global search (:meth:`LoopCloser.localize`) starts on a grid this many times coarser
 VIEW_PERCENTILE = 95  # a wide match is verified on the keyframes within this percentile of the scan's ranges
 
 
@@ -261,7 +262,7 @@ class LoopCloser:
         self.stats["verified"] += 1
         self._position(key)  # a clear KeyError for a keyframe never added
         points = self._points[int(key)]
-        anchor = self._anchor(cand)
+        anchor = self._anchor(cand, key)
         submap = self._submap(key, anchor, poses) if len(points) >= MIN_POINTS else None
         if submap is None:
             self.stats["rejected_points"] += 1
@@ -308,9 +309,68 @@ class LoopCloser:
         closure = LoopClosure(int(anchor), int(key), result.pose, 0.5 * (info + info.T), result.score)
         if aliased:
             self.stats["accepted_along_degenerate_direction"] += 1
-        else:  # pins the pair once the estimate follows it (see path_lengths)
-            self._loops.append(closure)
+        else:
+            self.pin(closure)
         return closure
+
+    def pin(self, closure: LoopClosure) -> None:
+        """Count ``closure`` among the loops that pin their pair once the estimate follows them
+        (a shortcut in :meth:`path_lengths`): the accepted, unaliased ones."""
+        self._loops.append(closure)
+
+    @property
+    def pinned(self) -> list[LoopClosure]:
+        """The loops :meth:`pin` took, in order."""
+        return list(self._loops)
+
+    def localize(self, points, poses) -> LoopClosure | None:
+        """Where scan ``points`` (M, 2) (base frame, m) lie in the map of every stored keyframe at
+        ``poses`` (K, 3), the pose unknown: a global search, or None if no place matches unambiguously.
+
+        The scan is matched over the whole map at every heading: on a grid
+        ``LOCALIZE_COARSENING`` times coarser than ``resolution`` within a window
+        reaching every keyframe point from the map's centre, with the rival check;
+        then on the fine grid against the keyframes within its view (as
+        :meth:`wide_search` does). The LoopClosure's ``i`` is the nearest keyframe,
+        its ``delta`` the scan's pose in that keyframe's frame; ``j`` is -1 (the scan
+        is no keyframe yet).
+        """
+        cfg = self.cfg
+        poses = geometry.as_pose(poses).reshape(-1, 3)
+        points = voxel_filter(points, KEYFRAME_VOXEL_CELLS * cfg.resolution)
+        members = [k for k in self._keys if k < len(poses)]
+        if len(points) < MIN_POINTS or not members:
+            return None
+        self.stats["global searches"] += 1
+        region = np.vstack([geometry.transform_points(poses[k], self._points[k]) for k in members])
+        low, high = region.min(axis=0), region.max(axis=0)
+        centre = np.array([*(0.5 * (low + high)), 0.0])
+        window_xy = float(0.5 * np.max(high - low)) + 1.0
+        coarse = ProbabilityGrid(region, LOCALIZE_COARSENING * cfg.resolution)
+        cells = window_xy / coarse.resolution
+        depth = int(np.clip(np.ceil(np.log2((2 * cells + 1) / WIDE_TOP_BLOCKS)), 1, WIDE_MAX_DEPTH))
+        prune = max(0.0, cfg.min_score - SEARCH_MARGIN)
+        found = match(coarse, points, centre, window_xy, np.pi, min_score=prune, depth=depth,
+                      ambiguity_xy=max(cfg.ambiguity_distance, 2 * coarse.resolution),
+                      ambiguity_ratio=cfg.ambiguity_ratio)  # fmt: skip
+        if found.search_score < prune:
+            self.stats["rejected_score"] += 1
+            return None
+        submap, anchor = self._view_submap(members, found.pose, points, poses)
+        step = angular_step(voxel_filter(points, coarse.resolution), coarse.resolution)
+        fine = match(submap.grid, points, geometry.between(poses[anchor], found.pose), 2 * coarse.resolution, step,
+                     min_score=prune, prior_window=[window_xy, window_xy, np.pi])  # fmt: skip
+        rival = None if found.rival is None else geometry.between(poses[anchor], found.rival)
+        result = replace(fine, runner_up=found.runner_up, rival=rival)
+        if result.score < cfg.min_score:
+            self.stats["rejected_score"] += 1
+            return None
+        if result.runner_up > 0 and not self._rival_within_uncertainty(result):
+            self.stats["rejected_ambiguous"] += 1
+            return None
+        self.stats["localized"] += 1
+        info = np.linalg.inv(result.covariance)
+        return LoopClosure(int(anchor), -1, result.pose, 0.5 * (info + info.T), result.score)
 
     @staticmethod
     def _rival_within_uncertainty(result) -> bool:
@@ -321,12 +381,18 @@ class LoopCloser:
         d[2] = geometry.wrap_angle(d[2])
         return bool(d @ np.linalg.solve(result.covariance, d) <= CHI2_3DOF_99)
 
-    def _anchor(self, cand: int) -> int:
-        """The submap anchor for ``cand``: the nearest keyframe whose position is a multiple of ``submap_keyframes``."""
+    def _anchor(self, cand: int, key: int) -> int:
+        """The submap anchor for ``cand``: the nearest keyframe whose position is a multiple of ``submap_keyframes``
+        that is at least ``min_travel`` from ``key`` (the one before it if the nearest is not; else ``cand``)."""
         n, pos = self.cfg.submap_keyframes, self._position(cand)
         if n == 0:
             return int(cand)
-        return self._keys[min(int(round(pos / n)) * n, len(self._keys) - 1)]
+        here = self.travelled(key)
+        for p in (int(round(pos / n)) * n, pos // n * n):
+            p = min(p, len(self._keys) - 1)
+            if abs(self._travelled[p] - here) >= self.cfg.min_travel:
+                return self._keys[p]
+        return int(cand)
 
     def _submap(self, key: int, anchor: int, poses: np.ndarray) -> _Submap | None:
         """The grid of keyframes around ``anchor`` in its frame (cached while their poses hold), or None if empty."""

@@ -84,7 +84,7 @@ class PoseGraph:
         self._active: list[bool] = []
         self._initial: list[np.ndarray] = []  # poses given to add_keyframe
         self._landmarks: set[int] = set()
-        self._odometry: list = []  # gtsam.Pose2 odometry into keyframe k + 1
+        self._odometry: list = []  # (keyframe it starts at, gtsam.Pose2) odometry into keyframe k + 1
         self.rejected_inconsistent = 0  # loops removed after the batch optimisation
         self.isam_updates = 0  # iSAM2 updates run
         self.factorization = ISAM2_FACTORIZATION
@@ -92,13 +92,14 @@ class PoseGraph:
 
     # ----------------------------------------------------------------- building
 
-    def add_keyframe(self, pose, delta_from_previous=None, information=None) -> int:
+    def add_keyframe(self, pose, delta_from_previous=None, information=None, previous: int | None = None) -> int:
         """Add a keyframe with initial value ``pose`` (3,); return its key (0, 1, ...).
 
         The first keyframe gets a tight prior at ``pose``. Later ones get a between
-        factor from the previous keyframe: ``delta_from_previous`` (3,) (default: the
-        relative pose between the poses given to this method) with ``information``
-        (3, 3) (default: ``DEFAULT_ODOMETRY_SIGMAS``).
+        factor from the previous keyframe (or from keyframe ``previous``: a trajectory
+        that starts where another session placed it): ``delta_from_previous`` (3,)
+        (default: the relative pose between the poses given to this method) with
+        ``information`` (3, 3) (default: ``DEFAULT_ODOMETRY_SIGMAS``).
         """
         import gtsam
 
@@ -108,18 +109,19 @@ class PoseGraph:
             factor = prior_factor(pose_key(0), gtsam_pose(pose))
             self._add(_Factor("prior", factor, 0, 0, pose, np.diag(1.0 / PRIOR_SIGMAS**2)))
         else:
+            i = k - 1 if previous is None else self._check_key(previous)
             if delta_from_previous is None:
-                delta = geometry.between(self._initial[-1], pose)
+                delta = geometry.between(self._initial[i], pose)
             else:
                 delta = _pose3(delta_from_previous, "add_keyframe delta_from_previous")
             if information is None:
                 info, model = self._default_odometry_info, self._default_odometry_model
             else:
-                info = rb.check_information(information, f"odometry information {k - 1} -> {k}")
+                info = rb.check_information(information, f"odometry information {i} -> {k}")
                 model = gtsam.noiseModel.Gaussian.Information(info)
-            factor = between_factor(k - 1, k, delta, model)
-            self._add(_Factor("odometry", factor, k - 1, k, delta, info))
-            self._odometry.append(gtsam_pose(delta))
+            factor = between_factor(i, k, delta, model)
+            self._add(_Factor("odometry", factor, i, k, delta, info))
+            self._odometry.append((i, gtsam_pose(delta)))
         self._new_values.insert(pose_key(k), gtsam_pose(pose))
         self._initial.append(pose)
         return k
@@ -174,7 +176,8 @@ class PoseGraph:
         """
         nothing_new = self._n_updated == len(self._initial)
         for k in range(max(self._n_updated, 1), len(self._initial)):
-            self._new_values.update(pose_key(k), self._pose_value(k - 1).compose(self._odometry[k - 1]))
+            i, delta = self._odometry[k - 1]
+            self._new_values.update(pose_key(k), self._pose_value(i).compose(delta))
         self._n_updated = len(self._initial)
         if self._pending_other or nothing_new or not self._is_settled():
             self._flush()
@@ -326,6 +329,12 @@ class PoseGraph:
             measurements=np.array([e.measurement for e in edges]).reshape(-1, 3),
             information=np.array([e.information for e in edges]).reshape(-1, 3, 3),
         )
+
+    def edges(self) -> list[tuple[str, int, int, np.ndarray, np.ndarray]]:
+        """The odometry and loop factors in the graph (removed loops left out), in the order added:
+        (kind, i, j, measurement (3,), information (3, 3)), the measurement the pose of ``j`` in ``i``'s frame."""
+        return [(f.kind, f.i, f.j, f.measurement, f.information)
+                for f, a in zip(self._factors, self._active) if a and f.kind in ("odometry", "loop")]
 
     def loop_edges(self) -> np.ndarray:
         """Every loop added, in order, as rows (i, j, kept): keyframe keys and 1 if still in the graph."""

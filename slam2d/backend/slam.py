@@ -8,19 +8,30 @@ matcher's score, enters the graph under the robust kernel, and is removed
 after the batch optimisation if the optimised graph cannot accommodate it
 (chi-square test on its residual, see ``PoseGraph.optimize_batch``). Poses
 for every scan are keyframe poses composed with the scan's offset from its keyframe.
+
+A back end can start from a saved :class:`~slam2d.backend.session.Session` (``resume``): the scans
+then continue its last one, or start a trajectory whose first pose a global search of the saved map
+finds (``_place``); ``session`` returns what a later run goes on from.
 """
 
 from __future__ import annotations
 
 from collections import Counter
+from dataclasses import replace
 
 import numpy as np
 
 from slam2d import geometry
 from slam2d.backend.base import register_backend
+from slam2d.backend.loop_closure import LoopClosure
+from slam2d.backend.session import LOOP, ODOMETRY, Session
 from slam2d.config import BackendConfig
+from slam2d.errors import InputError
 from slam2d.frontends.base import FrontendResult
 from slam2d.types import Scan
+
+SESSION_GAP = 1e6  # m of travel put between a saved session and one placed in it (they share no path)
+PLACE_KEYFRAMES = 5  # scans (at keyframe spacing) matched together to place a new session in a saved map
 
 
 @register_backend("pose_graph")
@@ -41,11 +52,20 @@ class GraphSlamBackend:
         self._cov = np.zeros((3, 3))
         self._travelled = 0.0
         self._searches = 0  # loop searches so far
+        self._placing: list | None = None  # scans of a session not yet placed in the saved map (resume)
+        self._link: tuple | None = None  # (pose, keyframe, delta, information) of the next scan's keyframe
+        self._pin: LoopClosure | None = None  # ... and the loop its link pins
+        self._attempts = 0  # global searches to place this session
 
     def add(self, scan: Scan, result: FrontendResult) -> None:
         """Take one scan and its frontend result (``result.delta`` unused for the first)."""
-        if not self._scan_keyframe:
-            self._new_keyframe(scan, np.asarray(scan.odom, float), None, None, result.landmarks)
+        if self._placing is not None:
+            self._place(scan, result)
+            return
+        if self._link is not None or not self._scan_keyframe:
+            pose, previous, delta, information = self._link or (np.asarray(scan.odom, float), None, None, None)
+            self._link = None
+            self._new_keyframe(scan, pose, delta, information, result.landmarks, previous)
             return
         cov = np.linalg.inv(result.information)
         self._cov = geometry.compose_covariance(self._cov, result.delta, cov)
@@ -61,6 +81,9 @@ class GraphSlamBackend:
 
     def finish(self) -> np.ndarray:
         """Final batch optimisation; poses (N, 3) for every scan added."""
+        if self._placing is not None:
+            raise InputError("session.localize_in", f"no scan of the {len(self._placing)} of this session "
+                             f"matched the saved map unambiguously ({self._attempts} global searches)")
         kf = self.graph.optimize_batch() if self.graph.num_keyframes > 1 else self.graph.estimate()
         return geometry.compose(kf[np.array(self._scan_keyframe)], np.array(self._scan_offset))
 
@@ -79,8 +102,8 @@ class GraphSlamBackend:
             or abs(delta[2]) >= np.deg2rad(self.cfg.keyframe_angle_deg)
         )
 
-    def _new_keyframe(self, scan: Scan, pose, delta, information, landmarks=()) -> None:
-        key = self.graph.add_keyframe(pose, delta, information)
+    def _new_keyframe(self, scan: Scan, pose, delta, information, landmarks=(), previous=None) -> None:
+        key = self.graph.add_keyframe(pose, delta, information, previous)
         for obs in landmarks:  # landmarks seen from keyframes become bearing-range factors
             self.graph.add_landmark_observation(key, obs.landmark_id, obs.bearing, obs.range, obs.covariance)
             self.stats["landmark observations"] += 1
@@ -91,6 +114,9 @@ class GraphSlamBackend:
         self.graph.update()
         if self.loops is not None:
             self.loops.add_keyframe(key, scan.points_in_base(), self._travelled)
+            if self._pin is not None:
+                self.loops.pin(replace(self._pin, j=key))
+                self._pin = None
             if key % self.cfg.loop_closure.every_n_keyframes == 0 and self._close_loops(key):
                 self.graph.update()
 
@@ -110,6 +136,115 @@ class GraphSlamBackend:
                 self.stats["loop closures added"] += 1
                 added += 1
         return added
+
+    # ------------------------------------------------------------ sessions
+
+    def session(self, scans: list[Scan]) -> Session:
+        """The state to go on from (after :meth:`finish`); ``scans``: every scan added, in order."""
+        kf, offsets = self.scan_anchors()
+        keep = np.zeros(len(scans), bool)
+        keep[np.flatnonzero(np.r_[True, np.diff(kf) != 0])] = True  # each keyframe's first scan
+        keep[-1] = True
+        edges = self.graph.edges()
+        pinned = {(c.i, c.j) for c in (self.loops.pinned if self.loops is not None else ())}
+        travelled = [self.loops.travelled(k) for k in range(self.graph.num_keyframes)] if self.loops else \
+            np.zeros(self.graph.num_keyframes)  # fmt: skip
+        kept = [s for s, k in zip(scans, keep) if k]
+        return Session(
+            keyframe_poses=self.graph.estimate(),
+            travelled=np.asarray(travelled, float),
+            edge_kind=np.array([LOOP if e[0] == "loop" else ODOMETRY for e in edges], np.int8),
+            edge_ij=np.array([(e[1], e[2]) for e in edges], int).reshape(-1, 2),
+            edge_delta=np.array([e[3] for e in edges], float).reshape(-1, 3),
+            edge_information=np.array([e[4] for e in edges], float).reshape(-1, 3, 3),
+            edge_pinned=np.array([e[0] == "loop" and (e[1], e[2]) in pinned for e in edges], bool),
+            tail=np.concatenate([self._delta, self._cov.ravel(), [self._travelled, self._searches]]),
+            stamp=np.array([s.stamp for s in scans]),
+            odom=np.array([s.odom for s in scans], float),
+            sensor_pose=np.array([s.sensor_pose for s in scans], float),
+            ground_truth=np.array([np.full(3, np.nan) if s.ground_truth is None else s.ground_truth for s in scans]),
+            range_limits=np.array([(s.range_min, s.range_max) for s in scans], float),
+            keyframe=kf,
+            offset=offsets,
+            beams=np.array([len(s.ranges) if k else 0 for s, k in zip(scans, keep)]),
+            ranges=np.concatenate([s.ranges for s in kept]).astype(float),
+            angles=np.concatenate([s.angles for s in kept]).astype(float),
+        )
+
+    def resume(self, session: Session, localize: bool = False) -> None:
+        """Start from a saved ``session`` (before any scan is added): its graph at its estimate, its
+        keyframes in the loop closer and its scans' places. The next scans continue its last one;
+        with ``localize`` they start a new trajectory whose pose is found by a global search of
+        the first scans in the session's map (:meth:`_place`) and which closes loops with it."""
+        if self._scan_keyframe:
+            raise ValueError("resume needs a back end that has taken no scan")
+        if localize and self.loops is None:
+            raise InputError("session.localize_in", "placing a session needs backend.loop_closure.enabled")
+        odometry = {int(j): (int(i), d, info) for kind, (i, j), d, info in zip(
+            session.edge_kind, session.edge_ij, session.edge_delta, session.edge_information) if kind == ODOMETRY}
+        for k, pose in enumerate(session.keyframe_poses):
+            if k == 0:
+                self.graph.add_keyframe(pose)
+            else:
+                i, delta, info = odometry[k]
+                self.graph.add_keyframe(pose, delta, info, previous=i)
+        loops = session.edge_kind == LOOP
+        for (i, j), delta, info in zip(session.edge_ij[loops], session.edge_delta[loops],
+                                       session.edge_information[loops]):  # fmt: skip
+            self.graph.add_loop(int(i), int(j), delta, info)
+        if session.num_keyframes > 1:
+            self.graph.optimize_batch()  # from the saved optimum: restarts iSAM2 there
+        else:
+            self.graph.update()
+        scans = session.scans()
+        if self.loops is not None:
+            for k, n in enumerate(session.keyframe_scans()):
+                self.loops.add_keyframe(k, scans[n].points_in_base(), session.travelled[k])
+            for (i, j), delta, info in zip(session.edge_ij[session.edge_pinned], session.edge_delta[session.edge_pinned],
+                                           session.edge_information[session.edge_pinned]):  # fmt: skip
+                self.loops.pin(LoopClosure(int(i), int(j), delta, info, np.nan))
+        self._scan_keyframe = session.keyframe.tolist()
+        self._scan_offset = list(session.offset)
+        self.stats["keyframes"] = session.num_keyframes
+        self.stats["loop closures added"] = int(loops.sum())
+        tail = session.tail
+        if localize:  # no path along the trajectory between the sessions: every saved keyframe is a candidate
+            self._travelled = float(tail[12]) + SESSION_GAP
+            self._placing, self._attempts = [], 0
+        else:
+            self._delta, self._cov = tail[:3].copy(), tail[3:12].reshape(3, 3).copy()
+            self._travelled, self._searches = float(tail[12]), int(tail[13])
+
+    def _place(self, scan: Scan, result: FrontendResult) -> None:
+        """Hold ``scan`` of a session not yet placed; at every ``every_n_keyframes``-th scan that would
+        be a keyframe, search the saved map globally for the last ``PLACE_KEYFRAMES`` such scans
+        together. Once one is found, the held scans go into the graph from the pose it implies,
+        the first one joined to the saved keyframe it matched by the match."""
+        held = self._placing
+        chain = np.zeros(3) if not held else geometry.compose(held[-1][2], result.delta)
+        tried = [h for h in held if h[3]]
+        is_keyframe = not tried or self._is_keyframe(geometry.between(tried[-1][2], chain))
+        held.append((scan, result, chain, is_keyframe))
+        if not is_keyframe or len(tried) % self.cfg.loop_closure.every_n_keyframes:
+            return
+        group = [h for h in held if h[3]][-PLACE_KEYFRAMES:]
+        points = np.vstack([geometry.transform_points(geometry.between(chain, c), s.points_in_base())
+                            for s, _, c, _ in group])  # fmt: skip
+        self._attempts += 1
+        found = self.loops.localize(points, self.graph.estimate())
+        if found is None:
+            return
+        start = geometry.compose(found.delta, geometry.inverse(chain))  # first held scan in the anchor's frame
+        cov = geometry.compose_covariance(np.linalg.inv(found.information), geometry.inverse(chain), np.zeros((3, 3)))
+        info = np.linalg.inv(cov)
+        info = 0.5 * (info + info.T)
+        pose = geometry.compose(self.graph.pose(found.i), start)
+        self._link = (pose, found.i, start, info)
+        self._pin = LoopClosure(found.i, -1, start, info, found.score)
+        self._placing = None
+        self.stats["sessions placed"] += 1
+        for s, r, _, _ in held:
+            self.add(s, r)
 
     def summary(self) -> dict[str, int]:
         """Counts of keyframes and loop-closure outcomes (matcher and graph checks).

@@ -40,13 +40,20 @@ def run(
     config: Optional[Path] = CONFIG_ARG, config_opt: Optional[Path] = CONFIG_OPT, set_: list[str] = SET_OPT,
     root: Optional[Path] = OUT_SET_OPT, plugin: list[str] = PLUGIN_OPT, quiet: bool = QUIET_OPT,
     viz: bool = VIZ_OPT, viz_save: Optional[Path] = VIZ_SAVE_OPT, as_json: bool = JSON_OPT,
+    continue_from: Optional[Path] = typer.Option(
+        None, "--continue", help="results folder whose session this run continues (session.continue_from)"),
+    localize_in: Optional[Path] = typer.Option(
+        None, "--localize-in", help="results folder whose map this run starts in, pose unknown, and merges with "
+        "(session.localize_in)"),
 ) -> None:
     """Run one experiment; print the results folder."""
     from slam2d.runs.run import run_experiment
 
     with _command(quiet):
         target = _viz_target(viz, viz_save)
-        cfg = _command_config("run", _config_file(config, config_opt), set_, {"output.root": root}, plugin)
+        flags = {"output.root": root, "session.continue_from": continue_from and continue_from.resolve(),
+                 "session.localize_in": localize_in and localize_in.resolve()}
+        cfg = _command_config("run", _config_file(config, config_opt), set_, flags, plugin)
         folder = run_experiment(cfg, quiet=quiet, viz=target)
     _results("run", folder, as_json)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 from collections import Counter, deque
@@ -96,12 +97,14 @@ class ScanSource:
     or pose are invalid or disagree with the scans around them, counting each
     reason in ``self.skipped``. A stamp or odometry pose that disagrees with
     most of the next LOOKAHEAD scans is the outlier, not the new reference.
-    When more than ``max_skipped`` (a fraction of ``len(self)``) is skipped,
-    iteration stops with an :class:`InputError`.
+    When more than ``max_skipped`` (a fraction of the scans expected) is skipped,
+    iteration stops with an :class:`InputError`. Iteration starts at raw scan
+    ``first_scan`` (a window of a log); ``len(self)`` counts the scans before it too.
     """
 
     name: str = "scans"
     max_skipped: float = 0.05
+    first_scan: int = 0
 
     def __init__(self) -> None:
         self.skipped: Counter[str] = Counter()
@@ -122,13 +125,20 @@ class ScanSource:
     def __iter__(self) -> Iterator[Scan]:
         self.skipped = Counter()
         self.invalid_beams = 0
-        yield from self._checked(self._raw_scans())
+        raw = self._raw_scans()
+        if self.first_scan:
+            raw = itertools.islice(raw, self.first_scan, None)
+        yield from self._checked(raw)
         self.log_skips()
+
+    def expected(self) -> int:
+        """Scans this iteration expects to yield (before skips): ``len(self)`` from ``first_scan`` on."""
+        return max(len(self) - self.first_scan, 0)
 
     def skip(self, reason: str) -> None:
         """Count one unusable scan; an InputError once more than ``max_skipped`` of the input is lost."""
         self.skipped[reason] += 1
-        n, total = sum(self.skipped.values()), max(len(self), 1)
+        n, total = sum(self.skipped.values()), max(self.expected(), 1)
         if n > self.max_skipped * total:
             reasons = ", ".join(f"{count} {what}" for what, count in sorted(self.skipped.items()))
             raise InputError(self.where, f"{n} of {total} scans ({percent(n / total)}) unusable ({reasons}); "
@@ -173,7 +183,8 @@ class ScanSource:
             log.warning("%s: skipped %d %s", self.name, count, reason)
         n = sum(self.skipped.values())
         if n:
-            log.warning("%s: %d of %d scans (%s) skipped", self.where, n, len(self), percent(n / max(len(self), 1)))
+            log.warning("%s: %d of %d scans (%s) skipped", self.where, n, self.expected(),
+                        percent(n / max(self.expected(), 1)))
         if self.invalid_beams:
             log.info("%s: %d beams had no valid range (NaN, inf or negative) and were ignored", self.name, self.invalid_beams)
 

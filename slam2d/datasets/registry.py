@@ -19,7 +19,11 @@ def log_path(cfg: DatasetConfig) -> Path:
 
 
 def open_dataset(cfg: DatasetConfig, seed: int = 0) -> ScanSource:
-    """The ScanSource a dataset config names, allowed to skip ``cfg.max_skipped`` of its scans."""
+    """The ScanSource a dataset config names, from scan ``cfg.first_scan`` on, allowed to skip
+    ``cfg.max_skipped`` of its scans."""
+    if cfg.first_scan and cfg.max_scans is not None:  # the readers stop after max_scans of the whole log
+        cfg = cfg.model_copy(update={"max_scans": cfg.first_scan + cfg.max_scans})
     source = DATASETS.create(cfg.kind, None, cfg, seed)
     source.max_skipped = cfg.max_skipped
+    source.first_scan = cfg.first_scan
     return source

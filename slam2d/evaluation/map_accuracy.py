@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Span", "measure_spans", "span_summary", "span_table"]
+__all__ = ["Span", "free_space_iou", "measure_spans", "span_summary", "span_table"]
 
 SURFACE = 0.04  # m, half the depth of one wall surface's points (range noise, the map's cells)
 
@@ -95,3 +95,22 @@ def span_table(spans, measured: dict[str, np.ndarray]) -> list[dict]:
             row[f"{label}_error_m"] = float(values[k] - span.length)
         rows.append(row)
     return rows
+
+
+def free_space_iou(a, b, free_thresh: float = 0.196) -> float:
+    """IoU of the free cells (probability below ``free_thresh``) of two occupancy grids in one world frame:
+    how far two maps of one place agree. Counted on each grid's cells (a cell is looked up in the other
+    at its centre; outside it is not free); the lower of the two."""
+    return min(_free_iou_on(a, b, free_thresh), _free_iou_on(b, a, free_thresh))
+
+
+def _free_iou_on(a, b, free_thresh: float) -> float:
+    rows, cols = np.indices(a.shape)
+    centres = a.cell_to_world(np.column_stack([rows.ravel(), cols.ravel()]))
+    in_a = a.free_mask(free_thresh).ravel()
+    cells = b.world_to_cell(centres)
+    ok = b.in_bounds(cells)
+    in_b = np.zeros(len(centres), dtype=bool)
+    in_b[ok] = b.free_mask(free_thresh)[cells[ok, 0], cells[ok, 1]]
+    union = int(np.count_nonzero(in_a | in_b))
+    return float(np.count_nonzero(in_a & in_b) / union) if union else 1.0

@@ -216,7 +216,7 @@ def progress(source, quiet: bool):
         yield None
         return
     try:
-        total = len(source)
+        total = source.expected() if hasattr(source, "expected") else len(source)
     except (TypeError, NotImplementedError):
         total = None
     with Progress(

@@ -35,10 +35,13 @@ from slam2d.runs.results import (
 )
 from slam2d.runs.signals import check_stop
 from slam2d.runs.slam_outputs import (
+    SESSION_FILE,
     ape_figure,
+    read_session,
     write_loops,
     write_map_accuracy,
     write_relations,
+    write_session,
 )
 from slam2d.sim.world import load_world
 from slam2d.types import Trajectory
@@ -63,9 +66,12 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | N
     (out / "config.yaml").write_text(config_mod.dump(resolved(cfg)))
     source = open_dataset(cfg.dataset, seed=cfg.seed)
     relations = _load_relations(cfg)
+    saved = cfg.session.continue_from or cfg.session.localize_in
+    session = None if saved is None else read_session(saved)
     pipeline = SlamPipeline(cfg)
     with live_view(viz, cfg.name, "run", cfg.mapping) as view, progress(source, quiet) as advance:
-        result = pipeline.run(source, on_scan=lambda: (check_stop(), advance and advance()), view=view)
+        result = pipeline.run(source, on_scan=lambda: (check_stop(), advance and advance()), view=view,
+                              session=session, localize=cfg.session.localize_in is not None)
     t_slam = time.perf_counter()
     log.info("%d scans processed in %.1f s", len(result.scans), t_slam - t0)
     for key, count in result.stats.items():
@@ -77,8 +83,10 @@ def _run_into(cfg: ExperimentConfig, out: Path, quiet: bool, viz: str | Path | N
         "invalid_beams": getattr(source, "invalid_beams", 0),
         "slam": snake_keys(result.stats),
         "frontend_fallbacks": result.fallbacks,
-        "cpu_ms_per_scan": 1000.0 * result.cpu_s / len(result.scans),
+        "cpu_ms_per_scan": 1000.0 * result.cpu_s / max(len(result.scans) - (len(session) if session else 0), 1),
     }
+    if session is not None:
+        metrics["saved_scans"] = len(session)  # of the scans, those of the saved session (not in cpu_ms_per_scan)
     metrics.update(_evaluate(cfg, result, relations))
     t_eval = time.perf_counter()
     grid = _write_outputs(cfg, result, out)
@@ -148,6 +156,8 @@ def _write_outputs(cfg: ExperimentConfig, result, out: Path):
         write_tum(out / "ground_truth.tum", Trajectory(result.stamps, result.ground_truth))
     if result.graph is not None:
         result.graph.write_g2o(out / "graph.g2o")
+    if result.session is not None:
+        write_session(out / SESSION_FILE, result.session)
     grid = build_grid(result.poses, result.scans, cfg.mapping)
     save_map_server(grid, out / "map", cfg.mapping)
     if set(cfg.mapping.layers) - {"grid"}:

@@ -1,10 +1,12 @@
 """The SLAM run's evaluation files beside its trajectories: ``ape.png`` (APE over time and along the path),
 ``relations.csv/png`` (every scored relation's error), ``loops.csv/png`` (the loop-closure timeline) and
-``spans.csv`` (the map's wall-to-wall spans against the simulator's plan)."""
+``spans.csv`` (the map's wall-to-wall spans against the simulator's plan); ``session.npz``, what a later
+run goes on from (``slam2d run --continue`` / ``--localize-in``)."""
 
 from __future__ import annotations
 
 import csv
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -12,13 +14,36 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from slam2d import geometry
+from slam2d.backend.session import Session
 from slam2d.config import ExperimentConfig
+from slam2d.errors import InputError
 from slam2d.evaluation.map_accuracy import measure_spans, span_summary, span_table
 from slam2d.evaluation.relations import relation_errors
 from slam2d.evaluation.trajectory import align_se2
 from slam2d.sim.spans import spans_of
 
-__all__ = ["ape_figure", "write_loops", "write_relations"]
+__all__ = ["SESSION_FILE", "ape_figure", "read_session", "write_loops", "write_relations", "write_session"]
+
+SESSION_FILE = "session.npz"
+
+
+def write_session(path: Path, session: Session) -> None:
+    """``session`` (:class:`slam2d.backend.session.Session`) as compressed numpy arrays at ``path``."""
+    np.savez_compressed(path, **session.arrays())
+
+
+def read_session(folder) -> Session:
+    """The session a results folder (or its ``session.npz``) holds; an InputError naming it if none."""
+    path = Path(folder).expanduser()
+    if path.is_dir():
+        path = path / SESSION_FILE
+    if not path.is_file():
+        raise InputError(path, "no saved session (a results folder of 'slam2d run' with the pose_graph back end)")
+    try:
+        with np.load(path, allow_pickle=False) as arrays:
+            return Session.from_arrays({k: arrays[k] for k in arrays.files}, where=str(path))
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise InputError(path, f"not a readable session ({err})") from None
 
 
 def write_relations(out: Path, cfg: ExperimentConfig, result, relations, frame: str) -> None:
