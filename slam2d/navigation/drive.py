@@ -11,7 +11,9 @@ import numpy as np
 
 from slam2d import geometry
 from slam2d.navigation.config import NavigatorConfig
+from slam2d.navigation.depth_layer import ObstacleLayer
 from slam2d.navigation.navigator import ACTIVE, REACHED, TIMEOUT, Navigator
+from slam2d.sim.depth import DepthCamera
 
 __all__ = ["NavigationResult", "clearance", "run_navigation"]
 
@@ -70,13 +72,15 @@ def clearance(world, robot) -> float:
 
 
 def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: NavigatorConfig | None = None,
-                   *, pose_source=None, max_steps: int | None = None) -> NavigationResult:  # fmt: skip
+                   *, pose_source=None, max_steps: int | None = None, seed: int = 0) -> NavigationResult:  # fmt: skip
     """Drives ``robot`` (a :class:`slam2d.sim.Robot` in ``world``) to ``goal`` (x, y[, theta]).
 
     ``map_grid`` is a planning or occupancy grid, or a callable ``(StepResult) -> grid``
     asked at every step (a live map). ``pose_source(StepResult) -> pose`` is the pose the
     navigator uses (default: the true pose). Stops when the goal is reached or
-    unreachable, after ``config.max_time`` s of simulated time, or after ``max_steps``.
+    unreachable, after ``config.max_time`` s of simulated time, or after ``max_steps``. With
+    ``config.depth_camera.enabled`` a depth camera (noise seeded by ``seed``) renders the world
+    (its 3D objects too) at every step and its obstacle layer goes to the navigator.
     """
     cfg = (config or NavigatorConfig()).model_copy(update={"planner": planner})
     nav = Navigator(goal, robot.cfg, cfg)
@@ -85,10 +89,16 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
     poses, commands, stamps = [step.pose], [], [step.scan.stamp]
     collisions, in_contact, min_clear = 0, False, clearance(world, robot)
     limit = max_steps if max_steps is not None else int(np.ceil(cfg.max_time / cfg.period)) + 1
+    depth = cfg.depth_camera
+    camera, layer = (DepthCamera(depth, seed), ObstacleLayer(depth)) if depth.enabled else (None, None)
     for _ in range(limit):
         grid = map_grid(step) if callable(map_grid) else map_grid
         pose = step.pose if pose_source is None else pose_source(step)
-        cmd = nav.step(pose, step.velocity, step.scan.points_in_base(), grid, step.scan.stamp)
+        points, obstacles = step.scan.points_in_base(), None
+        if camera is not None:
+            layer.update(pose, camera.render(world, robot.pose, robot.obstacle_circles()), step.scan.stamp, points)
+            obstacles = layer.points()
+        cmd = nav.step(pose, step.velocity, points, grid, step.scan.stamp, obstacles)
         if nav.status != ACTIVE:
             break
         step = robot.step(cmd.v, cmd.w, cfg.period)
