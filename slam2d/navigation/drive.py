@@ -47,6 +47,7 @@ class NavigationResult:
     planner_hz: float = float("nan")
     steps: int = 0
     events: list = field(default_factory=list)
+    object_collisions: int = 0  # contact events with 3D objects (``world.objects``) at the body's height
 
     @property
     def length_ratio(self) -> float:
@@ -56,7 +57,8 @@ class NavigationResult:
     def metrics(self) -> dict:
         """The scalar fields (for metrics.json)."""
         keys = ("success", "status", "reason", "time", "path_length", "optimal_length", "collisions", "min_clearance",
-                "replans", "recoveries", "goal_error", "heading_error", "planner_hz", "steps")  # fmt: skip
+                "replans", "recoveries", "goal_error", "heading_error", "planner_hz", "steps",
+                "object_collisions")  # fmt: skip
         return {k: getattr(self, k) for k in keys} | {"length_ratio": self.length_ratio}
 
 
@@ -87,7 +89,7 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
     step = robot.step(0.0, 0.0, 0.0)
     start_pose = step.pose.copy()
     poses, commands, stamps = [step.pose], [], [step.scan.stamp]
-    collisions, in_contact, min_clear = 0, False, clearance(world, robot)
+    collisions, object_hits, in_contact, min_clear = 0, 0, False, clearance(world, robot)
     limit = max_steps if max_steps is not None else int(np.ceil(cfg.max_time / cfg.period)) + 1
     depth = cfg.depth_camera
     camera, layer = (DepthCamera(depth, seed), ObstacleLayer(depth)) if depth.enabled else (None, None)
@@ -106,12 +108,15 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
         commands.append((cmd.v, cmd.w))
         stamps.append(step.scan.stamp)
         collisions += int(step.collision and not in_contact)
+        object_hits += int(step.contact == "object" and not in_contact)
         in_contact = step.collision
         min_clear = min(min_clear, clearance(world, robot))
     else:
         nav._finish(TIMEOUT, f"step budget of {limit} steps used up")
-    return _result(nav, start_pose, np.array(poses), np.array(commands).reshape(-1, 2), np.array(stamps),
-                   collisions, min_clear)  # fmt: skip
+    result = _result(nav, start_pose, np.array(poses), np.array(commands).reshape(-1, 2), np.array(stamps),
+                     collisions, min_clear)  # fmt: skip
+    result.object_collisions = object_hits
+    return result
 
 
 def _result(nav: Navigator, start, traj, commands, stamps, collisions, min_clear) -> NavigationResult:

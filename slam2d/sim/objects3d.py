@@ -136,31 +136,40 @@ def _half_diagonal(spec: ObjectSpec) -> float:
     return float(np.hypot(*spec.size)) / 2
 
 
+def _outline(spec: ObjectSpec, spacing: float = 0.05) -> np.ndarray:
+    """Points (P, 2) on the edges of a footprint, at most ``spacing`` m apart, and its centre."""
+    (cx, cy), (w, d) = spec.at, spec.size
+    ring = _box(cx - w / 2, cy - d / 2, cx + w / 2, cy + d / 2)
+    edges = [np.linspace(a, b, int(np.ceil(np.linalg.norm(b - a) / spacing)) + 1) for a, b in zip(ring, np.roll(ring, -1, 0))]
+    return np.vstack([*edges, [spec.at]])
+
+
+def _gap(a: ObjectSpec, b: ObjectSpec) -> float:
+    """A lower bound (m) of the distance between two axis-aligned footprints."""
+    dx = abs(a.at[0] - b.at[0]) - (a.size[0] + b.size[0]) / 2
+    dy = abs(a.at[1] - b.at[1]) - (a.size[1] + b.size[1]) / 2
+    return max(dx, dy)
+
+
 def scatter_objects(world: World, counts: dict[str, int], rng: np.random.Generator, *, keep_clear=None,
-                    along=None, spread: float = 0.6, passage: float = 0.5) -> list[ObjectSpec]:  # fmt: skip
+                    along=None, spread: float = 0.6, passage: float = 0.7, tries: int = 500) -> list[ObjectSpec]:  # fmt: skip
     """Objects of random size, ``counts`` per kind ("box", "table", "chair", "shelf"), at random free
     places: each footprint at least ``passage`` m from every wall and from the others (so that a robot
     narrower than that passes everywhere), clear of ``keep_clear`` circles (centres (K, 2), radii (K,) m),
-    and, given ``along`` (L, 2) a polyline, with its centre within ``spread`` m of it."""
+    and, given ``along`` (L, 2) a polyline, with its centre within ``spread`` m of it. An object with no
+    such place in ``tries`` draws is left out (``len`` of the result tells)."""
     centres, radii = keep_clear if keep_clear is not None else (np.zeros((0, 2)), np.zeros(0))
     centres, radii = np.asarray(centres, float).reshape(-1, 2), np.asarray(radii, float).reshape(-1)
     kinds = [k for k in ("table", "shelf", "chair", "box") for _ in range(counts.get(k, 0))]  # big ones first
     chosen: list[ObjectSpec] = []
     for kind in kinds:
-        for _ in range(200):
-            at = _candidate(world, rng, along, spread)
-            spec = _random_spec(kind, at, rng)
-            reach = _half_diagonal(spec)
-            if not world.free(np.array(at), reach + passage)[0]:
+        for _ in range(tries):
+            spec = _random_spec(kind, _candidate(world, rng, along, spread), rng)
+            if np.any(np.hypot(*(centres - spec.at).T) < radii + _half_diagonal(spec)):
                 continue
-            if np.any(np.hypot(*(centres - at).T) < radii + reach):
-                continue
-            if all(np.hypot(*np.subtract(at, o.at)) >= reach + _half_diagonal(o) + passage for o in chosen):
+            if all(_gap(spec, o) >= passage for o in chosen) and world.free(_outline(spec), passage).all():
                 chosen.append(spec)
                 break
-        else:
-            raise InputError("dataset.simulator.objects", f"found no room for a {kind} in {world.name} "
-                             f"after {len(chosen)} objects")  # fmt: skip
     return chosen
 
 
