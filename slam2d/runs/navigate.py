@@ -238,6 +238,8 @@ def _draw_map(ax, world, grid) -> None:
         ax.imshow(1.0 - grid.probability(), cmap="gray", origin="lower", extent=(x0, x1, y0, y1), vmin=0, vmax=1)
     for seg in world.segments:
         ax.plot(*seg.T, color="0.3", lw=0.6)
+    for ring in world.objects.footprints() if world.objects is not None else ():  # 3D objects: every part
+        ax.fill(*ring.T, color="tab:brown", alpha=0.35, lw=0)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
