@@ -4,14 +4,13 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from slam2d.config import ObjectSpec
+from slam2d.config import LaserModel, ObjectSpec
 from slam2d.errors import InputError
 from slam2d.navigation import Navigator, NavigatorConfig, run_navigation, world_grid
 from slam2d.navigation.depth_layer import ObstacleLayer, obstacle_points
 from slam2d.sim import Robot, RobotConfig, World
 from slam2d.sim.depth import DepthCamera, DepthCameraConfig
 from slam2d.sim.objects3d import Objects3D, furnish, load_objects, scatter_objects
-from slam2d.config import LaserModel
 
 QUIET_LASER = LaserModel(range_noise=0.0, dropout=0.0)
 
@@ -112,7 +111,7 @@ def test_a_stale_obstacle_is_cleared_when_seen_through_and_forgotten_out_of_view
     assert len(layer) == 0
     layer.update(pose, camera.render(room(box(3.0, 2.0, 0.04)), pose), 0.2)
     away = np.array([1.5, 2.0, np.pi])  # looking away: kept, then forgotten
-    on_box = lambda: np.all(np.abs(layer.points() - [3.0, 2.0]) <= 0.2, axis=1).sum()  # noqa: E731
+    on_box = lambda: np.all(np.abs(layer.points() - [3.0, 2.0]) <= 0.2, axis=1).sum()
     layer.update(away, camera.render(room(), away), 1.0)
     assert on_box() > 0
     layer.update(away, camera.render(room(), away), 6.0)
