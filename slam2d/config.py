@@ -48,6 +48,8 @@ class LaserModel(Section):
     range_max: float = Field(12.0, gt=0)
     range_noise: float = Field(0.01, ge=0, description="Gaussian range noise std, m")
     dropout: float = Field(0.01, ge=0, le=1, description="probability a beam returns nothing")
+    height: float = Field(
+        0.25, ge=0, description="m above the floor: the laser sees only the parts of 3D objects crossing this height")
 
 
 class OdometryNoise(Section):
@@ -63,6 +65,41 @@ class OdometryNoise(Section):
     alpha4: float = Field(0.001, ge=0)
 
 
+class ObjectSpec(Section):
+    """One object with a height in a simulated world (``slam2d.sim.objects3d``): a footprint and a height range."""
+
+    kind: Literal["box", "table", "chair", "shelf"] = Field(
+        description="box: one solid block over z; table, chair: four 4 cm legs under a 3 cm top at z[1] "
+        "(a chair also has a back); shelf: a board over z between two end panels standing on the floor")
+    at: tuple[float, float] = Field(description="x, y of the footprint's centre, m")
+    size: tuple[Annotated[float, Field(gt=0, le=100)], Annotated[float, Field(gt=0, le=100)]] = Field(
+        description="footprint along x and y, m")
+    z: tuple[Annotated[float, Field(ge=0)], Annotated[float, Field(gt=0)]] | None = Field(
+        None, description="m, (bottom, top); default: box (0, 0.04), table (0, 0.72), chair (0, 0.45), "
+        "shelf board (0.30, 0.34)")
+
+    @model_validator(mode="after")
+    def _z_order(self):
+        if self.z is not None and not self.z[0] < self.z[1]:
+            raise ValueError(f"z must be (bottom, top) with bottom < top, got {self.z}")
+        return self
+
+
+class ObjectsConfig(Section):
+    """Objects with heights added to a simulated world (listed, from a file, or scattered by the seed)."""
+
+    file: str | None = Field(None, description="YAML file holding a list of objects (ObjectSpec keys); "
+                             "relative paths resolve against SLAM2D_DATA if not found")
+    items: list[ObjectSpec] = Field(default_factory=list, description="objects listed here")
+    boxes: int = Field(0, ge=0, le=1000, description="low boxes (3-5 cm high, 20-40 cm wide) scattered by the seed")
+    tables: int = Field(0, ge=0, le=1000, description="tables (0.8-1.2 x 0.6-0.8 m, 0.72 m high) scattered")
+    chairs: int = Field(0, ge=0, le=1000, description="chairs (0.45 m square, seat at 0.45 m) scattered")
+    shelves: int = Field(0, ge=0, le=1000, description="shelves (0.8-1.2 x 0.3 m, board at 0.30-0.34 m) scattered")
+    along_path: bool = Field(True, description="navigate: scatter near the shortest path from start to goal "
+                             "(within `spread`), where the robot meets them; false: anywhere free")
+    spread: float = Field(0.6, ge=0, description="m, farthest a scattered object's centre lies from that path")
+
+
 class SimulatorConfig(Section):
     """The embedded default dataset: a world, a scripted route, a laser, odometry."""
 
@@ -76,6 +113,7 @@ class SimulatorConfig(Section):
     scan_rate: float = Field(5.0, gt=0, description="Hz")
     laser: LaserModel = LaserModel()
     odometry: OdometryNoise = OdometryNoise()
+    objects: ObjectsConfig = ObjectsConfig()
 
 
 class DatasetConfig(Section):

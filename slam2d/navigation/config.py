@@ -13,6 +13,7 @@ from slam2d.config import Section
 from slam2d.navigation.dwa import DwaConfig
 from slam2d.navigation.fsm import FsmConfig
 from slam2d.registry import Choice, validation_error
+from slam2d.sim.depth import DepthCameraConfig
 
 __all__ = ["NavigatorConfig", "navigator_config"]
 
@@ -47,6 +48,9 @@ class NavigatorConfig(Section):
     )
     dwa: DwaConfig = DwaConfig()
     fsm: FsmConfig = FsmConfig()
+    depth_camera: DepthCameraConfig = Field(
+        DepthCameraConfig(), description="a depth camera whose obstacles (3D: what the laser misses) the local "
+        "planner and replanning avoid (slam2d.navigation.depth_layer)")
 
 
 def navigator_config(options: dict[str, Any], slam: bool, section: str = "navigation.options"):

@@ -11,7 +11,9 @@ import numpy as np
 
 from slam2d import geometry
 from slam2d.navigation.config import NavigatorConfig
+from slam2d.navigation.depth_layer import ObstacleLayer
 from slam2d.navigation.navigator import ACTIVE, REACHED, TIMEOUT, Navigator
+from slam2d.sim.depth import DepthCamera
 
 __all__ = ["NavigationResult", "clearance", "run_navigation"]
 
@@ -45,6 +47,7 @@ class NavigationResult:
     planner_hz: float = float("nan")
     steps: int = 0
     events: list = field(default_factory=list)
+    object_collisions: int = 0  # contact events with 3D objects (``world.objects``) at the body's height
 
     @property
     def length_ratio(self) -> float:
@@ -54,7 +57,8 @@ class NavigationResult:
     def metrics(self) -> dict:
         """The scalar fields (for metrics.json)."""
         keys = ("success", "status", "reason", "time", "path_length", "optimal_length", "collisions", "min_clearance",
-                "replans", "recoveries", "goal_error", "heading_error", "planner_hz", "steps")  # fmt: skip
+                "replans", "recoveries", "goal_error", "heading_error", "planner_hz", "steps",
+                "object_collisions")  # fmt: skip
         return {k: getattr(self, k) for k in keys} | {"length_ratio": self.length_ratio}
 
 
@@ -70,25 +74,33 @@ def clearance(world, robot) -> float:
 
 
 def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: NavigatorConfig | None = None,
-                   *, pose_source=None, max_steps: int | None = None) -> NavigationResult:  # fmt: skip
+                   *, pose_source=None, max_steps: int | None = None, seed: int = 0) -> NavigationResult:  # fmt: skip
     """Drives ``robot`` (a :class:`slam2d.sim.Robot` in ``world``) to ``goal`` (x, y[, theta]).
 
     ``map_grid`` is a planning or occupancy grid, or a callable ``(StepResult) -> grid``
     asked at every step (a live map). ``pose_source(StepResult) -> pose`` is the pose the
     navigator uses (default: the true pose). Stops when the goal is reached or
-    unreachable, after ``config.max_time`` s of simulated time, or after ``max_steps``.
+    unreachable, after ``config.max_time`` s of simulated time, or after ``max_steps``. With
+    ``config.depth_camera.enabled`` a depth camera (noise seeded by ``seed``) renders the world
+    (its 3D objects too) at every step and its obstacle layer goes to the navigator.
     """
     cfg = (config or NavigatorConfig()).model_copy(update={"planner": planner})
     nav = Navigator(goal, robot.cfg, cfg)
     step = robot.step(0.0, 0.0, 0.0)
     start_pose = step.pose.copy()
     poses, commands, stamps = [step.pose], [], [step.scan.stamp]
-    collisions, in_contact, min_clear = 0, False, clearance(world, robot)
+    collisions, object_hits, in_contact, min_clear = 0, 0, False, clearance(world, robot)
     limit = max_steps if max_steps is not None else int(np.ceil(cfg.max_time / cfg.period)) + 1
+    depth = cfg.depth_camera
+    camera, layer = (DepthCamera(depth, seed), ObstacleLayer(depth)) if depth.enabled else (None, None)
     for _ in range(limit):
         grid = map_grid(step) if callable(map_grid) else map_grid
         pose = step.pose if pose_source is None else pose_source(step)
-        cmd = nav.step(pose, step.velocity, step.scan.points_in_base(), grid, step.scan.stamp)
+        points, obstacles = step.scan.points_in_base(), None
+        if camera is not None:
+            layer.update(pose, camera.render(world, robot.pose, robot.obstacle_circles()), step.scan.stamp, points)
+            obstacles = layer.points()
+        cmd = nav.step(pose, step.velocity, points, grid, step.scan.stamp, obstacles)
         if nav.status != ACTIVE:
             break
         step = robot.step(cmd.v, cmd.w, cfg.period)
@@ -96,12 +108,15 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
         commands.append((cmd.v, cmd.w))
         stamps.append(step.scan.stamp)
         collisions += int(step.collision and not in_contact)
+        object_hits += int(step.contact == "object" and not in_contact)
         in_contact = step.collision
         min_clear = min(min_clear, clearance(world, robot))
     else:
         nav._finish(TIMEOUT, f"step budget of {limit} steps used up")
-    return _result(nav, start_pose, np.array(poses), np.array(commands).reshape(-1, 2), np.array(stamps),
-                   collisions, min_clear)  # fmt: skip
+    result = _result(nav, start_pose, np.array(poses), np.array(commands).reshape(-1, 2), np.array(stamps),
+                     collisions, min_clear)  # fmt: skip
+    result.object_collisions = object_hits
+    return result
 
 
 def _result(nav: Navigator, start, traj, commands, stamps, collisions, min_clear) -> NavigationResult:

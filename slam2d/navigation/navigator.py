@@ -105,6 +105,7 @@ class Navigator:
         self._blocked_since = None
         self._stand_in = False  # the path ends at a free cell near a goal the map blocks (see _goal_cell)
         self._manoeuvre: list[list] = []
+        self._layer = None  # (H, W) bool on ``_raw``: cells of the obstacle layer (``step``'s obstacles)
 
     # map and plan --------------------------------------------------------
 
@@ -160,6 +161,8 @@ class Navigator:
         blocked_at = around(self._cell_blocked_at, cells[inside, 0], cells[inside, 1], _EXPLAINING, np.inf)
         out = np.zeros(len(points), dtype=bool)
         out[inside] = ~(blocked_at <= self._now - _SETTLED_S).any(axis=1)
+        if self._layer is not None:  # the obstacle layer's cells hold things that stay
+            out[inside] &= ~self._layer[cells[inside, 0], cells[inside, 1]]
         return out
 
     @property
@@ -263,16 +266,24 @@ class Navigator:
 
     # the control step -----------------------------------------------------
 
-    def step(self, pose, velocity, points, map_grid, now: float) -> Command:
+    def step(self, pose, velocity, points, map_grid, now: float, obstacles=None) -> Command:
         """Command (v, w) for the robot at ``pose`` (3,) moving at ``velocity`` (v, w), seeing laser
-        ``points`` (M, 2) in its frame, on ``map_grid`` at time ``now`` (s)."""
+        ``points`` (M, 2) in its frame, on ``map_grid`` at time ``now`` (s). ``obstacles`` (K, 2), world
+        frame, are an obstacle layer's (e.g. a depth camera's, :mod:`~slam2d.navigation.depth_layer`):
+        their cells are blocked in the map and the local planner sees them as points that stay."""
         pose, velocity = np.asarray(pose, dtype=np.float64), np.asarray(velocity, dtype=np.float64)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         if self.status != ACTIVE:
             return Command(0.0, 0.0, state=self.status)
         if now > self.cfg.max_time:
             return self._finish(TIMEOUT, f"time budget of {self.cfg.max_time:g} s used up")
+        if obstacles is not None:
+            obstacles = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
+            free, res, origin = free_mask(map_grid, self.cfg.unknown_free)
+            map_grid = mark_points(PlanningGrid(free, res, origin), obstacles)
+            points = np.vstack([points, in_robot_frame(pose, obstacles)])
         changed = self.update_map(map_grid, now)
+        self._layer = None if obstacles is None else self._cells_of(obstacles)
         if self.path is None or (changed and (self._stand_in or self._path_blocked())):
             if self.path is not None:
                 self._log(now, "replan", "the goal is blocked in the map" if self._stand_in else
@@ -302,6 +313,14 @@ class Navigator:
         else:
             self._blocked_since = None
         return cmd
+
+    def _cells_of(self, xy) -> np.ndarray:
+        """(H, W) bool on the map: the cells of world points ``xy`` (K, 2)."""
+        mask = np.zeros(self._raw.shape, dtype=bool)
+        cells = self._raw.world_to_cell(xy)
+        cells = cells[self._raw.in_bounds(cells)]
+        mask[cells[:, 0], cells[:, 1]] = True
+        return mask
 
     def _log(self, now: float, kind: str, why: str) -> None:
         """Counts a replan and records ``(time s, kind, why)`` in ``events``."""

@@ -32,6 +32,7 @@ from slam2d.navigation import Navigator, run_navigation, world_grid
 from slam2d.navigation.config import navigator_config
 from slam2d.runs.results import json_text, progress_bar, results_folder
 from slam2d.sim import Robot
+from slam2d.sim.objects3d import furnish, objects_from_config
 from slam2d.sim.obstacles import scatter_wanderers
 from slam2d.sim.robot import RobotConfig
 from slam2d.sim.world import load_world
@@ -110,6 +111,7 @@ def simulate(cfg: ExperimentConfig, progress=None) -> NavigationRun:
     options = navigator_config(nav.options, nav.slam)
     rng = np.random.default_rng(cfg.seed)
     keep = (np.array([start[:2], goal[:2]]), np.array([1.0, 1.0]))
+    world = _with_objects(world, sim, options, start, goal, keep, cfg.seed)
     people = scatter_wanderers(world, nav.people, rng, speed=nav.people_speed, keep_clear=keep)
     robot = Robot(world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), obstacles=people, seed=cfg.seed)
     truth = world_grid(world)
@@ -121,7 +123,8 @@ def simulate(cfg: ExperimentConfig, progress=None) -> NavigationRun:
         map_grid, pose_source = record.wrap(online), lambda step: online.pose
     else:
         map_grid, pose_source = record.wrap(None, truth), _localizer(nav, world, start, robot, cfg.seed)
-    result = run_navigation(world, robot, map_grid, goal, nav.planner, options, pose_source=pose_source)
+    result = run_navigation(world, robot, map_grid, goal, nav.planner, options, pose_source=pose_source,
+                            seed=cfg.seed)  # fmt: skip
     wall = time.perf_counter() - t0
     reference = Navigator(goal, robot.cfg, options)
     reference.update_map(truth)
@@ -141,6 +144,21 @@ def simulate(cfg: ExperimentConfig, progress=None) -> NavigationRun:
         **_pose_errors(estimate, result.trajectory),
     }
     return NavigationRun(world, result, estimate, online.grid if online else None, record, metrics)
+
+
+def _with_objects(world, sim, options, start, goal, keep, seed: int):
+    """``world`` with the 3D objects of ``sim.objects`` (scattered by ``seed``, clear of ``keep`` circles, near
+    the shortest path from ``start`` to ``goal`` if asked); ``world`` itself without any."""
+    spec = sim.objects
+    if not (spec.items or spec.file or spec.boxes or spec.tables or spec.chairs or spec.shelves):
+        return world
+    along = None
+    if spec.along_path:
+        reference = Navigator(goal, RobotConfig(), options.model_copy(update={"unknown_free": False}))
+        reference.update_map(world_grid(world))
+        along = reference.path if not reference.plan(start) else None
+    objects = objects_from_config(spec, world, np.random.default_rng([seed, 3]), keep_clear=keep, along=along)
+    return furnish(world, objects, sim.laser.height)
 
 
 class _Recorder:
@@ -220,6 +238,8 @@ def _draw_map(ax, world, grid) -> None:
         ax.imshow(1.0 - grid.probability(), cmap="gray", origin="lower", extent=(x0, x1, y0, y1), vmin=0, vmax=1)
     for seg in world.segments:
         ax.plot(*seg.T, color="0.3", lw=0.6)
+    for ring in world.objects.footprints() if world.objects is not None else ():  # 3D objects: every part
+        ax.fill(*ring.T, color="tab:brown", alpha=0.35, lw=0)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")

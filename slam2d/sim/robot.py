@@ -48,6 +48,8 @@ class RobotConfig(Section):
     max_turn_rate: float = Field(2.0, gt=0, description="rad/s")
     max_accel: float = Field(1.0, gt=0, description="m/s^2")
     max_turn_accel: float = Field(3.0, gt=0, description="rad/s^2")
+    height: float = Field(0.45, gt=0, description="m, top of the body: parts of 3D objects below it are in its way")
+    ground_clearance: float = Field(0.01, ge=0, description="m under the body: parts of 3D objects below it are not")
     laser: LaserModel = LaserModel()
     odometry: OdometryNoise = OdometryNoise()
 
@@ -159,7 +161,8 @@ def odometry_step(odom, before, after, noise: OdometryNoise, rng: np.random.Gene
 class StepResult:
     """One step: the laser ``scan`` at its end, the wheel ``odom`` pose and true ``pose`` (3,)
     there, the ``velocity`` (v m/s, w rad/s) reached, and ``contact``: None, or "wall"
-    (walls and the world's bounds) or "obstacle" when a collision stopped the robot."""
+    (walls and the world's bounds), "obstacle" (a moving one) or "object" (a part of a 3D object at
+    the body's height, ``world.objects``) when a collision stopped the robot."""
 
     scan: Scan
     odom: np.ndarray
@@ -194,6 +197,18 @@ class Robot:
         self.laser = Laser(self.cfg.laser, noise_seed, dropout_seed)
         self._odom_rng = np.random.default_rng(odom_seed)
         self._obstacle_rng = np.random.default_rng(obstacle_seed)
+        self._body = self._body_world()
+
+    def _body_world(self) -> World | None:
+        """The footprints of the world's 3D object parts at the body's height, as walls (None without any)."""
+        objects = self.world.objects
+        if objects is None or len(objects) == 0:
+            return None
+        rings = objects.footprints(objects.overlapping(self.cfg.ground_clearance, self.cfg.height))
+        if not rings:
+            return None
+        edges = np.concatenate([np.stack([r, np.roll(r, -1, axis=0)], axis=1) for r in rings])
+        return World(edges, self.world.bounds + [[-1e3], [1e3]], name="objects")  # bounds far: the world's are walls
 
     def _check_start(self) -> None:
         x, y, r = self.pose[0], self.pose[1], self.cfg.radius
@@ -241,11 +256,15 @@ class Robot:
     def _stop_at_contact(self, path: np.ndarray) -> tuple[np.ndarray, str | None]:
         """The pose (3,) where the robot's disc first touches something along ``path``, and what it touched."""
         hit = self.world.sweep(path[:, :2], self.cfg.radius, self.obstacle_circles())
+        kind = None if hit is None else "wall" if hit.circle is None else "obstacle"
+        body = self._body.sweep(path[:, :2], self.cfg.radius) if self._body is not None else None
+        if body is not None and (hit is None or (body.leg, body.fraction) <= (hit.leg, hit.fraction)):
+            hit, kind = body, "object"  # a part of a 3D object at the body's height (a table leg: also a wall)
         if hit is None:
             return path[-1].copy(), None
         a, b, f = path[hit.leg], path[hit.leg + 1], hit.fraction
         theta = geometry.wrap_angle(a[2] + f * geometry.wrap_angle(b[2] - a[2]))
-        return np.array([*(a[:2] + f * (b[:2] - a[:2])), theta]), "wall" if hit.circle is None else "obstacle"
+        return np.array([*(a[:2] + f * (b[:2] - a[:2])), theta]), kind
 
     def _scan(self) -> Scan:
         ranges = self.laser.read(self.world, self.pose, self.obstacle_circles())[0]

@@ -129,6 +129,7 @@ class World:
         self.grid = grid
         self.unmapped = unmapped  # (H, W) bool on ``grid``'s cells: free to the laser, unknown in the plan
         self.name = name
+        self.objects = None  # objects with heights (slam2d.sim.objects3d.furnish), if any
 
     def __repr__(self) -> str:
         (x0, y0), (x1, y1) = self.bounds
