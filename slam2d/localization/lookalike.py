@@ -164,11 +164,18 @@ def _find(known: KnownMap, radius: float, min_match: float, min_area: float) -> 
             if len(tried) > MAX_CANDIDATES or any(np.abs(shift - t).max() * res < PEAK_SEPARATION for t in tried):
                 continue
             tried.append(shift)
+            shift = _refine(w, m, centre, shift)
             region, match = _region(w, near, free, visible, m, centre, shift, box, min_match)
             if region.sum() * res**2 < min_area:
                 continue
             found.append(_in_map_frame(known, region, match, k, shift, centre, off, factor))
     return found
+
+
+def _refine(w: np.ndarray, m: np.ndarray, centre: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """The shift within a cell of ``shift`` under which the most walls land exactly on walls."""
+    steps = [shift + (dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
+    return max(steps, key=lambda s: int(np.count_nonzero(w & _pull(w, m, centre, s))))
 
 
 def _region(w, near, free, visible, m, centre, shift, box, min_match) -> tuple[np.ndarray, float]:
@@ -209,10 +216,9 @@ def _in_map_frame(known: KnownMap, region, match, k, shift, centre, off, factor)
     """The transform in metres of the map frame, its region on the map's own grid."""
     res = known.resolution * factor
     # analysis cell (r, c) of the padded grid -> map (x, y) of its centre
-    to_xy = lambda rc: np.array([known.origin[0] + (rc[1] - off[1] + 0.5) * res,  # noqa: E731
-                                 known.origin[1] + (rc[0] - off[0] + 0.5) * res])  # fmt: skip
+    c_xy = np.array([known.origin[0] + (centre[1] - off[1] + 0.5) * res,
+                     known.origin[1] + (centre[0] - off[0] + 0.5) * res])  # fmt: skip
     angle = k * math.pi / 2
-    c_xy = to_xy(centre)
     rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
     move = np.array([shift[1] * res, shift[0] * res])
     t = c_xy + move - rot @ c_xy

@@ -36,24 +36,48 @@ from slam2d.localization.maps import KnownMap
 from slam2d.localization.sensor import LikelihoodField, sensor_model
 from slam2d.types import Scan
 
-__all__ = ["Estimate", "ParticleFilter", "clusters", "kld_limit", "low_variance_indices", "sample_motion"]
+__all__ = ["Estimate", "Hypothesis", "ParticleFilter", "clusters", "hypotheses", "kld_limit", "low_variance_indices",
+           "sample_motion"]
 
 _MIN_TRANS = 0.01  # m: below this a motion has no heading of its own (rot1 = 0), as in amcl
 PARTICLE_BEAM_BYTES = 32  # memory per particle and beam while a scan is weighed (float64 temporaries)
 CONFIDENT_NOISE = 0.1  # random share below which a confident filter draws no random particle
 LOCAL_SPREAD = np.array([0.3, 0.3, 0.1])  # m, m, rad: sd of recovery candidates around the current particles
+MAX_HYPOTHESES = 20  # clusters reported and kept alive at resampling, heaviest first
+SAME_PLACE = (1.0, 0.5)  # m, rad: a look-alike image this close to a hypothesis is already held
+STATES = ("tracking", "ambiguous", "lost")
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """A cluster of particles: weighted mean pose (3,), covariance (3, 3), share of the weight, particles."""
+
+    pose: np.ndarray
+    covariance: np.ndarray
+    weight: float
+    particles: int
+
+    @property
+    def sd_xy(self) -> float:
+        """m, root of the larger position variance."""
+        return float(math.sqrt(max(self.covariance[0, 0], self.covariance[1, 1])))
 
 
 @dataclass(frozen=True)
 class Estimate:
     """The filter's pose (3,), its covariance (3, 3), the heaviest cluster's share of the weight,
-    the number of clusters and of particles."""
+    the number of clusters and of particles; the state (``tracking``: one hypothesis holds the
+    evidence; ``ambiguous``: compact hypotheses not yet told apart; ``lost``: no compact one), the
+    hypotheses (heaviest first) and the log evidence ratio of the best over the runner-up."""
 
     pose: np.ndarray
     covariance: np.ndarray
     share: float
     clusters: int
     particles: int
+    state: str = "tracking"
+    hypotheses: tuple[Hypothesis, ...] = ()
+    evidence: float = math.inf
 
     @property
     def sd_xy(self) -> float:
@@ -158,6 +182,23 @@ def cluster_means(poses: np.ndarray, log_w: np.ndarray, labels: np.ndarray, k: i
         return np.nan_to_num(mean), np.log(total) + log_w.max()
 
 
+def hypotheses(poses: np.ndarray, log_w: np.ndarray, labels: np.ndarray, count: int = MAX_HYPOTHESES
+               ) -> tuple[list[Hypothesis], np.ndarray, np.ndarray]:
+    """The ``count`` heaviest clusters of ``poses`` (P, 3) with log weights (P,) and cluster ``labels``
+    (P,) as hypotheses, heaviest first; also every cluster's weight (K,) (normalised) and the labels
+    of the hypotheses returned (their order)."""
+    w = np.exp(log_w - log_w.max())
+    mass = np.bincount(labels, weights=w)
+    mass = mass / mass.sum()
+    order = np.argsort(-mass, kind="stable")[:count]
+    out = []
+    for c in order:
+        inside = labels == c
+        mean, cov = weighted_pose(poses[inside], w[inside])
+        out.append(Hypothesis(mean, cov, float(mass[c]), int(inside.sum())))
+    return out, mass, order
+
+
 def weighted_pose(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weighted mean pose (3,) (circular mean heading) and covariance (3, 3) of poses (P, 3)."""
     w = weights / weights.sum()  # sums, not BLAS: its threads contend with numba's
@@ -193,6 +234,16 @@ class ParticleFilter:
         self._odom: np.ndarray | None = None  # odometry at the last update
         self._estimate: Estimate | None = None
         self._labels: np.ndarray | None = None  # cluster of each particle at the last estimate
+        self._best_label = 0  # the heaviest cluster's label
+        self._tested = False  # the compact best hypothesis's look-alike places were added
+        self.lookalikes = None  # the map's look-alike places (slam2d.localization.lookalike), with hypotheses
+        self.evidence_threshold = math.inf  # log weight ratio best / runner-up from which the state is tracking
+        if self.cfg.hypotheses:
+            from slam2d.localization.lookalike import look_alikes
+
+            self.lookalikes = look_alikes(known, self.cfg.lookalike_radius, self.cfg.lookalike_match)
+            c = self.cfg.confidence
+            self.evidence_threshold = math.log(self.lookalikes.places * c / (1.0 - c))
         self._candidates = False  # the next update weighs global candidates
 
     # initialisation ------------------------------------------------------
@@ -243,6 +294,7 @@ class ParticleFilter:
         self.log_w = np.full(len(poses), -math.log(len(poses)))
         self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
         self._estimate = self._labels = None
+        self._tested = False
 
     # the filter ------------------------------------------------------------
 
@@ -279,7 +331,7 @@ class ParticleFilter:
             for i, (fit, counted) in enumerate(self._recovery_fits(pool, scan, ll, beams)):
                 self._average(i, float(logsumexp(fit) - math.log(len(pool))), counted)
                 self.w_slow[i] = max(self.w_slow[i], self._best_fit(fit, counted))
-        self._estimate = self._cluster_estimate()
+        self._update_estimate()
 
     def _best_fit(self, loglik: np.ndarray, beams: int) -> float:
         """Mean likelihood (as :meth:`_average` scales it) of the best 1 % of ``loglik``: what a filter
@@ -313,11 +365,12 @@ class ParticleFilter:
                     self._average(i, float(logsumexp(self.log_w + fit)), counted)
             joint = self.log_w + fine[:p]
             if refit:
-                joint = joint + (old + fine[p:] - _group_logsumexp(joint, self._labels, k))[self._labels]
+                between = coarse[p:] if self.cfg.hypotheses else fine[p:]  # hypotheses weighed on the smooth field
+                joint = joint + (old + between - _group_logsumexp(joint, self._labels, k))[self._labels]
             self.log_w = joint - logsumexp(joint)
         if self._resample_due() or (self.confident() and self.random_share() > 0):
             self._resample(scan)
-        self._estimate = self._cluster_estimate()
+        self._update_estimate()
 
     def _recovering(self) -> bool:
         return self.cfg.alpha_slow > 0 and self.cfg.alpha_fast > 0
@@ -376,14 +429,40 @@ class ParticleFilter:
         drawn[is_random] = self.random_poses(int(is_random.sum()))
         n = self.kld_count(drawn)  # KLD counts bins along the random order
         n_random = int(is_random[:n].sum())
-        kept = self.particles[low_variance_indices(weights, n - n_random, self.rng)]
-        self.particles = np.concatenate([kept, self.guided_random_poses(n_random, scan)])
+        kept = low_variance_indices(weights, n - n_random, self.rng)
+        per_cluster = cfg.hypotheses and self._labels is not None and len(self._labels) == len(weights)
+        if per_cluster:
+            kept = self._with_floors(kept, weights)
+        self.particles = np.concatenate([self.particles[kept], self.guided_random_poses(n_random, scan)])
+        n = len(self.particles)
         self.log_w = np.full(n, -math.log(n))
+        if per_cluster:  # each cluster keeps its weight, shared by the particles drawn into it
+            labels = self._labels[kept]
+            mass = np.bincount(self._labels, weights=weights)
+            self.log_w[:len(kept)] = np.log(mass[labels] / np.bincount(labels)[labels] * len(kept) / n)
+            self.log_w -= logsumexp(self.log_w)
         self.resamples += 1
         if n_random:
             self.injected += n_random
             if cfg.combine == "amcl":  # amcl restarts its averages after injecting
                 self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
+
+    def _with_floors(self, kept: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """``kept`` indices plus, for each of the MAX_HYPOTHESES heaviest clusters holding at least
+        ``hypothesis_keep`` of the heaviest one's weight, particles drawn from it by weight up to
+        ``hypothesis_particles``: a look-alike place is not lost to sampling before the scans tell."""
+        cfg, labels = self.cfg, self._labels
+        mass = np.bincount(labels, weights=weights)
+        top = np.argsort(-mass, kind="stable")[:MAX_HYPOTHESES]
+        top = top[mass[top] >= cfg.hypothesis_keep * mass[top[0]]]
+        have = np.bincount(labels[kept], minlength=len(mass))
+        extra = [kept]
+        for c in top:
+            short = cfg.hypothesis_particles - int(have[c])
+            if short > 0:
+                members = np.flatnonzero(labels == c)
+                extra.append(members[low_variance_indices(weights[members] / mass[c], short, self.rng)])
+        return np.concatenate(extra)
 
     def kld_count(self, poses: np.ndarray) -> int:
         """The first n such that the n leading ``poses`` reach KLD's count for their bins (max if none)."""
@@ -396,13 +475,61 @@ class ParticleFilter:
     # estimate -----------------------------------------------------------------
 
     def _cluster_estimate(self) -> Estimate:
-        cfg, w = self.cfg, np.exp(self.log_w)
+        cfg = self.cfg
         labels = self._labels = clusters(self.particles, cfg.kld_bin_xy, cfg.kld_bin_theta)
-        mass = np.bincount(labels, weights=w)
-        best = int(np.argmax(mass))
-        inside = labels == best
-        mean, cov = weighted_pose(self.particles[inside], w[inside])
-        return Estimate(mean, cov, float(mass[best] / mass.sum()), len(mass), len(self.particles))
+        hyps, mass, order = hypotheses(self.particles, self.log_w, labels, MAX_HYPOTHESES if cfg.hypotheses else 1)
+        self._best_label = int(order[0])
+        best = hyps[0]
+        runner_up = float(np.partition(mass, len(mass) - 2)[-2]) if len(mass) > 1 else 0.0
+        evidence = math.log(best.weight / runner_up) if runner_up > 0 else math.inf
+        return Estimate(best.pose, best.covariance, best.weight, len(mass), len(self.particles),
+                        self._state(best, evidence), tuple(hyps), evidence)  # fmt: skip
+
+    def _state(self, best: Hypothesis, evidence: float) -> str:
+        """``lost`` without a compact best hypothesis; ``tracking`` once its evidence over the runner-up
+        reaches the threshold and its look-alike places were tested; else ``ambiguous``. Without
+        ``hypotheses``: tracking whenever the best holds 90 % within converged_sd (as amcl claims)."""
+        compact = best.sd_xy < self.cfg.converged_sd
+        if not self.cfg.hypotheses:
+            return "tracking" if compact and best.weight >= 0.9 else "lost"
+        if not compact:
+            return "lost"
+        return "tracking" if self._tested and evidence >= self.evidence_threshold else "ambiguous"
+
+    def _update_estimate(self) -> None:
+        """The estimate; when the best hypothesis turns compact, its look-alike places join as
+        hypotheses of equal weight (its particles moved onto each place no hypothesis holds yet)."""
+        est = self._estimate = self._cluster_estimate()
+        if not self.cfg.hypotheses:
+            return
+        if est.state == "lost":
+            self._tested = False
+            return
+        if not self._tested:
+            self._tested = True
+            self._add_lookalikes(est)
+            self._estimate = self._cluster_estimate()
+
+    def _add_lookalikes(self, est: Estimate) -> int:
+        """Add the best hypothesis's images at its look-alike places not held yet; how many."""
+        best, added = est.hypotheses[0], 0
+        inside = self._labels == self._best_label
+        for place in self.lookalikes.at(best.pose):
+            image = place.image(best.pose[None])[0]
+            if any(np.hypot(*(image[:2] - h.pose[:2])) < SAME_PLACE[0]
+                   and abs(geometry.wrap_angle(image[2] - h.pose[2])) < SAME_PLACE[1] for h in est.hypotheses):
+                continue
+            self.particles = np.concatenate([self.particles, place.image(self.particles[inside])])
+            self.log_w = np.concatenate([self.log_w, self.log_w[inside]])
+            added += 1
+        if added:
+            self.log_w -= logsumexp(self.log_w)
+        return added
+
+    @property
+    def state(self) -> str:
+        """``tracking``, ``ambiguous`` or ``lost`` (the last estimate's)."""
+        return self.estimate.state
 
     def confident(self) -> bool:
         """Whether the last estimate's cluster holds 90 % of the weight within ``converged_sd`` m."""
