@@ -1,7 +1,7 @@
 """Monte Carlo localisation: slam2d's filter beside a re-implementation of ROS amcl's defaults,
 on the office and the room plans, global localisation, kidnapping and tracking.
 
-Usage: nice .venv/bin/python benchmarks/localization.py [--worlds office rooms] [--runs N] [--first-seed 0]
+Usage: nice .venv/bin/python benchmarks/localization.py [--worlds office rooms ring wings] [--runs N] [--first-seed 0]
        [--workers 2] [--scenarios global kidnap tracking] [--filters slam2d amcl amcl_recovery]
        [--out results/bench-localization]
 
@@ -42,11 +42,52 @@ GLOBAL_TRAVEL = 10.0  # m
 RECOVERY = 15.0  # s
 
 
-def world_specs(names: list[str]) -> list[str]:
-    """'office', 'rooms' (the ten furnished plans of SLAM2D_DATA/rooms) or PNG paths."""
+def _ring() -> np.ndarray:
+    """A square ring corridor (22 m outside, 2.5 m wide) whose four sides, boxes included, are alike."""
+    g = np.full((440, 440), 205, np.uint8)
+    g[20:420, 20:420] = 0
+    g[24:416, 24:416] = 255
+    g[74:366, 74:366] = 0
+    g[78:362, 78:362] = 205
+    g[24:40, 100:124] = 0  # a cupboard on the outer wall of each side
+    g[55:65, 250:262] = 0  # a pillar
+    return np.min([np.rot90(g, k) for k in range(4)], axis=0)
+
+
+def _wings() -> np.ndarray:
+    """A U-shaped plan: two identical wings (a 3.1 m corridor, three furnished rooms off its west side)
+    17.5 m apart, joined at their south ends by a corridor."""
+    g = np.full((400, 640), 205, np.uint8)
+    for c0 in (120, 470):
+        g[20:380, c0:c0 + 70] = 0
+        g[24:376, c0 + 4:c0 + 66] = 255
+        for r0, r1 in ((100, 180), (190, 280), (290, 370)):
+            g[r0:r1, c0 - 100:c0 + 4] = 0
+            g[r0 + 4:r1 - 4, c0 - 96:c0] = 255
+            g[r0 + 20:r0 + 40, c0:c0 + 4] = 255  # the door
+            g[r0 + 10:r0 + 24, c0 - 90:c0 - 60] = 0  # a desk
+        g[120:136, c0 - 40:c0 - 24] = 0  # a cupboard in the first room
+    g[20:90, 120:540] = np.minimum(g[20:90, 120:540], 0)
+    g[24:86, 124:536] = 255
+    return g
+
+
+SYNTHETIC = {"ring": _ring, "wings": _wings}  # plans made here (0.05 m/px), never used to tune the filter
+
+
+def world_specs(names: list[str], folder: Path | None = None) -> list[str]:
+    """'office', 'rooms' (the furnished plans of SLAM2D_DATA/rooms), 'ring' / 'wings' (plans written to
+    ``folder``) or PNG paths."""
     out = []
     for name in names:
-        if name == "rooms":
+        if name in SYNTHETIC:
+            from PIL import Image
+
+            path = (folder or Path(".")) / f"{name}.png"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            Image.fromarray(SYNTHETIC[name]()[::-1]).save(path)
+            out.append(str(path))
+        elif name == "rooms":
             data = Path(os.environ.get("SLAM2D_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" /
                                        "datasets")) / "rooms"  # fmt: skip
             out += sorted(str(p) for p in data.glob("*_furnitures.png"))
@@ -172,7 +213,7 @@ def main(argv: list[str]) -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     seeds = range(args.first_seed, args.first_seed + args.runs)
-    jobs = [(w, s, seed, tuple(args.filters)) for w in world_specs(args.worlds) for s in args.scenarios
+    jobs = [(w, s, seed, tuple(args.filters)) for w in world_specs(args.worlds, out / "plans") for s in args.scenarios
             for seed in seeds]  # fmt: skip
     rows: list[dict] = []
     t0 = time.perf_counter()

@@ -353,6 +353,9 @@ def test_localize_command_writes_a_results_folder_and_none_on_bad_input(tmp_path
 
     metrics = json.loads((folder / "metrics.json").read_text())
     assert metrics["converged_s"] is not None and metrics["kidnaps"][0]["at_s"] == pytest.approx(6.0)
+    rows = (folder / "error.csv").read_text().splitlines()
+    assert rows[0].endswith(",state") and metrics["final_state"] == rows[-1].rsplit(",", 1)[1] == "tracking"
+    assert sum(metrics["states"].values()) == len(rows) - 1 and metrics["states"]["tracking"] > 0
     bad = runner.invoke(app, ["localize", "office", "--set", "mcl={bogus: 1}", "--out", str(tmp_path / "bad")])
     assert bad.exit_code == 2 and "mcl.bogus" in bad.output
     assert not (tmp_path / "bad").exists() or not any((tmp_path / "bad").iterdir())
@@ -481,3 +484,21 @@ def test_two_identical_rooms_end_ambiguous_never_tracking_in_the_wrong_one(tmp_p
     held = [h for h in pf.estimate.hypotheses if h.weight > 0.05]
     assert len(held) == 2  # the true room and its copy
     assert min(np.hypot(*(h.pose[:2] - stream.truth[-1, :2])) for h in held) < 0.2
+
+
+def test_navigation_on_mcl_turns_in_place_while_the_pose_is_ambiguous(tmp_path):
+    from slam2d.localization import MclPoseSource
+    from slam2d.navigation.drive import run_navigation
+    from slam2d.sim.world import load_world
+
+    plan = _two_rooms(tmp_path)
+    world, known = load_world(plan), KnownMap.load(plan)
+    start = np.array([1.2, 1.5, 0.0])
+    robot = Robot(world, start, seed=0)
+    source = MclPoseSource(known, start, MclConfig(max_particles=5000), robot.cfg.laser.range_max, seed=0)
+    source.filter.init_global()  # no initial pose: the two rooms cannot be told apart
+    result = run_navigation(world, robot, None, (3.0, 1.5), pose_source=source, max_steps=150)
+    assert source.filter.state == "ambiguous" and not result.success
+    assert np.all(result.commands[:, 0] == 0.0) and np.all(result.commands[:, 1] > 0)  # turned, never drove
+    assert np.hypot(*(result.trajectory[-1, :2] - start[:2])) < 0.05
+    assert [e[1] for e in result.events] == ["hold"]

@@ -236,6 +236,7 @@ class ParticleFilter:
         self._labels: np.ndarray | None = None  # cluster of each particle at the last estimate
         self._best_label = 0  # the heaviest cluster's label
         self._tested = False  # the compact best hypothesis's look-alike places were added
+        self._anchored = False  # an initial pose rules look-alike places out
         self.lookalikes = None  # the map's look-alike places (slam2d.localization.lookalike), with hypotheses
         self.evidence_threshold = math.inf  # log weight ratio best / runner-up from which the state is tracking
         if self.cfg.hypotheses:
@@ -278,7 +279,8 @@ class ParticleFilter:
         self._candidates = self.cfg.global_candidates > 1
 
     def init_pose(self, pose, sd_xy: float | None = None, sd_theta: float | None = None) -> None:
-        """A rough initial pose (3,): ``max_particles`` Gaussian poses around it (sd m, rad; config's by default)."""
+        """A rough initial pose (3,): ``max_particles`` Gaussian poses around it (sd m, rad; config's by default);
+        its look-alike places are not hypotheses (the given pose rules them out)."""
         pose = geometry.as_pose(pose).reshape(3)
         if not np.isfinite(pose).all():
             raise InputError("initial pose", f"must be finite, got {pose.tolist()}")
@@ -287,6 +289,7 @@ class ParticleFilter:
         poses = pose + self.rng.standard_normal((self.cfg.max_particles, 3)) * sd
         poses[:, 2] = geometry.wrap_angle(poses[:, 2])
         self._reset(poses)
+        self._anchored = True  # the given pose rules its look-alike places out (until random particles come)
 
     def _reset(self, poses: np.ndarray) -> None:
         self._candidates = False
@@ -294,7 +297,7 @@ class ParticleFilter:
         self.log_w = np.full(len(poses), -math.log(len(poses)))
         self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
         self._estimate = self._labels = None
-        self._tested = False
+        self._tested = self._anchored = False
 
     # the filter ------------------------------------------------------------
 
@@ -444,6 +447,7 @@ class ParticleFilter:
         self.resamples += 1
         if n_random:
             self.injected += n_random
+            self._anchored = False  # the pose is searched for again: its look-alikes are hypotheses
             if cfg.combine == "amcl":  # amcl restarts its averages after injecting
                 self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
 
@@ -498,7 +502,8 @@ class ParticleFilter:
 
     def _update_estimate(self) -> None:
         """The estimate; when the best hypothesis turns compact, its look-alike places join as
-        hypotheses of equal weight (its particles moved onto each place no hypothesis holds yet)."""
+        hypotheses of equal weight (its particles moved onto each place no hypothesis holds yet),
+        unless an initial pose rules them out and no random particle came since."""
         est = self._estimate = self._cluster_estimate()
         if not self.cfg.hypotheses:
             return
@@ -507,7 +512,8 @@ class ParticleFilter:
             return
         if not self._tested:
             self._tested = True
-            self._add_lookalikes(est)
+            if not self._anchored:
+                self._add_lookalikes(est)
             self._estimate = self._cluster_estimate()
 
     def _add_lookalikes(self, est: Estimate) -> int:

@@ -2,7 +2,8 @@
 
 ``run_navigation(..., pose_source=MclPoseSource(...))`` drives on the filter's
 estimate: every step's scan and wheel odometry go to the filter, and the navigator
-gets the estimate (moved by the odometry since the last update).
+gets the estimate (moved by the odometry since the last update). While the filter is not
+``tracking`` (ambiguous or lost) the robot turns in place instead of driving.
 """
 
 from __future__ import annotations
@@ -34,3 +35,7 @@ class MclPoseSource:
         pose = self.filter.pose(step.scan.odom)
         self.estimates.append(pose)
         return pose
+
+    def holding(self) -> bool:
+        """Whether the navigator must not drive on the pose: the filter is ambiguous or lost."""
+        return self.filter.state != "tracking"

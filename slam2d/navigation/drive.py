@@ -58,6 +58,8 @@ class NavigationResult:
         return {k: getattr(self, k) for k in keys} | {"length_ratio": self.length_ratio}
 
 
+HOLD_TURN = 0.5  # rad/s: turning in place while the pose source holds
+
 def clearance(world, robot) -> float:
     """Distance (m) between the robot's disc and the nearest wall, world bound or moving obstacle."""
     x, y = robot.pose[:2]
@@ -75,7 +77,8 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
 
     ``map_grid`` is a planning or occupancy grid, or a callable ``(StepResult) -> grid``
     asked at every step (a live map). ``pose_source(StepResult) -> pose`` is the pose the
-    navigator uses (default: the true pose). Stops when the goal is reached or
+    navigator uses (default: the true pose); while its ``holding()`` (if it has one) is True, the
+    robot turns in place instead of driving (a localiser that has not claimed its pose). Stops when the goal is reached or
     unreachable, after ``config.max_time`` s of simulated time, or after ``max_steps``.
     """
     cfg = (config or NavigatorConfig()).model_copy(update={"planner": planner})
@@ -85,15 +88,22 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
     poses, commands, stamps = [step.pose], [], [step.scan.stamp]
     collisions, in_contact, min_clear = 0, False, clearance(world, robot)
     limit = max_steps if max_steps is not None else int(np.ceil(cfg.max_time / cfg.period)) + 1
+    holding = getattr(pose_source, "holding", None)
     for _ in range(limit):
         grid = map_grid(step) if callable(map_grid) else map_grid
         pose = step.pose if pose_source is None else pose_source(step)
-        cmd = nav.step(pose, step.velocity, step.scan.points_in_base(), grid, step.scan.stamp)
-        if nav.status != ACTIVE:
-            break
-        step = robot.step(cmd.v, cmd.w, cfg.period)
+        if holding is not None and holding():  # the pose is not claimed: look round in place, drive nowhere
+            if not nav.events or nav.events[-1][1] != "hold":
+                nav.events.append((float(step.scan.stamp), "hold", "localisation not tracking"))
+            v, w = 0.0, HOLD_TURN
+        else:
+            cmd = nav.step(pose, step.velocity, step.scan.points_in_base(), grid, step.scan.stamp)
+            if nav.status != ACTIVE:
+                break
+            v, w = cmd.v, cmd.w
+        step = robot.step(v, w, cfg.period)
         poses.append(step.pose)
-        commands.append((cmd.v, cmd.w))
+        commands.append((v, w))
         stamps.append(step.scan.stamp)
         collisions += int(step.collision and not in_contact)
         in_contact = step.collision
