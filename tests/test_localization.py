@@ -459,7 +459,7 @@ def test_look_alike_analysis_finds_the_turns_of_a_square_ring():
     # a room with nothing alike: none
     occ = np.zeros((120, 160), bool)
     occ[[0, -1], :] = occ[:, [0, -1]] = True
-    occ[20:40, 30:45] = occ[70:80, 100:140] = True
+    occ[0:70, 50:52] = occ[80:110, 100:150] = True  # a partition from one wall, a block in a corner
     assert not look_alikes(KnownMap(occ, ~occ, 0.05, (0.0, 0.0), "room")).items
 
 
@@ -474,7 +474,7 @@ def test_two_identical_rooms_end_ambiguous_never_tracking_in_the_wrong_one(tmp_p
     plan = _two_rooms(tmp_path)
     world, known = load_world(plan), KnownMap.load(plan)
     found = look_alikes(known)
-    assert found.places == 2 and any(abs(abs(a.transform[0]) - 10.0) < 0.15 for a in found.items), found.summary()
+    assert any(abs(abs(a.transform[0]) - 10.0) < 0.15 and a.transform[2] == 0 for a in found.items), found.summary()
     stream = wander(world, known, 25.0, seed=1)
     pf = ParticleFilter(known, MclConfig(max_particles=5000), stream.scans[0].range_max, seed=1)
     pf.init_global()

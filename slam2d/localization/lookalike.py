@@ -123,7 +123,7 @@ def _peaks(corr: np.ndarray, count: int, separation: int, floor: float) -> list[
     return [tuple(int(v) for v in cand[i]) for i in order[:count]]
 
 
-def look_alikes(known: KnownMap, radius: float = 4.0, min_match: float = 0.9, min_area: float = 4.0) -> LookAlikes:
+def look_alikes(known: KnownMap, radius: float = 4.0, min_match: float = 0.8, min_area: float = 4.0) -> LookAlikes:
     """The map's look-alike transforms (cached per map): turns by 90° multiples and shifts under which
     the walls within ``radius`` m of at least ``min_area`` m² of free cells land on walls (and back)
     for ``min_match`` of them."""
