@@ -46,6 +46,8 @@ LOCAL_SPREAD = np.array([0.3, 0.3, 0.1])  # m, m, rad: sd of recovery candidates
 MAX_HYPOTHESES = 20  # clusters reported and kept alive at resampling, heaviest first
 SAME_PLACE = (1.0, 0.5)  # m, rad: a look-alike image this close to a hypothesis is already held
 STATES = ("tracking", "ambiguous", "lost")
+FIT_DEFICIT = 0.1  # short-term average likelihood this far below the long-term one: the pose is not claimed
+FIT_ALPHA = 0.3  # decay of that short-term average (w_fast's 0.1 lags a recovery by seconds)
 
 
 @dataclass(frozen=True)
@@ -199,6 +201,12 @@ def hypotheses(poses: np.ndarray, log_w: np.ndarray, labels: np.ndarray, count: 
     return out, mass, order
 
 
+def _same_place(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether poses ``a`` and ``b`` (3,) lie within SAME_PLACE of each other."""
+    return bool(math.hypot(a[0] - b[0], a[1] - b[1]) < SAME_PLACE[0]
+                and abs(float(geometry.wrap_angle(a[2] - b[2]))) < SAME_PLACE[1])  # fmt: skip
+
+
 def weighted_pose(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weighted mean pose (3,) (circular mean heading) and covariance (3, 3) of poses (P, 3)."""
     w = weights / weights.sum()  # sums, not BLAS: its threads contend with numba's
@@ -230,6 +238,7 @@ class ParticleFilter:
         self.particles = np.zeros((0, 3))
         self.log_w = np.zeros(0)
         self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)  # of all beams, of the best-fitting share
+        self.w_fit = 0.0  # short-term average likelihood of every beam (FIT_ALPHA), for the state
         self.updates = self.resamples = self.injected = 0
         self._odom: np.ndarray | None = None  # odometry at the last update
         self._estimate: Estimate | None = None
@@ -237,6 +246,7 @@ class ParticleFilter:
         self._best_label = 0  # the heaviest cluster's label
         self._tested = False  # the compact best hypothesis's look-alike places were added
         self._anchored = False  # an initial pose rules look-alike places out
+        self._estimate_odom: np.ndarray | None = None  # odometry at the last estimate
         self.lookalikes = None  # the map's look-alike places (slam2d.localization.lookalike), with hypotheses
         self.evidence_threshold = math.inf  # log weight ratio best / runner-up from which the state is tracking
         if self.cfg.hypotheses:
@@ -296,6 +306,7 @@ class ParticleFilter:
         self.particles = poses
         self.log_w = np.full(len(poses), -math.log(len(poses)))
         self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
+        self.w_fit = 0.0
         self._estimate = self._labels = None
         self._tested = self._anchored = False
 
@@ -393,6 +404,8 @@ class ParticleFilter:
         w_avg = math.exp(log_total / (beams * cfg.beam_weight)) if cfg.combine == "product" else math.exp(log_total)
         for w, alpha in ((self.w_slow, cfg.alpha_slow), (self.w_fast, cfg.alpha_fast)):
             w[i] = w_avg if w[i] == 0.0 else w[i] + alpha * (w_avg - w[i])
+        if i == 0:  # the fit the state is judged on: as w_fast, quicker
+            self.w_fit = w_avg if self.w_fit == 0.0 else self.w_fit + FIT_ALPHA * (w_avg - self.w_fit)
 
     def _resample_due(self) -> bool:
         if self.cfg.resample_ess > 0:
@@ -491,25 +504,34 @@ class ParticleFilter:
 
     def _state(self, best: Hypothesis, evidence: float) -> str:
         """``lost`` without a compact best hypothesis; ``tracking`` once its evidence over the runner-up
-        reaches the threshold and its look-alike places were tested; else ``ambiguous``. Without
+        reaches the threshold, its look-alike places were tested and the scans fit as well as they
+        usually do (short-term average likelihood of every beam, ``w_fit``, within FIT_DEFICIT of the
+        long-term one: after a kidnap the best of wrong places is no pose); else ``ambiguous``. Without
         ``hypotheses``: tracking whenever the best holds 90 % within converged_sd (as amcl claims)."""
         compact = best.sd_xy < self.cfg.converged_sd
         if not self.cfg.hypotheses:
             return "tracking" if compact and best.weight >= 0.9 else "lost"
         if not compact:
             return "lost"
-        return "tracking" if self._tested and evidence >= self.evidence_threshold else "ambiguous"
+        fits = not self._recovering() or self.w_slow[0] <= 0 or self.w_fit >= (1 - FIT_DEFICIT) * self.w_slow[0]
+        return "tracking" if self._tested and fits and evidence >= self.evidence_threshold else "ambiguous"
 
     def _update_estimate(self) -> None:
-        """The estimate; when the best hypothesis turns compact, its look-alike places join as
-        hypotheses of equal weight (its particles moved onto each place no hypothesis holds yet),
-        unless an initial pose rules them out and no random particle came since."""
+        """The estimate; when the best hypothesis turns compact (or another one takes the lead), its
+        look-alike places join as hypotheses of equal weight (its particles moved onto each place no
+        hypothesis holds yet), unless an initial pose rules them out and no random particle came since."""
+        before, odom_before = self._estimate, self._estimate_odom
         est = self._estimate = self._cluster_estimate()
+        self._estimate_odom = self._odom.copy() if self._odom is not None else None
         if not self.cfg.hypotheses:
             return
         if est.state == "lost":
             self._tested = False
             return
+        if before is not None and odom_before is not None and self._odom is not None:
+            expected = geometry.compose(before.pose, geometry.between(odom_before, self._odom))
+            if not _same_place(est.pose, expected):  # another hypothesis leads: test it too
+                self._tested = False
         if not self._tested:
             self._tested = True
             if not self._anchored:
@@ -518,19 +540,16 @@ class ParticleFilter:
 
     def _add_lookalikes(self, est: Estimate) -> int:
         """Add the best hypothesis's images at its look-alike places not held yet; how many."""
-        best, added = est.hypotheses[0], 0
+        best = est.hypotheses[0]
         inside = self._labels == self._best_label
-        for place in self.lookalikes.at(best.pose):
-            image = place.image(best.pose[None])[0]
-            if any(np.hypot(*(image[:2] - h.pose[:2])) < SAME_PLACE[0]
-                   and abs(geometry.wrap_angle(image[2] - h.pose[2])) < SAME_PLACE[1] for h in est.hypotheses):
-                continue
-            self.particles = np.concatenate([self.particles, place.image(self.particles[inside])])
-            self.log_w = np.concatenate([self.log_w, self.log_w[inside]])
-            added += 1
-        if added:
+        source, source_w = self.particles[inside], self.log_w[inside]
+        images = [place.image(source) for place in self.lookalikes.at(best.pose)
+                  if not any(_same_place(place.image(best.pose[None])[0], h.pose) for h in est.hypotheses)]
+        if images:
+            self.particles = np.concatenate([self.particles, *images])
+            self.log_w = np.concatenate([self.log_w, *[source_w] * len(images)])
             self.log_w -= logsumexp(self.log_w)
-        return added
+        return len(images)
 
     @property
     def state(self) -> str:
