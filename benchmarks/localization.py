@@ -135,7 +135,8 @@ def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) 
         row = {"world": Path(spec).stem.replace("_furnitures", ""), "scenario": scenario, "filter": name,
                "seed": seed, "wall_s": time.perf_counter() - t0,
                "update_ms": float(np.median(track.update_ms)) if len(track.update_ms) else None,
-               "false": bool(false_convergence(track)), "end_state": final_state(track)}  # fmt: skip
+               "false": bool(false_convergence(track)), "end_state": final_state(track),
+               "lookalikes_at_end": None if pf.lookalikes is None else len(pf.lookalikes.at(stream.truth[-1]))}  # fmt: skip
         if scenario == "global":
             c = converged_at(track)
             row.update(converged=bool(c is not None and stream.travelled[c] <= GLOBAL_TRAVEL),
@@ -173,6 +174,12 @@ def _states(rows) -> str:
     return " / ".join(str(sum(r.get("end_state") == s for r in rows)) for s in ("tracking", "ambiguous", "lost"))
 
 
+def _predicted(rows) -> str:
+    """Runs ending ambiguous whose true pose lies at a look-alike place of the map's analysis / all ending ambiguous."""
+    amb = [r for r in rows if r.get("end_state") == "ambiguous"]
+    return f"{sum(bool(r.get('lookalikes_at_end')) for r in amb)} / {len(amb)}" if amb else "-"
+
+
 def _count(rows, key) -> str:
     return f"{sum(bool(r.get(key)) for r in rows)}" if rows else "-"
 
@@ -181,9 +188,9 @@ def table(rows: list[dict]) -> str:
     """Markdown: per filter, all worlds pooled and per world."""
     worlds = sorted({r["world"] for r in rows})
     lines = [("| world | filter | global converged ≤ 10 m | global end tracking / ambiguous / lost | false conv. "
-              "global / kidnap / tracking | median travel (m) | kidnap recovered ≤ 15 s | kidnap end t / a / l "
+              "global / kidnap / tracking | ambiguous at a look-alike | median travel (m) | kidnap recovered ≤ 15 s | kidnap end t / a / l "
               "| median recovery (s) | tracking RMSE (m) | heading RMSE (°) | particles tracking | ms/update | runs |"),
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for world in ["all", *worlds]:
         for name in [n for n in FILTERS["global"] if any(r["filter"] == n for r in rows)]:
             sel = [r for r in rows if r["filter"] == name and world in ("all", r["world"])]
@@ -191,7 +198,7 @@ def table(rows: list[dict]) -> str:
             k = [r for r in sel if r["scenario"] == "kidnap"]
             t = [r for r in sel if r["scenario"] == "tracking"]
             lines.append(f"| {world} | {name} | {_rate(g, 'converged')} | {_states(g) if g else '-'} | "
-                         f"{_count(g, 'false')} / {_count(k, 'false')} / {_count(t, 'false')} | "
+                         f"{_count(g, 'false')} / {_count(k, 'false')} / {_count(t, 'false')} | {_predicted(sel)} | "
                          f"{_median(g, 'travel', '{:.1f}')} | {_rate(k, 'recovered')} | "
                          f"{_states(k) if k else '-'} | "
                          f"{_median(k, 'recovery_s', '{:.1f}')} | {_median(t, 'rmse')} | "
