@@ -4,6 +4,7 @@ recovery from a kidnapping, determinism, bad input, the localize command and the
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -502,3 +503,34 @@ def test_navigation_on_mcl_turns_in_place_while_the_pose_is_ambiguous(tmp_path):
     assert np.all(result.commands[:, 0] == 0.0) and np.all(result.commands[:, 1] > 0)  # turned, never drove
     assert np.hypot(*(result.trajectory[-1, :2] - start[:2])) < 0.05
     assert [e[1] for e in result.events] == ["hold"]
+
+
+def test_the_disambiguating_goal_looks_where_the_wings_differ(tmp_path):
+    import sys
+
+    from slam2d.localization.active import disambiguating_goal, separation
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from localization import (
+        _wings,  # the benchmark's U-shaped plan: its wings differ only where they join
+    )
+    from PIL import Image
+
+    Image.fromarray(_wings()[::-1]).save(tmp_path / "wings.png")
+    known = KnownMap.load(tmp_path / "wings.png")
+    truth = np.array([7.7, 17.0, -np.pi / 2])  # far end of the west wing; the east wing's copy is 17.5 m east
+    copy = truth + [17.5, 0.0, 0.0]
+    rng = np.random.default_rng(0)
+    pf = ParticleFilter(known, MclConfig(), 12.0, seed=0)
+    pf.init_pose(truth)
+    pf.particles = np.concatenate([truth + rng.standard_normal((300, 3)) * [0.05, 0.05, 0.01],
+                                   copy + rng.standard_normal((300, 3)) * [0.05, 0.05, 0.01]])  # fmt: skip
+    pf.log_w = np.full(600, -math.log(600))
+    pf._estimate = pf._cluster_estimate()
+    assert len(pf.estimate.hypotheses) == 2
+    here, free = separation(pf, pf.estimate.pose[None])
+    assert free[0] and here[0] < 0.05  # the scans here are the same under both
+    goal = disambiguating_goal(pf, max_distance=16.0)
+    assert goal is not None and goal.separation > 0.5
+    assert goal.pose[1] < 8.0  # towards the corridor that joins the wings (y 1.2-4.3 m)
+    assert known.free[tuple(known.world_to_cell(goal.pose[None, :2])[0])]

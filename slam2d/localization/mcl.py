@@ -228,6 +228,7 @@ class ParticleFilter:
         pool = self.cfg.max_particles * self.cfg.global_candidates
         check_memory(pool * (self.cfg.beams * PARTICLE_BEAM_BYTES + 64), "localization.mcl.max_particles",
                      f"weighing {pool} particles on {self.cfg.beams} beams")
+        self.range_max = float(range_max)
         self.sensor = sensor_model(known, self.cfg, range_max)
         self.coarse = self.sensor  # the smoother likelihood field used while the pose is uncertain
         if self.cfg.model == "likelihood_field" and self.cfg.sigma_hit_uncertain != self.cfg.sigma_hit:
