@@ -67,8 +67,10 @@ def _wings() -> np.ndarray:
             g[r0 + 20:r0 + 40, c0:c0 + 4] = 255  # the door
             g[r0 + 10:r0 + 24, c0 - 90:c0 - 60] = 0  # a desk
         g[120:136, c0 - 40:c0 - 24] = 0  # a cupboard in the first room
-    g[20:90, 120:540] = np.minimum(g[20:90, 120:540], 0)
+    g[20:90, 120:540] = 0
     g[24:86, 124:536] = 255
+    for c0 in (120, 470):
+        g[24:376, c0 + 4:c0 + 66] = 255  # each wing opens onto the joining corridor
     return g
 
 

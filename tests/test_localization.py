@@ -383,6 +383,16 @@ def test_navigation_drives_on_the_mcl_pose():
 # --------------------------------------------------------------------------- hypotheses and look-alikes
 
 
+def _wings() -> np.ndarray:
+    """The benchmark's U-shaped plan: two wings alike but where the corridor joining them leaves."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from localization import _wings as wings
+
+    return wings()
+
+
 def _two_rooms(folder) -> str:
     """A plan (0.05 m/px) of two identical, unconnected 5 m x 4 m rooms 10 m apart along x, each with
     a partition and a box that make it look different under any turn (nothing tells the rooms apart)."""
@@ -496,7 +506,8 @@ def test_navigation_on_mcl_turns_in_place_while_the_pose_is_ambiguous(tmp_path):
     world, known = load_world(plan), KnownMap.load(plan)
     start = np.array([1.2, 1.5, 0.0])
     robot = Robot(world, start, seed=0)
-    source = MclPoseSource(known, start, MclConfig(max_particles=5000), robot.cfg.laser.range_max, seed=0)
+    source = MclPoseSource(known, start, MclConfig(max_particles=5000), robot.cfg.laser.range_max, seed=0,
+                           active=False)  # fmt: skip
     source.filter.init_global()  # no initial pose: the two rooms cannot be told apart
     result = run_navigation(world, robot, None, (3.0, 1.5), pose_source=source, max_steps=150)
     assert source.filter.state == "ambiguous" and not result.success
@@ -506,15 +517,9 @@ def test_navigation_on_mcl_turns_in_place_while_the_pose_is_ambiguous(tmp_path):
 
 
 def test_the_disambiguating_goal_looks_where_the_wings_differ(tmp_path):
-    import sys
+    from PIL import Image
 
     from slam2d.localization.active import disambiguating_goal, separation
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from localization import (
-        _wings,  # the benchmark's U-shaped plan: its wings differ only where they join
-    )
-    from PIL import Image
 
     Image.fromarray(_wings()[::-1]).save(tmp_path / "wings.png")
     known = KnownMap.load(tmp_path / "wings.png")
@@ -534,3 +539,23 @@ def test_the_disambiguating_goal_looks_where_the_wings_differ(tmp_path):
     assert goal is not None and goal.separation > 0.5
     assert goal.pose[1] < 8.0  # towards the corridor that joins the wings (y 1.2-4.3 m)
     assert known.free[tuple(known.world_to_cell(goal.pose[None, :2])[0])]
+
+
+def test_navigation_on_mcl_drives_where_the_wings_differ_then_to_its_goal(tmp_path):
+    from PIL import Image
+
+    from slam2d.localization import MclPoseSource
+    from slam2d.navigation import run_navigation, world_grid
+    from slam2d.sim.world import load_world
+
+    Image.fromarray(_wings()[::-1]).save(tmp_path / "wings.png")
+    world, known = load_world(str(tmp_path / "wings.png")), KnownMap.load(tmp_path / "wings.png")
+    start, goal = np.array([7.7, 17.0, -np.pi / 2]), (7.7, 9.0)  # far end of the west wing, a goal in it
+    robot = Robot(world, start, seed=0)
+    source = MclPoseSource(known, start, MclConfig(max_particles=5000), robot.cfg.laser.range_max, seed=0)
+    source.filter.init_global()  # the wings look alike until the corridor that joins them is in view
+    result = run_navigation(world, robot, world_grid(world), goal, pose_source=source, max_steps=1200)
+    kinds = [e[1] for e in result.events]
+    assert "disambiguate" in kinds and source.goals, kinds
+    assert result.success and result.goal_error < 0.3  # at the goal in the true wing
+    assert source.filter.state == "tracking"

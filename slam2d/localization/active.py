@@ -35,10 +35,12 @@ class Goal:
     distance: float
 
 
-def separation(pf: ParticleFilter, goals: np.ndarray, beams: int = 72) -> tuple[np.ndarray, np.ndarray]:
+def separation(pf: ParticleFilter, goals: np.ndarray, beams: int = 72, clearance: float | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
     """For goals (G, 3) relative to the best compact hypothesis, the weighted mean range difference (G,) m
     between the scans predicted under it and under the other compact hypotheses, and whether each goal is
-    free with the filter's clearance under every hypothesis (G,) bool."""
+    free, ``clearance`` m from walls (the filter's free_clearance by default), under every hypothesis (G,)."""
+    clearance = pf.cfg.free_clearance if clearance is None else clearance
     hyps = [h for h in pf.estimate.hypotheses if h.weight >= MIN_WEIGHT and h.sd_xy < pf.cfg.converged_sd]
     known, model = pf.map, BeamModel(pf.map, pf.cfg, pf.range_max)
     angles = np.linspace(-np.pi, np.pi, beams, endpoint=False)
@@ -51,7 +53,7 @@ def separation(pf: ParticleFilter, goals: np.ndarray, beams: int = 72) -> tuple[
         inside = known.in_bounds(cells)
         ok = np.zeros(len(goals), dtype=bool)
         ok[inside] = known.free[cells[inside, 0], cells[inside, 1]]
-        ok[inside] &= known.distance()[cells[inside, 0], cells[inside, 1]] >= pf.cfg.free_clearance
+        ok[inside] &= known.distance()[cells[inside, 0], cells[inside, 1]] >= clearance
         free &= ok
         ranges.append(model.expected_ranges(poses, np.zeros(3), angles))
         weights.append(h.weight)
@@ -62,17 +64,18 @@ def separation(pf: ParticleFilter, goals: np.ndarray, beams: int = 72) -> tuple[
     return (w @ diff) / w.sum(), free
 
 
-def disambiguating_goal(pf: ParticleFilter, candidates: int = 400, max_distance: float = 10.0,
-                        seed: int = 0) -> Goal | None:  # fmt: skip
-    """The nearest of ``candidates`` free places within ``max_distance`` m of the estimate (in the best
-    hypothesis's map) whose scans tell the hypotheses apart at least half as well as the best of them;
-    None when fewer than two compact hypotheses hold weight or no place separates them."""
+def disambiguating_goal(pf: ParticleFilter, candidates: int = 400, max_distance: float = 15.0,
+                        clearance: float = 0.5, seed: int = 0) -> Goal | None:  # fmt: skip
+    """The nearest of ``candidates`` free places (``clearance`` m from walls) within ``max_distance`` m
+    of the estimate (in the best hypothesis's map) whose scans tell the hypotheses apart at least half
+    as well as the best of them; None when fewer than two compact hypotheses hold weight or no place
+    separates them."""
     best = pf.estimate.hypotheses[0] if pf.estimate.hypotheses else None
     if best is None:
         return None
     rng = np.random.default_rng(seed)
     known = pf.map
-    cells = known.free_cells(pf.cfg.free_clearance)
+    cells = known.free_cells(clearance)
     row, col = np.divmod(cells, known.shape[1])
     xy = np.column_stack([known.origin[0] + (col + 0.5) * known.resolution,
                           known.origin[1] + (row + 0.5) * known.resolution])  # fmt: skip
@@ -81,7 +84,7 @@ def disambiguating_goal(pf: ParticleFilter, candidates: int = 400, max_distance:
         return None
     pick = near[rng.choice(len(near), min(candidates, len(near)), replace=False)]
     goals = np.column_stack([pick, np.full(len(pick), best.pose[2])])
-    sep, free = separation(pf, goals)
+    sep, free = separation(pf, goals, clearance=clearance)
     sep = np.where(free, sep, 0.0)
     if sep.max() <= 0.0:
         return None

@@ -56,7 +56,7 @@ class MclConfig(Section):
     confidence: float = Field(0.99, gt=0, lt=1, description="tracking needs the best hypothesis's weight over the "
                               "runner-up's to reach places x confidence / (1 - confidence), places being the most "
                               "places of the map that look alike (lookalike analysis; 1 without look-alikes)")
-    hypothesis_particles: int = Field(30, ge=0, le=MAX_SAMPLES, description="particles each hypothesis keeps at "
+    hypothesis_particles: int = Field(100, ge=0, le=MAX_SAMPLES, description="particles each hypothesis keeps at "
                                       "resampling (with its weight) while it holds hypothesis_keep of the best's")
     hypothesis_keep: float = Field(1e-4, gt=0, le=1, description="weight relative to the best hypothesis below "
                                    "which a hypothesis is left to resampling")

@@ -245,6 +245,7 @@ class ParticleFilter:
         self._estimate: Estimate | None = None
         self._labels: np.ndarray | None = None  # cluster of each particle at the last estimate
         self._best_label = 0  # the heaviest cluster's label
+        self._hypothesis_labels = np.zeros(1, dtype=np.int64)  # the cluster label of each hypothesis
         self._tested = False  # the compact best hypothesis's look-alike places were added
         self._anchored = False  # an initial pose rules look-alike places out
         self._estimate_odom: np.ndarray | None = None  # odometry at the last estimate
@@ -496,7 +497,7 @@ class ParticleFilter:
         cfg = self.cfg
         labels = self._labels = clusters(self.particles, cfg.kld_bin_xy, cfg.kld_bin_theta)
         hyps, mass, order = hypotheses(self.particles, self.log_w, labels, MAX_HYPOTHESES if cfg.hypotheses else 1)
-        self._best_label = int(order[0])
+        self._best_label, self._hypothesis_labels = int(order[0]), order
         best = hyps[0]
         runner_up = float(np.partition(mass, len(mass) - 2)[-2]) if len(mass) > 1 else 0.0
         evidence = math.log(best.weight / runner_up) if runner_up > 0 else math.inf
@@ -540,17 +541,29 @@ class ParticleFilter:
             self._estimate = self._cluster_estimate()
 
     def _add_lookalikes(self, est: Estimate) -> int:
-        """Add the best hypothesis's images at its look-alike places not held yet; how many."""
+        """Give the best hypothesis's look-alike places its weight: a hypothesis already there is raised
+        to it (before the pose was compact, the weights told how many global candidates fell near each
+        place more than how the scans fit), elsewhere its particles are copied there; how many places."""
         best = est.hypotheses[0]
         inside = self._labels == self._best_label
         source, source_w = self.particles[inside], self.log_w[inside]
-        images = [place.image(source) for place in self.lookalikes.at(best.pose)
-                  if not any(_same_place(place.image(best.pose[None])[0], h.pose) for h in est.hypotheses)]
+        best_mass = logsumexp(source_w)
+        images, raised = [], 0
+        for place in self.lookalikes.at(best.pose):
+            image = place.image(best.pose[None])[0]
+            held = [i for i, h in enumerate(est.hypotheses) if _same_place(image, h.pose)]
+            if not held:
+                images.append(place.image(source))
+            elif held[0] > 0:
+                members = self._labels == self._hypothesis_labels[held[0]]
+                self.log_w[members] += best_mass - logsumexp(self.log_w[members])
+                raised += 1
         if images:
             self.particles = np.concatenate([self.particles, *images])
             self.log_w = np.concatenate([self.log_w, *[source_w] * len(images)])
+        if images or raised:
             self.log_w -= logsumexp(self.log_w)
-        return len(images)
+        return len(images) + raised
 
     @property
     def state(self) -> str:

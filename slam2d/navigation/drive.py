@@ -78,7 +78,9 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
     ``map_grid`` is a planning or occupancy grid, or a callable ``(StepResult) -> grid``
     asked at every step (a live map). ``pose_source(StepResult) -> pose`` is the pose the
     navigator uses (default: the true pose); while its ``holding()`` (if it has one) is True, the
-    robot turns in place instead of driving (a localiser that has not claimed its pose). Stops when the goal is reached or
+    robot does not drive to the goal (a localiser that has not claimed its pose): it drives to the
+    pose source's ``looking()`` goal if it gives one (a place that tells its hypotheses apart; then
+    ``looked()`` is called once that goal is reached or given up), else turns in place. Stops when the goal is reached or
     unreachable, after ``config.max_time`` s of simulated time, or after ``max_steps``.
     """
     cfg = (config or NavigatorConfig()).model_copy(update={"planner": planner})
@@ -89,13 +91,26 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
     collisions, in_contact, min_clear = 0, False, clearance(world, robot)
     limit = max_steps if max_steps is not None else int(np.ceil(cfg.max_time / cfg.period)) + 1
     holding = getattr(pose_source, "holding", None)
+    looking, aside = getattr(pose_source, "looking", None), None
     for _ in range(limit):
         grid = map_grid(step) if callable(map_grid) else map_grid
         pose = step.pose if pose_source is None else pose_source(step)
-        if holding is not None and holding():  # the pose is not claimed: look round in place, drive nowhere
+        if holding is not None and holding():  # the pose is not claimed: do not drive to the goal
             if not nav.events or nav.events[-1][1] != "hold":
                 nav.events.append((float(step.scan.stamp), "hold", "localisation not tracking"))
-            v, w = 0.0, HOLD_TURN
+            look = looking() if looking is not None else None
+            if look is not None and (aside is None or not np.allclose(aside.goal[:2], look[:2])):
+                aside = Navigator(look[:2], robot.cfg, cfg)
+                nav.events.append((float(step.scan.stamp), "disambiguate", f"to ({look[0]:.2f}, {look[1]:.2f})"))
+            v, w = 0.0, HOLD_TURN  # look round in place ...
+            if look is not None:  # ... or drive where the localiser's hypotheses differ
+                cmd = aside.step(pose, step.velocity, step.scan.points_in_base(), grid, step.scan.stamp)
+                if aside.status == ACTIVE:
+                    v, w = cmd.v, cmd.w
+                else:
+                    nav.events.append((float(step.scan.stamp), "looked", f"{aside.status}: {aside.reason}"))
+                    pose_source.looked()
+                    aside = None
         else:
             cmd = nav.step(pose, step.velocity, step.scan.points_in_base(), grid, step.scan.stamp)
             if nav.status != ACTIVE:
