@@ -1,15 +1,16 @@
 """Monte Carlo localisation: slam2d's filter beside a re-implementation of ROS amcl's defaults,
 on the office and the room plans, global localisation, kidnapping and tracking.
 
-Usage: nice .venv/bin/python benchmarks/localization.py [--worlds office rooms] [--runs N] [--first-seed 0]
+Usage: nice .venv/bin/python benchmarks/localization.py [--worlds office rooms ring wings] [--runs N] [--first-seed 0]
        [--workers 2] [--scenarios global kidnap tracking] [--filters slam2d amcl amcl_recovery]
        [--out results/bench-localization]
 
 Every seeded run records one stream of the wandering robot (scans, odometry,
 truth) and replays it through every filter, so that all see the same data:
-- global: no initial pose, 40 s of driving; converged = error < 0.2 m and < 5 deg held
-  for 5 s, counted when it starts within 10 m of travel; a false convergence is a
-  confident filter (heaviest cluster >= 90 %, sd < 0.2 m) more than 1 m wrong for 5 s;
+- global: no initial pose, 40 s of driving; converged = state tracking with an error < 0.2 m
+  and < 5 deg held for 5 s, counted when it starts within 10 m of travel; a false
+  convergence is the state tracking more than 0.5 m wrong for 5 s (any scenario); the
+  state at the end (tracking / ambiguous / lost) is counted;
 - kidnap: tracking from the true pose (sd 0.1 m, 3 deg) for 10 s, then a teleport of
   at least 5 m; recovered = converged again within 15 s of driving;
 - tracking: from the true pose with the rough initial spread (0.5 m, 15 deg), 60 s;
@@ -22,6 +23,7 @@ summary (medians and rates per world and filter) to table.md.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -40,11 +42,54 @@ GLOBAL_TRAVEL = 10.0  # m
 RECOVERY = 15.0  # s
 
 
-def world_specs(names: list[str]) -> list[str]:
-    """'office', 'rooms' (the ten furnished plans of SLAM2D_DATA/rooms) or PNG paths."""
+def _ring() -> np.ndarray:
+    """A square ring corridor (22 m outside, 2.5 m wide) whose four sides, boxes included, are alike."""
+    g = np.full((440, 440), 205, np.uint8)
+    g[20:420, 20:420] = 0
+    g[24:416, 24:416] = 255
+    g[74:366, 74:366] = 0
+    g[78:362, 78:362] = 205
+    g[24:40, 100:124] = 0  # a cupboard on the outer wall of each side
+    g[55:65, 250:262] = 0  # a pillar
+    return np.min([np.rot90(g, k) for k in range(4)], axis=0)
+
+
+def _wings() -> np.ndarray:
+    """A U-shaped plan: two identical wings (a 3.1 m corridor, three furnished rooms off its west side)
+    17.5 m apart, joined at their south ends by a corridor."""
+    g = np.full((400, 640), 205, np.uint8)
+    for c0 in (120, 470):
+        g[20:380, c0:c0 + 70] = 0
+        g[24:376, c0 + 4:c0 + 66] = 255
+        for r0, r1 in ((100, 180), (190, 280), (290, 370)):
+            g[r0:r1, c0 - 100:c0 + 4] = 0
+            g[r0 + 4:r1 - 4, c0 - 96:c0] = 255
+            g[r0 + 20:r0 + 40, c0:c0 + 4] = 255  # the door
+            g[r0 + 10:r0 + 24, c0 - 90:c0 - 60] = 0  # a desk
+        g[120:136, c0 - 40:c0 - 24] = 0  # a cupboard in the first room
+    g[20:90, 120:540] = 0
+    g[24:86, 124:536] = 255
+    for c0 in (120, 470):
+        g[24:376, c0 + 4:c0 + 66] = 255  # each wing opens onto the joining corridor
+    return g
+
+
+SYNTHETIC = {"ring": _ring, "wings": _wings}  # plans made here (0.05 m/px), never used to tune the filter
+
+
+def world_specs(names: list[str], folder: Path | None = None) -> list[str]:
+    """'office', 'rooms' (the furnished plans of SLAM2D_DATA/rooms), 'ring' / 'wings' (plans written to
+    ``folder``) or PNG paths."""
     out = []
     for name in names:
-        if name == "rooms":
+        if name in SYNTHETIC:
+            from PIL import Image
+
+            path = (folder or Path(".")) / f"{name}.png"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            Image.fromarray(SYNTHETIC[name]()[::-1]).save(path)
+            out.append(str(path))
+        elif name == "rooms":
             data = Path(os.environ.get("SLAM2D_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" /
                                        "datasets")) / "rooms"  # fmt: skip
             out += sorted(str(p) for p in data.glob("*_furnitures.png"))
@@ -53,6 +98,7 @@ def world_specs(names: list[str]) -> list[str]:
     return out
 
 
+@functools.lru_cache(maxsize=2)
 def _load(spec: str):
     from slam2d.localization import KnownMap
     from slam2d.sim.world import load_world
@@ -69,6 +115,7 @@ def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) 
         PERIOD,
         converged_at,
         false_convergence,
+        final_state,
         replay,
         wander,
     )
@@ -89,12 +136,14 @@ def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) 
         track = replay(pf, stream)
         row = {"world": Path(spec).stem.replace("_furnitures", ""), "scenario": scenario, "filter": name,
                "seed": seed, "wall_s": time.perf_counter() - t0,
-               "update_ms": float(np.median(track.update_ms)) if len(track.update_ms) else None}  # fmt: skip
+               "update_ms": float(np.median(track.update_ms)) if len(track.update_ms) else None,
+               "false": bool(false_convergence(track)), "end_state": final_state(track),
+               "lookalikes_at_end": None if pf.lookalikes is None else len(pf.lookalikes.at(stream.truth[-1]))}  # fmt: skip
         if scenario == "global":
             c = converged_at(track)
             row.update(converged=bool(c is not None and stream.travelled[c] <= GLOBAL_TRAVEL),
                        travel=None if c is None else float(stream.travelled[c]),
-                       false=bool(false_convergence(track)), max_particles=int(track.particles.max()))  # fmt: skip
+                       max_particles=int(track.particles.max()))
         elif scenario == "kidnap":
             k = stream.kidnaps[0]
             c = converged_at(track, k)
@@ -122,20 +171,38 @@ def _median(rows, key, fmt="{:.3f}") -> str:
     return fmt.format(float(np.median(v))) if v else "-"
 
 
+def _states(rows) -> str:
+    """End states: tracking / ambiguous / lost counts."""
+    return " / ".join(str(sum(r.get("end_state") == s for r in rows)) for s in ("tracking", "ambiguous", "lost"))
+
+
+def _predicted(rows) -> str:
+    """Runs ending ambiguous whose true pose lies at a look-alike place of the map's analysis / all ending ambiguous."""
+    amb = [r for r in rows if r.get("end_state") == "ambiguous"]
+    return f"{sum(bool(r.get('lookalikes_at_end')) for r in amb)} / {len(amb)}" if amb else "-"
+
+
+def _count(rows, key) -> str:
+    return f"{sum(bool(r.get(key)) for r in rows)}" if rows else "-"
+
+
 def table(rows: list[dict]) -> str:
     """Markdown: per filter, all worlds pooled and per world."""
     worlds = sorted({r["world"] for r in rows})
-    lines = [("| world | filter | global converged ≤ 10 m | false conv. | median travel (m) | kidnap recovered ≤ 15 s "
+    lines = [("| world | filter | global converged ≤ 10 m | global end tracking / ambiguous / lost | false conv. "
+              "global / kidnap / tracking | ambiguous at a look-alike | median travel (m) | kidnap recovered ≤ 15 s | kidnap end t / a / l "
               "| median recovery (s) | tracking RMSE (m) | heading RMSE (°) | particles tracking | ms/update | runs |"),
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for world in ["all", *worlds]:
         for name in [n for n in FILTERS["global"] if any(r["filter"] == n for r in rows)]:
             sel = [r for r in rows if r["filter"] == name and world in ("all", r["world"])]
             g = [r for r in sel if r["scenario"] == "global"]
             k = [r for r in sel if r["scenario"] == "kidnap"]
             t = [r for r in sel if r["scenario"] == "tracking"]
-            lines.append(f"| {world} | {name} | {_rate(g, 'converged')} | {_rate(g, 'false')} | "
+            lines.append(f"| {world} | {name} | {_rate(g, 'converged')} | {_states(g) if g else '-'} | "
+                         f"{_count(g, 'false')} / {_count(k, 'false')} / {_count(t, 'false')} | {_predicted(sel)} | "
                          f"{_median(g, 'travel', '{:.1f}')} | {_rate(k, 'recovered')} | "
+                         f"{_states(k) if k else '-'} | "
                          f"{_median(k, 'recovery_s', '{:.1f}')} | {_median(t, 'rmse')} | "
                          f"{_median(t, 'heading_rmse_deg', '{:.2f}')} | {_median(t, 'particles', '{:.0f}')} | "
                          f"{_median(sel, 'update_ms', '{:.1f}')} | {max(len(g), len(k), len(t))} |")  # fmt: skip
@@ -155,7 +222,7 @@ def main(argv: list[str]) -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     seeds = range(args.first_seed, args.first_seed + args.runs)
-    jobs = [(w, s, seed, tuple(args.filters)) for w in world_specs(args.worlds) for s in args.scenarios
+    jobs = [(w, s, seed, tuple(args.filters)) for w in world_specs(args.worlds, out / "plans") for s in args.scenarios
             for seed in seeds]  # fmt: skip
     rows: list[dict] = []
     t0 = time.perf_counter()

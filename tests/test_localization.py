@@ -4,6 +4,7 @@ recovery from a kidnapping, determinism, bad input, the localize command and the
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -353,6 +354,9 @@ def test_localize_command_writes_a_results_folder_and_none_on_bad_input(tmp_path
 
     metrics = json.loads((folder / "metrics.json").read_text())
     assert metrics["converged_s"] is not None and metrics["kidnaps"][0]["at_s"] == pytest.approx(6.0)
+    rows = (folder / "error.csv").read_text().splitlines()
+    assert rows[0].endswith(",state") and metrics["final_state"] == rows[-1].rsplit(",", 1)[1] == "tracking"
+    assert sum(metrics["states"].values()) == len(rows) - 1 and metrics["states"]["tracking"] > 0
     bad = runner.invoke(app, ["localize", "office", "--set", "mcl={bogus: 1}", "--out", str(tmp_path / "bad")])
     assert bad.exit_code == 2 and "mcl.bogus" in bad.output
     assert not (tmp_path / "bad").exists() or not any((tmp_path / "bad").iterdir())
@@ -374,3 +378,184 @@ def test_navigation_drives_on_the_mcl_pose():
     assert 0 < run.metrics["pose_rmse"] < 0.1  # the estimate, not the truth
     with pytest.raises(InputError, match="slam"):
         simulate(config_mod.load(None, ["navigation.localization=mcl", "navigation.goal=[10, 4.2]"]))
+
+
+# --------------------------------------------------------------------------- hypotheses and look-alikes
+
+
+def _wings() -> np.ndarray:
+    """The benchmark's U-shaped plan: two wings alike but where the corridor joining them leaves."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from localization import _wings as wings
+
+    return wings()
+
+
+def _two_rooms(folder) -> str:
+    """A plan (0.05 m/px) of two identical, unconnected 5 m x 4 m rooms 10 m apart along x, each with
+    a partition and a box that make it look different under any turn (nothing tells the rooms apart)."""
+    from PIL import Image
+
+    grey = np.full((100, 320), 205, np.uint8)  # rows up in y
+    room = np.zeros((80, 100), np.uint8)  # walls ...
+    room[1:79, 1:99] = 255  # ... round the free room
+    room[40:79, 30:32] = 0  # a partition 2 m long from one wall
+    room[10:30, 70:90] = 0  # a box 1 m x 1 m in a corner
+    grey[10:90, 10:110] = room
+    grey[10:90, 210:310] = room
+    path = folder / "two_rooms.png"
+    Image.fromarray(grey[::-1]).save(path)
+    return str(path)
+
+
+def _square_ring() -> KnownMap:
+    """A square ring corridor (2 m wide, 10 m outside) whose four sides are alike: symmetric under turns
+    by 90° about its centre (6.525, 6.525) m."""
+    occ = np.zeros((260, 260), bool)
+    occ[30:231, 30:231] = True
+    free = np.zeros_like(occ)
+    free[32:229, 32:229] = True
+    free[72:189, 72:189] = False
+    return KnownMap(occ & ~free, free, 0.05, (0.0, 0.0), "ring")
+
+
+def test_hypotheses_of_a_known_particle_set():
+    from slam2d.localization.mcl import clusters, hypotheses
+
+    rng = np.random.default_rng(0)
+    a, b = np.array([2.0, 3.0, 0.5]), np.array([12.0, -4.0, -2.0])
+    sd = np.array([0.1, 0.05, 0.02])
+    poses = np.concatenate([a + rng.standard_normal((600, 3)) * sd, b + rng.standard_normal((400, 3)) * sd])
+    log_w = np.log(np.r_[np.full(600, 0.8 / 600), np.full(400, 0.2 / 400)])  # the smaller cloud weighs less
+    hyps, mass, _ = hypotheses(poses, log_w, clusters(poses, 0.5, math.radians(10.0)))
+    assert len(hyps) == 2 and np.isclose(mass.sum(), 1.0)
+    assert hyps[0].particles == 600 and hyps[1].particles == 400
+    assert np.isclose(hyps[0].weight, 0.8) and np.isclose(hyps[1].weight, 0.2)
+    for h, truth in ((hyps[0], a), (hyps[1], b)):
+        assert np.allclose(h.pose, truth, atol=0.02)
+        assert np.allclose(np.sqrt(np.diag(h.covariance)), sd, rtol=0.15)
+    # the filter on that set: two compact hypotheses, evidence log 4 below the threshold -> ambiguous
+    world = World.office()
+    pf = ParticleFilter(KnownMap.from_world(world), MclConfig(), 12.0, seed=0)
+    pf.init_pose(a)
+    pf.particles, pf.log_w = poses, log_w
+    pf._tested = True
+    pf._estimate = pf._cluster_estimate()
+    assert pf.state == "ambiguous" and np.isclose(pf.estimate.evidence, math.log(4.0))
+    pf.log_w = np.log(np.r_[np.full(600, (1 - 1e-6) / 600), np.full(400, 1e-6 / 400)])
+    pf._estimate = pf._cluster_estimate()
+    assert pf.state == "tracking" and np.allclose(pf.estimate.pose, a, atol=0.02)
+    pf.particles = a + rng.standard_normal((1000, 3)) * [2.0, 2.0, 0.5]  # one wide cloud
+    pf._estimate = pf._cluster_estimate()
+    assert pf.state == "lost"
+
+
+def test_look_alike_analysis_finds_the_turns_of_a_square_ring():
+    from slam2d.localization.lookalike import look_alikes
+
+    known = _square_ring()
+    found = look_alikes(known)
+    angles = sorted(round(math.degrees(float(geometry_wrap(a.transform[2])))) % 360 for a in found.items)
+    assert angles == [90, 180, 270], found.summary()
+    assert found.places == 4
+    centre = np.array([6.525, 6.525, 0.0])
+    for a in found.items:  # each turns about the ring's centre (within an analysis cell)
+        assert np.allclose(a.image(centre[None])[0, :2], centre[:2], atol=0.15)
+    pose = np.array([2.5, 6.0, 0.3])  # on the west side
+    images = np.array([a.image(pose[None])[0] for a in found.at(pose)])
+    assert len(images) == 3
+    assert known.free[tuple(known.world_to_cell(images[:, :2]).T)].all()  # in the other sides' corridors
+    # a room with nothing alike: none
+    occ = np.zeros((120, 160), bool)
+    occ[[0, -1], :] = occ[:, [0, -1]] = True
+    occ[0:70, 50:52] = occ[80:110, 100:150] = True  # a partition from one wall, a block in a corner
+    assert not look_alikes(KnownMap(occ, ~occ, 0.05, (0.0, 0.0), "room")).items
+
+
+def geometry_wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def test_two_identical_rooms_end_ambiguous_never_tracking_in_the_wrong_one(tmp_path):
+    from slam2d.localization.lookalike import look_alikes
+    from slam2d.sim.world import load_world
+
+    plan = _two_rooms(tmp_path)
+    world, known = load_world(plan), KnownMap.load(plan)
+    found = look_alikes(known)
+    assert any(abs(abs(a.transform[0]) - 10.0) < 0.15 and a.transform[2] == 0 for a in found.items), found.summary()
+    stream = wander(world, known, 25.0, seed=1)
+    pf = ParticleFilter(known, MclConfig(max_particles=5000), stream.scans[0].range_max, seed=1)
+    pf.init_global()
+    track = replay(pf, stream)
+    assert not (track.tracking() & (track.position_error > 0.5)).any()
+    assert track.state[-1] == "ambiguous"
+    held = [h for h in pf.estimate.hypotheses if h.weight > 0.05]
+    assert len(held) == 2  # the true room and its copy
+    assert min(np.hypot(*(h.pose[:2] - stream.truth[-1, :2])) for h in held) < 0.2
+
+
+def test_navigation_on_mcl_turns_in_place_while_the_pose_is_ambiguous(tmp_path):
+    from slam2d.localization import MclPoseSource
+    from slam2d.navigation.drive import run_navigation
+    from slam2d.sim.world import load_world
+
+    plan = _two_rooms(tmp_path)
+    world, known = load_world(plan), KnownMap.load(plan)
+    start = np.array([1.2, 1.5, 0.0])
+    robot = Robot(world, start, seed=0)
+    source = MclPoseSource(known, start, MclConfig(max_particles=5000), robot.cfg.laser.range_max, seed=0,
+                           active=False)  # fmt: skip
+    source.filter.init_global()  # no initial pose: the two rooms cannot be told apart
+    result = run_navigation(world, robot, None, (3.0, 1.5), pose_source=source, max_steps=150)
+    assert source.filter.state == "ambiguous" and not result.success
+    assert np.all(result.commands[:, 0] == 0.0) and np.all(result.commands[:, 1] > 0)  # turned, never drove
+    assert np.hypot(*(result.trajectory[-1, :2] - start[:2])) < 0.05
+    assert [e[1] for e in result.events] == ["hold"]
+
+
+def test_the_disambiguating_goal_looks_where_the_wings_differ(tmp_path):
+    from PIL import Image
+
+    from slam2d.localization.active import disambiguating_goal, separation
+
+    Image.fromarray(_wings()[::-1]).save(tmp_path / "wings.png")
+    known = KnownMap.load(tmp_path / "wings.png")
+    truth = np.array([7.7, 17.0, -np.pi / 2])  # far end of the west wing; the east wing's copy is 17.5 m east
+    copy = truth + [17.5, 0.0, 0.0]
+    rng = np.random.default_rng(0)
+    pf = ParticleFilter(known, MclConfig(), 12.0, seed=0)
+    pf.init_pose(truth)
+    pf.particles = np.concatenate([truth + rng.standard_normal((300, 3)) * [0.05, 0.05, 0.01],
+                                   copy + rng.standard_normal((300, 3)) * [0.05, 0.05, 0.01]])  # fmt: skip
+    pf.log_w = np.full(600, -math.log(600))
+    pf._estimate = pf._cluster_estimate()
+    assert len(pf.estimate.hypotheses) == 2
+    here, free = separation(pf, pf.estimate.pose[None])
+    assert free[0] and here[0] < 0.05  # the scans here are the same under both
+    goal = disambiguating_goal(pf, max_distance=16.0)
+    assert goal is not None and goal.separation > 0.5
+    assert goal.pose[1] < 8.0  # towards the corridor that joins the wings (y 1.2-4.3 m)
+    assert known.free[tuple(known.world_to_cell(goal.pose[None, :2])[0])]
+
+
+def test_navigation_on_mcl_drives_where_the_wings_differ_then_to_its_goal(tmp_path):
+    from PIL import Image
+
+    from slam2d.localization import MclPoseSource
+    from slam2d.navigation import run_navigation, world_grid
+    from slam2d.sim.world import load_world
+
+    Image.fromarray(_wings()[::-1]).save(tmp_path / "wings.png")
+    world, known = load_world(str(tmp_path / "wings.png")), KnownMap.load(tmp_path / "wings.png")
+    start, goal = np.array([7.7, 17.0, -np.pi / 2]), (7.7, 9.0)  # far end of the west wing, a goal in it
+    robot = Robot(world, start, seed=0)
+    source = MclPoseSource(known, start, MclConfig(max_particles=5000), robot.cfg.laser.range_max, seed=0)
+    source.filter.init_global()  # the wings look alike until the corridor that joins them is in view
+    result = run_navigation(world, robot, world_grid(world), goal, pose_source=source, max_steps=1200)
+    kinds = [e[1] for e in result.events]
+    assert "disambiguate" in kinds and source.goals, kinds
+    assert result.success and result.goal_error < 0.3  # at the goal in the true wing
+    assert source.filter.state == "tracking"

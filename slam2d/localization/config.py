@@ -48,6 +48,22 @@ class MclConfig(Section):
                                  "weighs as much as the true one whatever the number and spread of its particles "
                                  "(False: plain MCL, as amcl)")
     free_clearance: float = Field(0.1, ge=0, description="m from walls of random and global particles")
+    # hypotheses and the filter's state (tracking / ambiguous / lost)
+    hypotheses: bool = Field(True, description="the state is 'tracking' only once the heaviest compact cluster's "
+                             "evidence over the runner-up reaches the map's threshold (confidence) and its "
+                             "look-alike places (lookalike_*) were tested; hypotheses keep hypothesis_particles at "
+                             "resampling (False: tracking whenever a cluster holds 90 % within converged_sd, as amcl)")
+    confidence: float = Field(0.99, gt=0, lt=1, description="tracking needs the best hypothesis's weight over the "
+                              "runner-up's to reach places x confidence / (1 - confidence), places being the most "
+                              "places of the map that look alike (lookalike analysis; 1 without look-alikes)")
+    hypothesis_particles: int = Field(100, ge=0, le=MAX_SAMPLES, description="particles each hypothesis keeps at "
+                                      "resampling (with its weight) while it holds hypothesis_keep of the best's")
+    hypothesis_keep: float = Field(1e-4, gt=0, le=1, description="weight relative to the best hypothesis below "
+                                   "which a hypothesis is left to resampling")
+    lookalike_radius: float = Field(4.0, gt=0, description="m: two places look alike when the walls within this "
+                                    "distance match (turns by 90° multiples and shifts)")
+    lookalike_match: float = Field(0.8, gt=0, le=1, description="share of those walls that must land on walls "
+                                   "(both ways)")
     # odometry motion model (sample_motion_model_odometry)
     alpha1: float = Field(0.05, ge=0, description="rotation noise from rotation")
     alpha2: float = Field(0.01, ge=0, description="rotation noise from translation, rad^2/m^2")
@@ -85,7 +101,7 @@ def amcl_config(recovery: bool = False) -> MclConfig:
         resample_ess=0.0, resample_interval=2, alpha_slow=0.001 if recovery else 0.0,
         alpha_fast=0.1 if recovery else 0.0, free_clearance=0.0, alpha1=0.2, alpha2=0.2, alpha3=0.2, alpha4=0.2,
         model="likelihood_field", beams=30, z_hit=0.95, z_rand=0.05, sigma_hit=0.2, sigma_hit_uncertain=0.2,
-        max_dist=2.0, combine="amcl", wall_poses=True, hypothesis_fit=False,
+        max_dist=2.0, combine="amcl", wall_poses=True, hypothesis_fit=False, hypotheses=False,
         beam_weight=1.0, global_candidates=1, recovery_candidates=1, recovery_best_beams=1.0, initial_sd_xy=0.5,
         initial_sd_theta=math.pi / 12,
     )  # fmt: skip

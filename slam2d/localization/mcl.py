@@ -36,24 +36,50 @@ from slam2d.localization.maps import KnownMap
 from slam2d.localization.sensor import LikelihoodField, sensor_model
 from slam2d.types import Scan
 
-__all__ = ["Estimate", "ParticleFilter", "clusters", "kld_limit", "low_variance_indices", "sample_motion"]
+__all__ = ["Estimate", "Hypothesis", "ParticleFilter", "clusters", "hypotheses", "kld_limit", "low_variance_indices",
+           "sample_motion"]
 
 _MIN_TRANS = 0.01  # m: below this a motion has no heading of its own (rot1 = 0), as in amcl
 PARTICLE_BEAM_BYTES = 32  # memory per particle and beam while a scan is weighed (float64 temporaries)
 CONFIDENT_NOISE = 0.1  # random share below which a confident filter draws no random particle
 LOCAL_SPREAD = np.array([0.3, 0.3, 0.1])  # m, m, rad: sd of recovery candidates around the current particles
+MAX_HYPOTHESES = 20  # clusters reported and kept alive at resampling, heaviest first
+SAME_PLACE = (1.0, 0.5)  # m, rad: a look-alike image this close to a hypothesis is already held
+STATES = ("tracking", "ambiguous", "lost")
+FIT_DEFICIT = 0.1  # short-term average likelihood this far below the long-term one: the pose is not claimed
+FIT_ALPHA = 0.3  # decay of that short-term average (w_fast's 0.1 lags a recovery by seconds)
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """A cluster of particles: weighted mean pose (3,), covariance (3, 3), share of the weight, particles."""
+
+    pose: np.ndarray
+    covariance: np.ndarray
+    weight: float
+    particles: int
+
+    @property
+    def sd_xy(self) -> float:
+        """m, root of the larger position variance."""
+        return float(math.sqrt(max(self.covariance[0, 0], self.covariance[1, 1])))
 
 
 @dataclass(frozen=True)
 class Estimate:
     """The filter's pose (3,), its covariance (3, 3), the heaviest cluster's share of the weight,
-    the number of clusters and of particles."""
+    the number of clusters and of particles; the state (``tracking``: one hypothesis holds the
+    evidence; ``ambiguous``: compact hypotheses not yet told apart; ``lost``: no compact one), the
+    hypotheses (heaviest first) and the log evidence ratio of the best over the runner-up."""
 
     pose: np.ndarray
     covariance: np.ndarray
     share: float
     clusters: int
     particles: int
+    state: str = "tracking"
+    hypotheses: tuple[Hypothesis, ...] = ()
+    evidence: float = math.inf
 
     @property
     def sd_xy(self) -> float:
@@ -158,6 +184,29 @@ def cluster_means(poses: np.ndarray, log_w: np.ndarray, labels: np.ndarray, k: i
         return np.nan_to_num(mean), np.log(total) + log_w.max()
 
 
+def hypotheses(poses: np.ndarray, log_w: np.ndarray, labels: np.ndarray, count: int = MAX_HYPOTHESES
+               ) -> tuple[list[Hypothesis], np.ndarray, np.ndarray]:
+    """The ``count`` heaviest clusters of ``poses`` (P, 3) with log weights (P,) and cluster ``labels``
+    (P,) as hypotheses, heaviest first; also every cluster's weight (K,) (normalised) and the labels
+    of the hypotheses returned (their order)."""
+    w = np.exp(log_w - log_w.max())
+    mass = np.bincount(labels, weights=w)
+    mass = mass / mass.sum()
+    order = np.argsort(-mass, kind="stable")[:count]
+    out = []
+    for c in order:
+        inside = labels == c
+        mean, cov = weighted_pose(poses[inside], w[inside])
+        out.append(Hypothesis(mean, cov, float(mass[c]), int(inside.sum())))
+    return out, mass, order
+
+
+def _same_place(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether poses ``a`` and ``b`` (3,) lie within SAME_PLACE of each other."""
+    return bool(math.hypot(a[0] - b[0], a[1] - b[1]) < SAME_PLACE[0]
+                and abs(float(geometry.wrap_angle(a[2] - b[2]))) < SAME_PLACE[1])  # fmt: skip
+
+
 def weighted_pose(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weighted mean pose (3,) (circular mean heading) and covariance (3, 3) of poses (P, 3)."""
     w = weights / weights.sum()  # sums, not BLAS: its threads contend with numba's
@@ -179,6 +228,7 @@ class ParticleFilter:
         pool = self.cfg.max_particles * self.cfg.global_candidates
         check_memory(pool * (self.cfg.beams * PARTICLE_BEAM_BYTES + 64), "localization.mcl.max_particles",
                      f"weighing {pool} particles on {self.cfg.beams} beams")
+        self.range_max = float(range_max)
         self.sensor = sensor_model(known, self.cfg, range_max)
         self.coarse = self.sensor  # the smoother likelihood field used while the pose is uncertain
         if self.cfg.model == "likelihood_field" and self.cfg.sigma_hit_uncertain != self.cfg.sigma_hit:
@@ -189,10 +239,24 @@ class ParticleFilter:
         self.particles = np.zeros((0, 3))
         self.log_w = np.zeros(0)
         self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)  # of all beams, of the best-fitting share
+        self.w_fit = 0.0  # short-term average likelihood of every beam (FIT_ALPHA), for the state
         self.updates = self.resamples = self.injected = 0
         self._odom: np.ndarray | None = None  # odometry at the last update
         self._estimate: Estimate | None = None
         self._labels: np.ndarray | None = None  # cluster of each particle at the last estimate
+        self._best_label = 0  # the heaviest cluster's label
+        self._hypothesis_labels = np.zeros(1, dtype=np.int64)  # the cluster label of each hypothesis
+        self._tested = False  # the compact best hypothesis's look-alike places were added
+        self._anchored = False  # an initial pose rules look-alike places out
+        self._estimate_odom: np.ndarray | None = None  # odometry at the last estimate
+        self.lookalikes = None  # the map's look-alike places (slam2d.localization.lookalike), with hypotheses
+        self.evidence_threshold = math.inf  # log weight ratio best / runner-up from which the state is tracking
+        if self.cfg.hypotheses:
+            from slam2d.localization.lookalike import look_alikes
+
+            self.lookalikes = look_alikes(known, self.cfg.lookalike_radius, self.cfg.lookalike_match)
+            c = self.cfg.confidence
+            self.evidence_threshold = math.log(self.lookalikes.places * c / (1.0 - c))
         self._candidates = False  # the next update weighs global candidates
 
     # initialisation ------------------------------------------------------
@@ -227,7 +291,8 @@ class ParticleFilter:
         self._candidates = self.cfg.global_candidates > 1
 
     def init_pose(self, pose, sd_xy: float | None = None, sd_theta: float | None = None) -> None:
-        """A rough initial pose (3,): ``max_particles`` Gaussian poses around it (sd m, rad; config's by default)."""
+        """A rough initial pose (3,): ``max_particles`` Gaussian poses around it (sd m, rad; config's by default);
+        its look-alike places are not hypotheses (the given pose rules them out)."""
         pose = geometry.as_pose(pose).reshape(3)
         if not np.isfinite(pose).all():
             raise InputError("initial pose", f"must be finite, got {pose.tolist()}")
@@ -236,13 +301,16 @@ class ParticleFilter:
         poses = pose + self.rng.standard_normal((self.cfg.max_particles, 3)) * sd
         poses[:, 2] = geometry.wrap_angle(poses[:, 2])
         self._reset(poses)
+        self._anchored = True  # the given pose rules its look-alike places out (until random particles come)
 
     def _reset(self, poses: np.ndarray) -> None:
         self._candidates = False
         self.particles = poses
         self.log_w = np.full(len(poses), -math.log(len(poses)))
         self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
+        self.w_fit = 0.0
         self._estimate = self._labels = None
+        self._tested = self._anchored = False
 
     # the filter ------------------------------------------------------------
 
@@ -279,7 +347,7 @@ class ParticleFilter:
             for i, (fit, counted) in enumerate(self._recovery_fits(pool, scan, ll, beams)):
                 self._average(i, float(logsumexp(fit) - math.log(len(pool))), counted)
                 self.w_slow[i] = max(self.w_slow[i], self._best_fit(fit, counted))
-        self._estimate = self._cluster_estimate()
+        self._update_estimate()
 
     def _best_fit(self, loglik: np.ndarray, beams: int) -> float:
         """Mean likelihood (as :meth:`_average` scales it) of the best 1 % of ``loglik``: what a filter
@@ -313,11 +381,12 @@ class ParticleFilter:
                     self._average(i, float(logsumexp(self.log_w + fit)), counted)
             joint = self.log_w + fine[:p]
             if refit:
-                joint = joint + (old + fine[p:] - _group_logsumexp(joint, self._labels, k))[self._labels]
+                between = coarse[p:] if self.cfg.hypotheses else fine[p:]  # hypotheses weighed on the smooth field
+                joint = joint + (old + between - _group_logsumexp(joint, self._labels, k))[self._labels]
             self.log_w = joint - logsumexp(joint)
         if self._resample_due() or (self.confident() and self.random_share() > 0):
             self._resample(scan)
-        self._estimate = self._cluster_estimate()
+        self._update_estimate()
 
     def _recovering(self) -> bool:
         return self.cfg.alpha_slow > 0 and self.cfg.alpha_fast > 0
@@ -337,6 +406,8 @@ class ParticleFilter:
         w_avg = math.exp(log_total / (beams * cfg.beam_weight)) if cfg.combine == "product" else math.exp(log_total)
         for w, alpha in ((self.w_slow, cfg.alpha_slow), (self.w_fast, cfg.alpha_fast)):
             w[i] = w_avg if w[i] == 0.0 else w[i] + alpha * (w_avg - w[i])
+        if i == 0:  # the fit the state is judged on: as w_fast, quicker
+            self.w_fit = w_avg if self.w_fit == 0.0 else self.w_fit + FIT_ALPHA * (w_avg - self.w_fit)
 
     def _resample_due(self) -> bool:
         if self.cfg.resample_ess > 0:
@@ -376,14 +447,41 @@ class ParticleFilter:
         drawn[is_random] = self.random_poses(int(is_random.sum()))
         n = self.kld_count(drawn)  # KLD counts bins along the random order
         n_random = int(is_random[:n].sum())
-        kept = self.particles[low_variance_indices(weights, n - n_random, self.rng)]
-        self.particles = np.concatenate([kept, self.guided_random_poses(n_random, scan)])
+        kept = low_variance_indices(weights, n - n_random, self.rng)
+        per_cluster = cfg.hypotheses and self._labels is not None and len(self._labels) == len(weights)
+        if per_cluster:
+            kept = self._with_floors(kept, weights)
+        self.particles = np.concatenate([self.particles[kept], self.guided_random_poses(n_random, scan)])
+        n = len(self.particles)
         self.log_w = np.full(n, -math.log(n))
+        if per_cluster:  # each cluster keeps its weight, shared by the particles drawn into it
+            labels = self._labels[kept]
+            mass = np.bincount(self._labels, weights=weights)
+            self.log_w[:len(kept)] = np.log(mass[labels] / np.bincount(labels)[labels] * len(kept) / n)
+            self.log_w -= logsumexp(self.log_w)
         self.resamples += 1
         if n_random:
             self.injected += n_random
+            self._anchored = False  # the pose is searched for again: its look-alikes are hypotheses
             if cfg.combine == "amcl":  # amcl restarts its averages after injecting
                 self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
+
+    def _with_floors(self, kept: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """``kept`` indices plus, for each of the MAX_HYPOTHESES heaviest clusters holding at least
+        ``hypothesis_keep`` of the heaviest one's weight, particles drawn from it by weight up to
+        ``hypothesis_particles``: a look-alike place is not lost to sampling before the scans tell."""
+        cfg, labels = self.cfg, self._labels
+        mass = np.bincount(labels, weights=weights)
+        top = np.argsort(-mass, kind="stable")[:MAX_HYPOTHESES]
+        top = top[mass[top] >= cfg.hypothesis_keep * mass[top[0]]]
+        have = np.bincount(labels[kept], minlength=len(mass))
+        extra = [kept]
+        for c in top:
+            short = cfg.hypothesis_particles - int(have[c])
+            if short > 0:
+                members = np.flatnonzero(labels == c)
+                extra.append(members[low_variance_indices(weights[members] / mass[c], short, self.rng)])
+        return np.concatenate(extra)
 
     def kld_count(self, poses: np.ndarray) -> int:
         """The first n such that the n leading ``poses`` reach KLD's count for their bins (max if none)."""
@@ -396,13 +494,81 @@ class ParticleFilter:
     # estimate -----------------------------------------------------------------
 
     def _cluster_estimate(self) -> Estimate:
-        cfg, w = self.cfg, np.exp(self.log_w)
+        cfg = self.cfg
         labels = self._labels = clusters(self.particles, cfg.kld_bin_xy, cfg.kld_bin_theta)
-        mass = np.bincount(labels, weights=w)
-        best = int(np.argmax(mass))
-        inside = labels == best
-        mean, cov = weighted_pose(self.particles[inside], w[inside])
-        return Estimate(mean, cov, float(mass[best] / mass.sum()), len(mass), len(self.particles))
+        hyps, mass, order = hypotheses(self.particles, self.log_w, labels, MAX_HYPOTHESES if cfg.hypotheses else 1)
+        self._best_label, self._hypothesis_labels = int(order[0]), order
+        best = hyps[0]
+        runner_up = float(np.partition(mass, len(mass) - 2)[-2]) if len(mass) > 1 else 0.0
+        evidence = math.log(best.weight / runner_up) if runner_up > 0 else math.inf
+        return Estimate(best.pose, best.covariance, best.weight, len(mass), len(self.particles),
+                        self._state(best, evidence), tuple(hyps), evidence)  # fmt: skip
+
+    def _state(self, best: Hypothesis, evidence: float) -> str:
+        """``lost`` without a compact best hypothesis; ``tracking`` once its evidence over the runner-up
+        reaches the threshold, its look-alike places were tested and the scans fit as well as they
+        usually do (short-term average likelihood of every beam, ``w_fit``, within FIT_DEFICIT of the
+        long-term one: after a kidnap the best of wrong places is no pose); else ``ambiguous``. Without
+        ``hypotheses``: tracking whenever the best holds 90 % within converged_sd (as amcl claims)."""
+        compact = best.sd_xy < self.cfg.converged_sd
+        if not self.cfg.hypotheses:
+            return "tracking" if compact and best.weight >= 0.9 else "lost"
+        if not compact:
+            return "lost"
+        fits = not self._recovering() or self.w_slow[0] <= 0 or self.w_fit >= (1 - FIT_DEFICIT) * self.w_slow[0]
+        return "tracking" if self._tested and fits and evidence >= self.evidence_threshold else "ambiguous"
+
+    def _update_estimate(self) -> None:
+        """The estimate; when the best hypothesis turns compact (or another one takes the lead), its
+        look-alike places join as hypotheses of equal weight (its particles moved onto each place no
+        hypothesis holds yet), unless an initial pose rules them out and no random particle came since."""
+        before, odom_before = self._estimate, self._estimate_odom
+        est = self._estimate = self._cluster_estimate()
+        self._estimate_odom = self._odom.copy() if self._odom is not None else None
+        if not self.cfg.hypotheses:
+            return
+        if est.state == "lost":
+            self._tested = False
+            return
+        if before is not None and odom_before is not None and self._odom is not None:
+            expected = geometry.compose(before.pose, geometry.between(odom_before, self._odom))
+            if not _same_place(est.pose, expected):  # another hypothesis leads: test it too
+                self._tested = False
+        if not self._tested:
+            self._tested = True
+            if not self._anchored:
+                self._add_lookalikes(est)
+            self._estimate = self._cluster_estimate()
+
+    def _add_lookalikes(self, est: Estimate) -> int:
+        """Give the best hypothesis's look-alike places its weight: a hypothesis already there is raised
+        to it (before the pose was compact, the weights told how many global candidates fell near each
+        place more than how the scans fit), elsewhere its particles are copied there; how many places."""
+        best = est.hypotheses[0]
+        inside = self._labels == self._best_label
+        source, source_w = self.particles[inside], self.log_w[inside]
+        best_mass = logsumexp(source_w)
+        images, raised = [], 0
+        for place in self.lookalikes.at(best.pose):
+            image = place.image(best.pose[None])[0]
+            held = [i for i, h in enumerate(est.hypotheses) if _same_place(image, h.pose)]
+            if not held:
+                images.append(place.image(source))
+            elif held[0] > 0:
+                members = self._labels == self._hypothesis_labels[held[0]]
+                self.log_w[members] += best_mass - logsumexp(self.log_w[members])
+                raised += 1
+        if images:
+            self.particles = np.concatenate([self.particles, *images])
+            self.log_w = np.concatenate([self.log_w, *[source_w] * len(images)])
+        if images or raised:
+            self.log_w -= logsumexp(self.log_w)
+        return len(images) + raised
+
+    @property
+    def state(self) -> str:
+        """``tracking``, ``ambiguous`` or ``lost`` (the last estimate's)."""
+        return self.estimate.state
 
     def confident(self) -> bool:
         """Whether the last estimate's cluster holds 90 % of the weight within ``converged_sd`` m."""

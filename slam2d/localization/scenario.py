@@ -19,7 +19,8 @@ from slam2d.localization.maps import KnownMap
 from slam2d.localization.mcl import ParticleFilter
 from slam2d.types import Scan
 
-__all__ = ["Stream", "Track", "converged_at", "false_convergence", "random_free_pose", "replay", "wander"]
+__all__ = ["Stream", "Track", "converged_at", "false_convergence", "final_state", "random_free_pose", "replay",
+           "wander"]
 
 SPEED = 0.5  # m/s, the wanderer's cruise speed
 PERIOD = 0.1  # s between scans
@@ -106,7 +107,8 @@ def wander(world, known: KnownMap, seconds: float, seed: int, kidnap_at=(), min_
 @dataclass
 class Track:
     """A filter's replay of a stream: estimates (N, 3), their errors (N,) m and (N,) rad, particle
-    counts (N,), the heaviest cluster's share (N,) and position sd (N,) m, ms per update."""
+    counts (N,), the heaviest cluster's share (N,) and position sd (N,) m, ms per update, the
+    filter's state (N,) (tracking / ambiguous / lost)."""
 
     estimates: np.ndarray
     position_error: np.ndarray
@@ -116,6 +118,11 @@ class Track:
     sd_xy: np.ndarray
     update_ms: np.ndarray
     snapshots: dict = field(default_factory=dict)
+    state: np.ndarray | None = None
+
+    def tracking(self) -> np.ndarray:
+        """(N,) bool: the filter claimed its pose (every scan if no state was recorded)."""
+        return np.ones(len(self.estimates), bool) if self.state is None else self.state == "tracking"
 
 
 SNAPSHOT_PARTICLES = 400  # particles kept per snapshot (an even subset)
@@ -130,6 +137,7 @@ def replay(pf: ParticleFilter, stream: Stream, snapshot_at=(), view=None, progre
 
     n = len(stream.scans)
     est, count, share, sd, ms = np.zeros((n, 3)), np.zeros(n, int), np.zeros(n), np.zeros(n), []
+    state = np.empty(n, dtype=object)
     snaps = {}
     for i, scan in enumerate(stream.scans):
         t0 = time.perf_counter()
@@ -137,7 +145,7 @@ def replay(pf: ParticleFilter, stream: Stream, snapshot_at=(), view=None, progre
         if updated:
             ms.append((time.perf_counter() - t0) * 1000)
         e = pf.estimate
-        est[i], count[i], share[i], sd[i] = pf.pose(scan.odom), e.particles, e.share, e.sd_xy
+        est[i], count[i], share[i], sd[i], state[i] = pf.pose(scan.odom), e.particles, e.share, e.sd_xy, e.state
         if view is not None:
             view.step(i, scan.stamp - stream.scans[0].stamp, pf, est[i], stream.truth[i], updated)
         if (updated and snapshot_at == "updates") or (snapshot_at != "updates" and i in snapshot_at):
@@ -147,7 +155,7 @@ def replay(pf: ParticleFilter, stream: Stream, snapshot_at=(), view=None, progre
             progress(i + 1)
     err = np.hypot(*(est[:, :2] - stream.truth[:, :2]).T)
     head = np.abs(geometry.wrap_angle(est[:, 2] - stream.truth[:, 2]))
-    return Track(est, err, head, count, share, sd, np.array(ms), snaps)
+    return Track(est, err, head, count, share, sd, np.array(ms), snaps, state.astype(str))
 
 
 def _held(ok: np.ndarray, from_index: int, steps: int) -> int | None:
@@ -166,18 +174,22 @@ HOLD = 5.0  # s
 
 
 def converged_at(track: Track, from_index: int = 0) -> int | None:
-    """First scan (>= from_index) from which the error stays below 0.2 m and 5 degrees for 5 s."""
-    ok = (track.position_error < POSITION_OK) & (track.heading_error < HEADING_OK)
+    """First scan (>= from_index) from which the filter is tracking with an error below 0.2 m and
+    5 degrees for 5 s."""
+    ok = (track.position_error < POSITION_OK) & (track.heading_error < HEADING_OK) & track.tracking()
     return _held(ok, from_index, round(HOLD / PERIOD))
 
 
-CONFIDENT_SHARE = 0.9
-CONFIDENT_SD = 0.2  # m
-WRONG = 1.0  # m
+WRONG = 0.5  # m
 
 
 def false_convergence(track: Track, from_index: int = 0) -> bool:
-    """Whether the filter was confident (heaviest cluster >= 90 % of the weight, sd < 0.2 m) while
-    more than 1 m wrong, for 5 s, after ``from_index``."""
-    ok = (track.share >= CONFIDENT_SHARE) & (track.sd_xy < CONFIDENT_SD) & (track.position_error > WRONG)
+    """Whether the filter claimed its pose (state tracking) while more than 0.5 m wrong, for 5 s,
+    after ``from_index``."""
+    ok = track.tracking() & (track.position_error > WRONG)
     return _held(ok, from_index, round(HOLD / PERIOD)) is not None
+
+
+def final_state(track: Track) -> str:
+    """The filter's state at the last scan."""
+    return "tracking" if track.state is None else str(track.state[-1])

@@ -62,6 +62,8 @@ class NavigationResult:
         return {k: getattr(self, k) for k in keys} | {"length_ratio": self.length_ratio}
 
 
+HOLD_TURN = 0.5  # rad/s: turning in place while the pose source holds
+
 def clearance(world, robot) -> float:
     """Distance (m) between the robot's disc and the nearest wall, world bound or moving obstacle."""
     x, y = robot.pose[:2]
@@ -79,7 +81,10 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
 
     ``map_grid`` is a planning or occupancy grid, or a callable ``(StepResult) -> grid``
     asked at every step (a live map). ``pose_source(StepResult) -> pose`` is the pose the
-    navigator uses (default: the true pose). Stops when the goal is reached or
+    navigator uses (default: the true pose); while its ``holding()`` (if it has one) is True, the
+    robot does not drive to the goal (a localiser that has not claimed its pose): it drives to the
+    pose source's ``looking()`` goal if it gives one (a place that tells its hypotheses apart; then
+    ``looked()`` is called once that goal is reached or given up), else turns in place. Stops when the goal is reached or
     unreachable, after ``config.max_time`` s of simulated time, or after ``max_steps``. With
     ``config.depth_camera.enabled`` a depth camera (noise seeded by ``seed``) renders the world
     (its 3D objects too) at every step and its obstacle layer goes to the navigator.
@@ -93,6 +98,8 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
     limit = max_steps if max_steps is not None else int(np.ceil(cfg.max_time / cfg.period)) + 1
     depth = cfg.depth_camera
     camera, layer = (DepthCamera(depth, seed), ObstacleLayer(depth)) if depth.enabled else (None, None)
+    holding = getattr(pose_source, "holding", None)
+    looking, aside = getattr(pose_source, "looking", None), None
     for _ in range(limit):
         grid = map_grid(step) if callable(map_grid) else map_grid
         pose = step.pose if pose_source is None else pose_source(step)
@@ -100,12 +107,30 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
         if camera is not None:
             layer.update(pose, camera.render(world, robot.pose, robot.obstacle_circles()), step.scan.stamp, points)
             obstacles = layer.points()
-        cmd = nav.step(pose, step.velocity, points, grid, step.scan.stamp, obstacles)
-        if nav.status != ACTIVE:
-            break
-        step = robot.step(cmd.v, cmd.w, cfg.period)
+        if holding is not None and holding():  # the pose is not claimed: do not drive to the goal
+            if not nav.events or nav.events[-1][1] != "hold":
+                nav.events.append((float(step.scan.stamp), "hold", "localisation not tracking"))
+            look = looking() if looking is not None else None
+            if look is not None and (aside is None or not np.allclose(aside.goal[:2], look[:2])):
+                aside = Navigator(look[:2], robot.cfg, cfg)
+                nav.events.append((float(step.scan.stamp), "disambiguate", f"to ({look[0]:.2f}, {look[1]:.2f})"))
+            v, w = 0.0, HOLD_TURN  # look round in place ...
+            if look is not None:  # ... or drive where the localiser's hypotheses differ
+                cmd = aside.step(pose, step.velocity, points, grid, step.scan.stamp, obstacles)
+                if aside.status == ACTIVE:
+                    v, w = cmd.v, cmd.w
+                else:
+                    nav.events.append((float(step.scan.stamp), "looked", f"{aside.status}: {aside.reason}"))
+                    pose_source.looked()
+                    aside = None
+        else:
+            cmd = nav.step(pose, step.velocity, points, grid, step.scan.stamp, obstacles)
+            if nav.status != ACTIVE:
+                break
+            v, w = cmd.v, cmd.w
+        step = robot.step(v, w, cfg.period)
         poses.append(step.pose)
-        commands.append((cmd.v, cmd.w))
+        commands.append((v, w))
         stamps.append(step.scan.stamp)
         collisions += int(step.collision and not in_contact)
         object_hits += int(step.contact == "object" and not in_contact)

@@ -57,7 +57,7 @@ for _name, _command in {
         "min_clearance", "path_repetition", "decision_ms_median", "map_accuracy.mean_abs_error_m", "stop_reason",
         "wall_s"), 'Explore a simulated world from nothing with SLAM in the loop.'),
     "localize": Command("slam2d.localization.config:LocalizeConfig", "slam2d.runs.localize:run_localize", (
-        "position_rmse", "heading_rmse_deg", "converged_s", "false_convergence", "position_rmse_converged",
+        "position_rmse", "heading_rmse_deg", "converged_s", "false_convergence", "final_state", "position_rmse_converged",
         "particles_median", "update_ms_median"), 'Monte Carlo localisation on a known map: tracking, global localisation, kidnapping.'),
     "map": Command("slam2d.runs.map:MapConfig", "slam2d.runs.map:run_map", (
         "grid.dense_uint8_bytes", "sparse.bytes", "quadtree.bytes", "quadtree.trinary_bytes", "lines.bytes",

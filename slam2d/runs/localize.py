@@ -6,7 +6,7 @@ itself when it is the office or a floor plan; ``kidnap`` teleports it) or a log
 (``--dataset EXPERIMENT.yaml``: its ``dataset`` section), whose reference is a TUM
 trajectory (by default the ``trajectory.tum`` of the slam2d run that made the
 map). The folder holds the resolved config, the estimate and the truth or
-reference (TUM), ``error.csv`` (error, particle count, cluster share over time),
+reference (TUM), ``error.csv`` (error, particle count, cluster share, state over time),
 the figures (error and particles over time, the particle cloud at chosen
 times) and ``metrics.json``.
 """
@@ -27,8 +27,17 @@ from slam2d.errors import InputError, check_inside
 from slam2d.evaluation.trajectory import read_tum, write_tum
 from slam2d.localization.config import LocalizeConfig
 from slam2d.localization.maps import KnownMap
-from slam2d.localization.mcl import ParticleFilter
-from slam2d.localization.scenario import PERIOD, Stream, Track, converged_at, false_convergence, replay, wander
+from slam2d.localization.mcl import STATES, ParticleFilter
+from slam2d.localization.scenario import (
+    PERIOD,
+    Stream,
+    Track,
+    converged_at,
+    false_convergence,
+    final_state,
+    replay,
+    wander,
+)
 from slam2d.paths import resolve_data_path
 from slam2d.runs.results import json_text, live_view, progress_bar, results_folder
 from slam2d.sim.world import load_world
@@ -53,9 +62,9 @@ def run_localize(cfg: LocalizeConfig, quiet: bool = False, viz: str | Path | Non
     name = cfg.name or "localize"
     with results_folder(cfg.output.root, name) as (work, published), live_view(viz, name, "localize", known) as view:
         metrics = localize(known, cfg, work, map_path=map_path, dataset=dataset, view=view, quiet=quiet)
-        log.info("position RMSE %.3f m, heading RMSE %.2f deg, median %d particles, %.1f ms per update",
+        log.info("position RMSE %.3f m, heading RMSE %.2f deg, median %d particles, %.1f ms per update, ends %s",
                  metrics["position_rmse"], metrics["heading_rmse_deg"], metrics["particles_median"],
-                 metrics["update_ms_median"])  # fmt: skip
+                 metrics["update_ms_median"], metrics["final_state"])  # fmt: skip
     return published[0]
 
 
@@ -172,6 +181,8 @@ def metrics_of(stream: Stream, track: Track, pf) -> dict[str, Any]:
         "converged_s": float(stamps[conv]) if conv is not None else None,
         "converged_travel_m": float(stream.travelled[conv]) if conv is not None else None,
         "false_convergence": bool(false_convergence(track)),
+        "states": {name: int(np.sum(track.state == name)) for name in STATES} if track.state is not None else None,
+        "final_state": final_state(track),
         "particles_median": float(np.median(track.particles)),
         "particles_median_converged": float(np.median(track.particles[after])) if after.any() else None,
         "update_ms_median": float(np.median(track.update_ms)) if len(track.update_ms) else None,
@@ -201,8 +212,10 @@ def _write_results(out: Path, stream: Stream, track: Track, metrics: dict, known
                   Trajectory(stamps[has], stream.truth[has]))  # fmt: skip
     rows = np.column_stack([stamps - stamps[0], track.position_error, np.degrees(track.heading_error),
                             track.particles, track.share])  # fmt: skip
-    np.savetxt(out / "error.csv", rows, delimiter=",", fmt="%.6g",
-               header="t_s,position_error_m,heading_error_deg,particles,cluster_share", comments="")
+    states = track.state if track.state is not None else np.full(len(rows), "tracking")
+    with open(out / "error.csv", "w") as f:
+        f.write("t_s,position_error_m,heading_error_deg,particles,cluster_share,state\n")
+        f.writelines(",".join(f"{v:.6g}" for v in row) + f",{state}\n" for row, state in zip(rows, states))
     if cfg.output.figures:
         _figures(out, stream, track, known, cfg)
 
