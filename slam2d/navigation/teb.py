@@ -23,8 +23,10 @@ moved into the new robot frame, with poses inserted or removed so that each dt s
 ``dt_ref``; the command is the first segment's (v, w), clipped to what the robot reaches in one
 period. A band whose first ``check_time`` s or whose command's stopping arc would bring the disc
 onto a laser point is dropped: the robot brakes and reports itself blocked. With
-``homotopies`` on, a second band starts on the other side of the nearest obstacle ahead and the
-cheaper one is kept (teb_local_planner's alternatives in distinct topologies).
+``homotopies`` on, a band that still runs through a point (a person on the path, a box the
+map lacks: pulled from both sides, it stays in the obstacle) is optimised again from two starts
+moved round that point, one on each side, and the cheapest band clear of every point is kept
+(teb_local_planner's alternatives in distinct topologies, two at a time).
 """
 
 from __future__ import annotations
@@ -72,7 +74,7 @@ class TebConfig(Section):
     obstacle_reach: float = Field(0.5, ge=0, description="m, the most such a point's margin grows along the band")
     check_time: float = Field(1.0, ge=0, description="s of band checked for contact before its command goes out")
     turn_first: float = Field(1.4, gt=0, description="rad; a path this far off the heading is turned to on the spot")
-    homotopies: bool = Field(True, description="also optimise a band round the other side of the nearest obstacle")
+    homotopies: bool = Field(True, description="a band through a point is optimised again round either side of it")
     obstacle_weight: float = Field(100.0, ge=0, description="inside radius + margin, per m^2")
     inflation_weight: float = Field(2.0, ge=0, description="within the inflation, per m^2")
     via_weight: float = Field(1.0, ge=0, description="per m^2 from a via-point")
@@ -329,16 +331,16 @@ class TimedElasticBand:
         return self._first_command(poses, dts, velocity, points)
 
     def _best(self, starts, velocity, points, moving, local, final):
-        """The cheapest clear band (poses, dts, cost) optimised from ``starts`` and, with ``homotopies``,
-        from the first moved round the other side of the nearest point that may move; None if none is clear."""
-        if self.cfg.homotopies and (other := self._other_side(starts[0], points[moving])) is not None:
-            starts = [*starts, other]
-        best = None
-        for poses, dts in starts:
-            poses, dts, cost = self.optimise(poses, dts, velocity, points, moving, local, final)
-            if self._clear(poses, dts, points) and (best is None or cost < best[2]):
-                best = (poses, dts, cost)
-        return best
+        """The cheapest clear band (poses, dts, cost) optimised from ``starts``; with ``homotopies``, when the
+        cheapest runs through a point, also from it moved round that point on either side (another homotopy
+        class); None if no band is clear."""
+        found = [self.optimise(poses, dts, velocity, points, moving, local, final) for poses, dts in starts]
+        if self.cfg.homotopies and (hit := self._first_contact(min(found, key=lambda b: b[2]), points)) is not None:
+            found += [self.optimise(*detour, velocity, points, moving, local, final)
+                      for detour in self._detours(min(found, key=lambda b: b[2]), *hit)]  # fmt: skip
+        clear = [b for b in found if self._clear(b[0], b[1], points)]
+        through = [self._first_contact(b, points) is not None for b in clear]
+        return min(zip(clear, through), key=lambda c: (c[1], c[0][2]))[0] if clear else None
 
     # the band's start ---------------------------------------------------------------------------------
 
@@ -406,30 +408,37 @@ class TimedElasticBand:
             i += 1
         return np.array(poses), np.array(dts)
 
-    def _other_side(self, band, points) -> tuple[np.ndarray, np.ndarray] | None:
-        """``band`` moved round the other side of the point of ``points`` (robot frame) nearest to it (within
-        radius + margin + inflation of an inner band pose): a start in the other homotopy class, or None."""
-        poses, dts = band
+    def _first_contact(self, band, points):
+        """(Band pose index, laser point (2,)) where the disc first comes within radius + half the margin of a
+        point along the band (every 2 cm), or None."""
+        poses = band[0]
         if len(points) == 0 or len(poses) < 3:
             return None
+        xy, owner = _densify(poses[:, :2], 0.02, with_index=True)
+        dist, idx = cKDTree(points).query(xy)
+        inside = np.flatnonzero(dist < self.robot.radius + self.cfg.margin / 2)
+        inside = inside[owner[inside] > 0]  # not where the robot is already
+        return None if len(inside) == 0 else (int(owner[inside[0]]), points[idx[inside[0]]])
+
+    def _detours(self, band, k: int, point) -> list[tuple[np.ndarray, np.ndarray]]:
+        """``band`` with its poses around pose ``k`` moved sideways so that it passes ``point`` (2,) at radius +
+        margin + inflation on its left, and on its right: starts in the two homotopy classes round it."""
+        poses, dts = band[0], band[1]
+        k = int(np.clip(k, 1, len(poses) - 2))
+        ahead = poses[k + 1, :2] - poses[k - 1, :2]
+        normal = np.array([-ahead[1], ahead[0]]) / max(np.hypot(*ahead), 1e-9)  # the band's left at pose k
+        across = float((point - poses[k, :2]) @ normal)  # the point's offset to the left of pose k
         reach = self.robot.radius + self.cfg.margin + self.cfg.inflation
-        dist, idx = cKDTree(points).query(poses[1:-1, :2])
-        if dist.min() > reach:
-            return None
-        k = int(np.argmin(dist)) + 1
-        o = points[idx[k - 1]]
-        rel = poses[k, :2] - o
-        gap = float(np.hypot(*rel))
-        if gap < 1e-6:
-            return None
-        shift = -rel / gap * (gap + max(gap, reach))  # as far on the point's other side, at least ``reach``
-        weights = np.exp(-0.5 * ((np.arange(len(poses)) - k) / max(1.0, len(poses) / 6)) ** 2)
+        weights = np.exp(-0.5 * ((np.arange(len(poses)) - k) / max(1.0, len(poses) / 5)) ** 2)
         weights[0] = weights[-1] = 0.0
-        other = poses.copy()
-        other[:, :2] += weights[:, None] * shift[None]
-        step = np.diff(other[:, :2], axis=0)
-        other[1:-1, 2] = np.arctan2(step[1:, 1], step[1:, 0])
-        return other, np.maximum(dts, self._times(other))
+        out = []
+        for side in (1.0, -1.0):
+            moved = poses.copy()
+            moved[:, :2] += weights[:, None] * ((across + side * reach) * normal)[None]
+            step = np.diff(moved[:, :2], axis=0)
+            moved[1:-1, 2] = np.arctan2(step[1:, 1], step[1:, 0])
+            out.append((moved, np.maximum(dts, self._times(moved))))
+        return out
 
     # the graph ----------------------------------------------------------------------------------------
 
@@ -563,10 +572,12 @@ def _arc_length_at(path: np.ndarray, xy) -> float:
     return float(cum[k] + u[k] * math.sqrt(seg[k]))
 
 
-def _densify(xy: np.ndarray, step: float) -> np.ndarray:
-    """The polyline ``xy`` (K, 2) with points inserted so that none are more than ``step`` m apart."""
-    out = [xy[:1]]
-    for a, b in itertools.pairwise(xy):
+def _densify(xy: np.ndarray, step: float, with_index: bool = False):
+    """The polyline ``xy`` (K, 2) with points inserted so that none are more than ``step`` m apart; with
+    ``with_index`` also the index (P,) of the vertex each point follows (the segment it lies on)."""
+    out, owner = [xy[:1]], [np.zeros(1, int)]
+    for i, (a, b) in enumerate(itertools.pairwise(xy)):
         k = max(1, math.ceil(np.hypot(*(b - a)) / step))
         out.append(a + np.linspace(1.0 / k, 1.0, k)[:, None] * (b - a))
-    return np.vstack(out)
+        owner.append(np.full(k, i))
+    return (np.vstack(out), np.concatenate(owner)) if with_index else np.vstack(out)
