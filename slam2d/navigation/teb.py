@@ -49,7 +49,7 @@ from slam2d.navigation.dwa import arcs
 from slam2d.sim.robot import RobotConfig
 
 __all__ = ["TebConfig", "TimedElasticBand", "acceleration_residual", "band_factor", "kinematics_residual",
-           "obstacle_residual", "segments", "velocity_residual", "via_residual"]  # fmt: skip
+           "obstacle_residual", "segments", "stacked", "velocity_residual", "via_residual"]  # fmt: skip
 
 
 
@@ -87,9 +87,9 @@ class TebConfig(Section):
 
 # --- factors: vectorised over the band, with analytic Jacobians ----------------------------------------------
 #
-# Each kind of factor is one gtsam.CustomFactor over the band's pose keys (and its time-interval keys where
-# time enters): a Python callback per kind and evaluation, a numba kernel over the band inside (the band is
-# small: numpy's per-call cost would dominate). A residual takes the poses P (n, 3) (x, y, theta; m, rad) and
+# Each kind of factor is a residual over the whole band, a numba kernel (the band is small: numpy's per-call
+# cost would dominate); ``band_factor`` makes one gtsam.CustomFactor of a residual, and the planner stacks all
+# kinds into one, so that an evaluation of the graph costs a single Python callback. A residual takes the poses P (n, 3) (x, y, theta; m, rad) and
 # intervals dts (n - 1,) s and returns the error (E,) and its derivatives over the world (x, y, theta) of
 # every pose (E, n, 3) and over every interval (E, n - 1).
 
@@ -274,6 +274,16 @@ def band_factor(n: int, residual, weights, timed: bool) -> gtsam.CustomFactor:
         return e
 
     return gtsam.CustomFactor(_sigmas(weights), pose_keys + dt_keys, error)
+
+
+def stacked(residuals):
+    """The residual whose error and derivatives are those of ``residuals`` one after the other."""
+
+    def residual(P, dts):
+        parts = [f(P, dts) for f in residuals]
+        return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))
+
+    return residual
 
 
 def _sigmas(weights) -> gtsam.noiseModel.Diagonal:
@@ -466,25 +476,25 @@ class TimedElasticBand:
         graph.add(gtsam.PriorFactorPose2(X(0), gtsam.Pose2(*poses[0]), gtsam.noiseModel.Isotropic.Sigma(3, 1e-4)))
         end_sigmas = np.array([0.01, 0.01, 1.0 if final else 0.2])
         graph.add(gtsam.PriorFactorPose2(X(n - 1), gtsam.Pose2(*poses[-1]), gtsam.noiseModel.Diagonal.Sigmas(end_sigmas)))
+        kinds = []  # (residual, weights (E,)): stacked into one factor, one Python callback an evaluation
         if (vias := self._vias(poses, local)) is not None:
-            graph.add(band_factor(n, partial(via_residual, index=vias[0], vias=vias[1]), np.full(2 * len(vias[0]), c.via_weight), False))
+            kinds.append((partial(via_residual, index=vias[0], vias=vias[1]), np.full(2 * len(vias[0]), c.via_weight)))
         if len(points):
             at = np.concatenate([[0.0], np.cumsum(dts)])  # s, when the band reaches each pose
             grown = np.minimum(c.obstacle_speed * at, c.obstacle_reach)[:, None] * moving[None, :]
             near = r.radius + c.margin
-            weights = np.repeat([c.obstacle_weight, c.inflation_weight], 2 * (n - 1))
-            obstacles = partial(obstacle_residual, points=points, grown=grown, near=near, soft=near + c.inflation)
-            graph.add(band_factor(n, obstacles, weights, False))
+            kinds.append((partial(obstacle_residual, points=points, grown=grown, near=near, soft=near + c.inflation),
+                          np.repeat([c.obstacle_weight, c.inflation_weight], 2 * (n - 1))))  # fmt: skip
         limits = (-c.max_speed_back * (1 - c.epsilon), r.max_speed * (1 - c.epsilon))
-        velocity = partial(velocity_residual, v_lo=limits[0], v_hi=limits[1], w_max=r.max_turn_rate * (1 - c.epsilon),
-                           min_dt=c.min_dt)  # fmt: skip
-        graph.add(band_factor(n, velocity, np.repeat([c.velocity_weight, c.velocity_weight, 100 * c.velocity_weight],
-                                                     n - 1), True))  # fmt: skip
-        graph.add(band_factor(n, kinematics_residual, np.repeat([c.kinematics_weight, c.forward_weight], n - 1), False))
+        kinds.append((partial(velocity_residual, v_lo=limits[0], v_hi=limits[1], w_max=r.max_turn_rate * (1 - c.epsilon),
+                              min_dt=c.min_dt),
+                      np.repeat([c.velocity_weight, c.velocity_weight, 100 * c.velocity_weight], n - 1)))  # fmt: skip
+        kinds.append((kinematics_residual, np.repeat([c.kinematics_weight, c.forward_weight], n - 1)))
         a_max, alpha_max = r.max_accel * (1 - c.epsilon), r.max_turn_accel * (1 - c.epsilon)
         end = np.zeros(2) if final else np.full(2, np.nan)
-        accel = partial(acceleration_residual, start=np.asarray(speed[:2], float), end=end, a_max=a_max, alpha_max=alpha_max)
-        graph.add(band_factor(n, accel, np.full(2 * (n - 1 + final), c.acceleration_weight), True))
+        kinds.append((partial(acceleration_residual, start=np.asarray(speed[:2], float), end=end, a_max=a_max,
+                              alpha_max=alpha_max), np.full(2 * (n - 1 + final), c.acceleration_weight)))  # fmt: skip
+        graph.add(band_factor(n, stacked([k[0] for k in kinds]), np.concatenate([k[1] for k in kinds]), True))
         return graph, values
 
     def _vias(self, poses, local):
