@@ -129,7 +129,8 @@ def test_band_reaches_full_speed_on_a_clear_path_and_stops_at_the_goal():
     assert cmd.v == pytest.approx(teb.robot.max_accel * teb.cfg.period, rel=0.05)
     poses, dts = teb.band
     v, _, _, _ = segments(poses, dts)
-    assert v.max() > 0.8 and v[-1] < 0.5 and poses[-1, :2] == pytest.approx([2.0, 0.0], abs=0.02)
+    assert v.max() > 0.9 and poses[-1, :2] == pytest.approx([2.0, 0.0], abs=0.02)
+    assert v[-1] <= teb.robot.max_accel * dts[-1] * 1.05  # it can stop within the last interval
 
 
 def test_a_band_that_would_touch_a_point_brakes_and_reports_blocked():

@@ -68,7 +68,7 @@ class TebConfig(Section):
     margin: float = Field(0.05, ge=0, description="m kept between the robot's disc and any laser point")
     inflation: float = Field(0.25, ge=0, description="m beyond the margin over which a soft cost keeps clear")
     max_speed_back: float = Field(0.2, ge=0, description="m/s, fastest backwards")
-    epsilon: float = Field(0.05, ge=0, description="fraction of each limit kept in reserve by the band")
+    epsilon: float = Field(0.02, ge=0, lt=1, description="fraction of each limit kept in reserve by the band")
     via_spacing: float = Field(0.3, gt=0, description="m between via-points along the path")
     obstacle_speed: float = Field(0.8, ge=0, description="m/s assumed for points the map does not explain")
     obstacle_reach: float = Field(0.5, ge=0, description="m, the most such a point's margin grows along the band")
