@@ -21,8 +21,10 @@ x_0 the robot, fixed) and the time intervals dt_i (s) between them. Its factors:
 Every call re-solves the band (Levenberg-Marquardt, ``iterations``) warm-started from the last one,
 moved into the new robot frame, with poses inserted or removed so that each dt stays near
 ``dt_ref``; the command is the first segment's (v, w), clipped to what the robot reaches in one
-period. A band whose first ``check_time`` s or whose command's stopping arc would bring the disc
-onto a laser point is dropped: the robot brakes and reports itself blocked. With
+period and slowed on its arc until the robot, braking at full deceleration after the period,
+stops short of every point (a point that may move with its margin grown, as the DWA's arcs).
+A band whose first ``check_time`` s would bring the disc onto a laser point, or whose slowest
+command cannot stop short, is dropped: the robot brakes and reports itself blocked. With
 ``homotopies`` on, a band that still runs through a point (a person on the path, a box the
 map lacks: pulled from both sides, it stays in the obstacle) is optimised again from two starts
 moved round that point, one on each side, and the cheapest band clear of every point is kept
@@ -338,7 +340,7 @@ class TimedElasticBand:
             return self._brake(velocity, "band touches a point")
         poses, dts, self.cost = best
         self.band = (geometry.compose(pose, poses), dts)
-        return self._first_command(poses, dts, velocity, points)
+        return self._first_command(poses, dts, velocity, points, moving)
 
     def _best(self, starts, velocity, points, moving, local, final):
         """The cheapest clear band (poses, dts, cost) optimised from ``starts``; with ``homotopies``, when the
@@ -522,9 +524,10 @@ class TimedElasticBand:
         now = float(tree.query([0.0, 0.0])[0])
         return bool((tree.query(xy[1:])[0] >= min(self.robot.radius + 0.005, now - 1e-4)).all())
 
-    def _first_command(self, poses, dts, velocity, points) -> Command:
-        """The first segment's (v, w), within what the robot reaches in one period; braking when its
-        stopping arc would bring the disc onto a point."""
+    def _first_command(self, poses, dts, velocity, points, moving) -> Command:
+        """The first segment's (v, w), within what the robot reaches in one period, slowed (on the same arc)
+        until it can still stop short of every point, a ``moving`` one's margin grown as in the band; braking
+        and blocked when even the slowest reachable speed cannot."""
         r, period = self.robot, self.cfg.period
         v, w = (float(x[0]) for x in segments(poses[:2], dts[:1])[:2])
         v0, w0 = float(velocity[0]), float(velocity[1])
@@ -532,19 +535,33 @@ class TimedElasticBand:
         v = float(np.clip(v, -self.cfg.max_speed_back, r.max_speed))
         w = float(np.clip(w, w0 - r.max_turn_accel * period, w0 + r.max_turn_accel * period))
         w = float(np.clip(w, -r.max_turn_rate, r.max_turn_rate))
-        if len(points) and abs(v) > 1e-3:
-            stop = period + abs(v) / r.max_accel
-            times = np.linspace(0.02, stop, max(2, int(stop / 0.02)))
-            # braking: distance v t - a t^2 / 2 after the period; an arc of the same curvature
-            travelled = np.where(times <= period, abs(v) * times,
-                                 abs(v) * period + abs(v) * (times - period) - 0.5 * r.max_accel * (times - period) ** 2)
-            on = arcs(np.array([np.sign(v)]), np.array([w / abs(v)]), travelled)[0, :, :2]
-            tree = cKDTree(points)
-            now = float(tree.query([0.0, 0.0])[0])
-            if (tree.query(on)[0] < min(r.radius + 0.005, now - 1e-4)).any():
-                self.band = None
-                return self._brake(velocity, "stopping arc touches a point")
-        return Command(v, w, False, "teb")
+        if len(points) == 0 or abs(v) <= 1e-3:
+            return Command(v, w, False, "teb")
+        slowest = max(abs(v0) - r.max_accel * period, 0.0)
+        for speed in np.linspace(abs(v), slowest, 6) if abs(v) > slowest else [abs(v)]:
+            if speed <= 1e-3 or self._stops_short(float(speed) * np.sign(v), w * speed / abs(v), points, moving):
+                return Command(float(speed * np.sign(v)), w * speed / abs(v), False, "teb" if speed == abs(v) else "teb, slowed")
+        self.band = None
+        return self._brake(velocity, "stopping arc touches a point")
+
+    def _stops_short(self, v: float, w: float, points, moving) -> bool:
+        """Whether the disc, driving (v, w) for a period and then braking at full deceleration on the same arc,
+        keeps off every point (a ``moving`` one's margin grown by ``obstacle_speed`` per second, up to
+        ``obstacle_reach``); already closer than the radius + 5 mm to one, whether it gets no closer."""
+        r, c = self.robot, self.cfg
+        stop = c.period + abs(v) / r.max_accel
+        times = np.linspace(0.02, stop, max(2, math.ceil(stop / 0.02)))
+        braking = np.maximum(times - c.period, 0.0)
+        travelled = abs(v) * times - 0.5 * r.max_accel * braking**2
+        on = arcs(np.array([np.sign(v)]), np.array([w / abs(v)]), travelled)[0, :, :2]
+        grow = np.minimum(c.obstacle_speed * times, c.obstacle_reach)
+        for group, extra in ((points[~moving], 0.0), (points[moving], grow)):
+            if len(group):
+                tree = cKDTree(group)
+                now = float(tree.query([0.0, 0.0])[0])
+                if (tree.query(on)[0] - extra < min(r.radius + 0.005, now - 1e-4)).any():
+                    return False
+        return True
 
     def _brake(self, velocity, why: str) -> Command:
         """Full braking on the arc the robot is on, reported as blocked."""
