@@ -333,8 +333,8 @@ class TimedElasticBand:
             return self._turn(velocity, math.atan2(ahead[1], ahead[0]))
         start = self._warm(pose, goal, local) if self.band is not None else self._along(goal, local)
         best = self._best([start], velocity, points, moving, local, final)
-        if best is None and self.band is not None:  # the warm band is stuck: one along the path
-            best = self._best([self._along(goal, local)], velocity, points, moving, local, final)
+        if best is None and self.band is not None:  # the warm band is stuck: one along the path (no detours)
+            best = self._best([self._along(goal, local)], velocity, points, moving, local, final, detours=False)
         if best is None:
             self.band = None
             return self._brake(velocity, "band touches a point")
@@ -342,12 +342,12 @@ class TimedElasticBand:
         self.band = (geometry.compose(pose, poses), dts)
         return self._first_command(poses, dts, velocity, points, moving)
 
-    def _best(self, starts, velocity, points, moving, local, final):
+    def _best(self, starts, velocity, points, moving, local, final, detours: bool = True):
         """The cheapest clear band (poses, dts, cost) optimised from ``starts``; with ``homotopies``, when the
         cheapest runs through a point, also from it moved round that point on either side (another homotopy
         class); None if no band is clear."""
         found = [self.optimise(poses, dts, velocity, points, moving, local, final) for poses, dts in starts]
-        if self.cfg.homotopies and (hit := self._first_contact(min(found, key=lambda b: b[2]), points)) is not None:
+        if detours and self.cfg.homotopies and (hit := self._first_contact(min(found, key=lambda b: b[2]), points)) is not None:
             found += [self.optimise(*detour, velocity, points, moving, local, final)
                       for detour in self._detours(min(found, key=lambda b: b[2]), *hit)]  # fmt: skip
         clear = [b for b in found if self._clear(b[0], b[1], points)]
