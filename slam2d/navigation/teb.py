@@ -65,7 +65,7 @@ class TebConfig(Section):
                                  "one shorter than dt_ref - this merged")  # fmt: skip
     min_dt: float = Field(0.02, gt=0, description="s, the shortest time interval")
     min_poses: int = Field(3, ge=3, le=100, description="poses in the band, at least")
-    max_poses: int = Field(25, ge=3, le=200, description="poses in the band, at most")
+    max_poses: int = Field(15, ge=3, le=200, description="poses in the band, at most (the cost grows with their square)")
     iterations: int = Field(8, ge=1, le=100, description="Levenberg-Marquardt iterations a call")
     margin: float = Field(0.05, ge=0, description="m kept between the robot's disc and any laser point")
     inflation: float = Field(0.25, ge=0, description="m beyond the margin over which a soft cost keeps clear")
