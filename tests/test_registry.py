@@ -55,7 +55,7 @@ BUILT_INS = {
     "frontends": ["odometry", "icp", "lines", "corners", "fuzzy_vertex", "fused"],
     "backends": ["none", "pose_graph"],
     "global_planners": ["astar", "hpa", "rooms", "jps", "jps_plus", "subgoal"],
-    "local_planners": ["dwa", "fsm"],
+    "local_planners": ["dwa", "fsm", "teb"],
     "recovery_behaviours": ["backoff"],
     "exploration_strategies": ["nearest_frontier", "explore_lite", "nearest_candidate", "farthest_candidate",
                                "utility"],

@@ -2,7 +2,7 @@
 
 A local planner turns the laser's view and the remaining path into a velocity command
 (``navigation.planner``, ``navigation.options.planner``); its parameters are the navigator
-config's section of its name (``dwa``, ``fsm``). A recovery behaviour says which manoeuvres
+config's section of its name (``dwa``, ``fsm``, ``teb``). A recovery behaviour says which manoeuvres
 the navigator makes when it is stuck (``navigation.options.recovery``).
 """
 
@@ -40,7 +40,7 @@ class RecoveryBehaviour(Protocol):
 
 LOCAL_PLANNERS = Registry(
     "local_planners", "local planner", key="navigation.planner", options_key="navigation.options",
-    builtins={"dwa": "slam2d.navigation.dwa", "fsm": "slam2d.navigation.fsm"})
+    builtins={"dwa": "slam2d.navigation.dwa", "fsm": "slam2d.navigation.fsm", "teb": "slam2d.navigation.teb"})
 """The local planners by name: ``create(name, options, robot)`` (a :class:`slam2d.sim.robot.RobotConfig`)."""
 
 RECOVERY_BEHAVIOURS = Registry("recovery_behaviours", "recovery behaviour", key="navigation.options.recovery",

@@ -12,6 +12,7 @@ from pydantic import Field, ValidationError
 from slam2d.config import Section
 from slam2d.navigation.dwa import DwaConfig
 from slam2d.navigation.fsm import FsmConfig
+from slam2d.navigation.teb import TebConfig
 from slam2d.registry import Choice, validation_error
 from slam2d.sim.depth import DepthCameraConfig
 
@@ -22,7 +23,7 @@ class NavigatorConfig(Section):
     """Global planning, goal tolerances, recovery and the time budget of a navigation run."""
 
     planner: Annotated[str, Choice("local_planners")] = Field(
-        "dwa", description="local planner: dwa, fsm (its parameters: the section of that name)")
+        "dwa", description="local planner: dwa, fsm, teb (its parameters: the section of that name)")
     recovery: Annotated[str, Choice("recovery_behaviours")] = Field(
         "backoff", description="what a recovery does (slam2d.navigation.base.RECOVERY_BEHAVIOURS)")
     period: float = Field(0.1, gt=0, description="s, control period")
@@ -51,6 +52,7 @@ class NavigatorConfig(Section):
     depth_camera: DepthCameraConfig = Field(
         DepthCameraConfig(), description="a depth camera whose obstacles (3D: what the laser misses) the local "
         "planner and replanning avoid (slam2d.navigation.depth_layer)")
+    teb: TebConfig = TebConfig()
 
 
 def navigator_config(options: dict[str, Any], slam: bool, section: str = "navigation.options"):
