@@ -52,6 +52,7 @@ WINDOW_STEP = 0.5  # m; grown windows are rounded up to this step (each window s
 WIDE_COARSENING = 2  # a wide search runs on a grid this many times coarser than ``resolution``
 WIDE_TOP_BLOCKS = 8  # ... with enough pooled levels for about this many top blocks across the window
 WIDE_MAX_DEPTH = 7  # ... but no more levels than this
+SESSION_GAP = 1e6  # m of travel put between a saved session and one placed in it (they share no path)
 LOCALIZE_COARSENING = 4  # a global search (:meth:`LoopCloser.localize`) starts on a grid this many times coarser
 VIEW_PERCENTILE = 95  # a wide match is verified on the keyframes within this percentile of the scan's ranges
 
@@ -262,7 +263,7 @@ class LoopCloser:
         self.stats["verified"] += 1
         self._position(key)  # a clear KeyError for a keyframe never added
         points = self._points[int(key)]
-        anchor = self._anchor(cand, key)
+        anchor = self._anchor(cand)
         submap = self._submap(key, anchor, poses) if len(points) >= MIN_POINTS else None
         if submap is None:
             self.stats["rejected_points"] += 1
@@ -381,18 +382,16 @@ class LoopCloser:
         d[2] = geometry.wrap_angle(d[2])
         return bool(d @ np.linalg.solve(result.covariance, d) <= CHI2_3DOF_99)
 
-    def _anchor(self, cand: int, key: int) -> int:
-        """The submap anchor for ``cand``: the nearest keyframe whose position is a multiple of ``submap_keyframes``
-        that is at least ``min_travel`` from ``key`` (the one before it if the nearest is not; else ``cand``)."""
+    def _anchor(self, cand: int) -> int:
+        """The submap anchor for ``cand``: the nearest keyframe whose position is a multiple of ``submap_keyframes``,
+        in ``cand``'s session (the multiple before it when the nearest lies in a session placed after it)."""
         n, pos = self.cfg.submap_keyframes, self._position(cand)
         if n == 0:
             return int(cand)
-        here = self.travelled(key)
-        for p in (int(round(pos / n)) * n, pos // n * n):
-            p = min(p, len(self._keys) - 1)
-            if abs(self._travelled[p] - here) >= self.cfg.min_travel:
-                return self._keys[p]
-        return int(cand)
+        p = min(int(round(pos / n)) * n, len(self._keys) - 1)
+        if abs(self._travelled[p] - self._travelled[pos]) >= SESSION_GAP / 2:
+            p = pos // n * n
+        return self._keys[p]
 
     def _submap(self, key: int, anchor: int, poses: np.ndarray) -> _Submap | None:
         """The grid of keyframes around ``anchor`` in its frame (cached while their poses hold), or None if empty."""

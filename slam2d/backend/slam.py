@@ -23,14 +23,13 @@ import numpy as np
 
 from slam2d import geometry
 from slam2d.backend.base import register_backend
-from slam2d.backend.loop_closure import LoopClosure
+from slam2d.backend.loop_closure import SESSION_GAP, LoopClosure
 from slam2d.backend.session import LOOP, ODOMETRY, Session
 from slam2d.config import BackendConfig
 from slam2d.errors import InputError
 from slam2d.frontends.base import FrontendResult
 from slam2d.types import Scan
 
-SESSION_GAP = 1e6  # m of travel put between a saved session and one placed in it (they share no path)
 PLACE_KEYFRAMES = 5  # scans (at keyframe spacing) matched together to place a new session in a saved map
 
 
