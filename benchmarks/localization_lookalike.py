@@ -72,7 +72,7 @@ def examine(spec: str, seed: int, travel: float) -> dict:
     """One seeded global run: converged or not, and for a failure the look-alike's fit against the truth."""
     from slam2d import geometry
     from slam2d.localization import KnownMap, ParticleFilter, preset
-    from slam2d.localization.mcl import cluster_means
+    from slam2d.localization.clusters import cluster_means
     from slam2d.localization.scenario import converged_at, replay, wander
     from slam2d.sim.world import load_world
 

@@ -43,7 +43,7 @@ from slam2d import geometry
 from slam2d.backend import initialization as ini
 from slam2d.backend.batch import g2o_error, loop_metrics, solve_g2o
 from slam2d.backend.factors import PRIOR_SIGMAS
-from slam2d.backend.pose_graph import replay_g2o
+from slam2d.backend.replay import replay_g2o
 from slam2d.config import BackendConfig
 from slam2d.datasets.g2o import (
     OUTLIER_KINDS,

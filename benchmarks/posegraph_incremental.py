@@ -34,13 +34,14 @@ def replay(graph, every: int, threshold, skip: int) -> tuple[float, float, int, 
     """(incremental s, final batch s, iSAM2 updates, error before and after the final batch) of one replay."""
     from slam2d.backend import batch
     from slam2d.backend import pose_graph as pgm
+    from slam2d.backend.replay import replay_g2o
     from slam2d.config import BackendConfig
 
     saved = pgm.RELINEARIZE_POSE, pgm.RELINEARIZE_SKIP
     pgm.RELINEARIZE_POSE, pgm.RELINEARIZE_SKIP = threshold, skip
     try:
         t0 = time.perf_counter()
-        pg = pgm.replay_g2o(graph, BackendConfig(name="pose_graph", robust="none"), every=every)
+        pg = replay_g2o(graph, BackendConfig(name="pose_graph", robust="none"), every=every)
         t1 = time.perf_counter()
         before = batch.g2o_error(graph, pg.estimate())
         t2 = time.perf_counter()
@@ -56,6 +57,7 @@ def keyframe_latencies(graph) -> tuple[list[float], float]:
     batch) of one replay at one update per keyframe, default relinearisation."""
     from slam2d.backend import batch
     from slam2d.backend import pose_graph as pgm
+    from slam2d.backend.replay import replay_g2o
     from slam2d.config import BackendConfig
 
     arrivals = []
@@ -67,7 +69,7 @@ def keyframe_latencies(graph) -> tuple[list[float], float]:
 
     pgm.PoseGraph.add_keyframe = timed
     try:
-        pg = pgm.replay_g2o(graph, BackendConfig(name="pose_graph", robust="none"), every=1)
+        pg = replay_g2o(graph, BackendConfig(name="pose_graph", robust="none"), every=1)
         arrivals.append(time.perf_counter())
     finally:
         pgm.PoseGraph.add_keyframe = add_keyframe

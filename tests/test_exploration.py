@@ -18,7 +18,8 @@ from slam2d.exploration.candidates import (
     scan_candidates,
     stands,
 )
-from slam2d.exploration.explorer import Explorer, tour_regret
+from slam2d.exploration.coverage import path_repetition
+from slam2d.exploration.explorer import Explorer
 from slam2d.exploration.frontiers import find_frontiers, frontier_mask
 from slam2d.exploration.gridops import (
     FREE,
@@ -33,7 +34,7 @@ from slam2d.exploration.gridops import (
     unknown_in_sight,
 )
 from slam2d.exploration.hybrid import FINAL, MARKED, HybridMap
-from slam2d.exploration.coverage import path_repetition
+from slam2d.exploration.regret import tour_regret
 from slam2d.sim.world import World
 
 ANGLES = np.linspace(-np.pi, np.pi, 360, endpoint=False)
@@ -781,7 +782,7 @@ def test_views_of_pockets_do_not_see_into_a_wall_block_through_a_gap_but_still_b
     res = 0.05
     before, after = GridView(scored, res, (0.0, 0.0)), GridView(faces, res, (0.0, 0.0))
     gap, desk = (18.5 * res, 23 * res), (47.5 * res, 46.5 * res)  # (x, y) m
-    seen = lambda view, xy: unknown_in_sight(view, xy, 6.0, 360)  # noqa: E731
+    seen = lambda view, xy: unknown_in_sight(view, xy, 6.0, 360)
     block, pocket = np.s_[15:22, 15:23], np.s_[44:50, 30:45]
     assert seen(before, gap)[block].any() and not seen(after, gap)[block].any()  # its inner face stops rays
     kept = seen(after, desk)[pocket]
@@ -804,7 +805,7 @@ def test_views_of_pockets_do_not_see_into_a_thick_wall_through_its_unseen_face()
     state[1:-1, 12] = OCCUPIED  # the far face
     state[1:-1, 13:20] = UNKNOWN  # the inside and the near face the laser never marked
     scored = pocket_state(state, 1)
-    view = lambda grid: GridView(grid, 0.05, (0.0, 0.0))  # noqa: E731
+    view = lambda grid: GridView(grid, 0.05, (0.0, 0.0))
     room = (30 * 0.05, 20 * 0.05)  # (x, y) m, in the near room
     inside = unknown_in_sight(view(opaque_faces(scored, state)), room, 6.0, 360)
     assert inside[:, 14:19].sum() >= 5 * 25  # without the depth, the inside is a target
@@ -837,8 +838,8 @@ def test_views_of_pockets_leave_the_outside_to_the_frontiers_but_keep_a_pocket_a
     state[45:51, 24:42] = UNKNOWN
     scored = pocket_state(state, 1)
     res = 0.05
-    view = lambda grid: GridView(grid, res, (0.0, 0.0))  # noqa: E731
-    seen = lambda grid, xy: unknown_in_sight(view(grid), xy, 6.0, 360)  # noqa: E731
+    view = lambda grid: GridView(grid, res, (0.0, 0.0))
+    seen = lambda grid, xy: unknown_in_sight(view(grid), xy, 6.0, 360)
     opening, beside = (56 * res, 30 * res), (21 * res, 47.5 * res)  # (x, y) m: at the open end, beside the desk
     kept = without_outside(scored, 40)
     assert seen(scored, opening)[:, 61:].any() and not seen(kept, opening)[:, 61:].any()  # no sliver is a target

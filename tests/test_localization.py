@@ -422,7 +422,7 @@ def _square_ring() -> KnownMap:
 
 
 def test_hypotheses_of_a_known_particle_set():
-    from slam2d.localization.mcl import clusters, hypotheses
+    from slam2d.localization.clusters import clusters, hypotheses
 
     rng = np.random.default_rng(0)
     a, b = np.array([2.0, 3.0, 0.5]), np.array([12.0, -4.0, -2.0])

@@ -16,7 +16,8 @@ from slam2d import geometry
 from slam2d.backend import robust as rb
 from slam2d.backend.batch import g2o_error, optimize_g2o, solve_g2o
 from slam2d.backend.factors import PRIOR_SIGMAS
-from slam2d.backend.pose_graph import CHI2_3DOF_99, PoseGraph, replay_g2o
+from slam2d.backend.pose_graph import CHI2_3DOF_99, PoseGraph
+from slam2d.backend.replay import replay_g2o
 from slam2d.config import BackendConfig
 from slam2d.datasets.g2o import PoseGraphFile, read_g2o
 from slam2d.errors import InputError

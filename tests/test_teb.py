@@ -16,7 +16,7 @@ from slam2d.navigation import (
     world_grid,
 )
 from slam2d.navigation.config import navigator_config
-from slam2d.navigation.teb import (
+from slam2d.navigation.teb_factors import (
     T,
     X,
     acceleration_residual,

@@ -18,13 +18,17 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 from slam2d import geometry
 from slam2d.exploration.base import EXPLORATION_STRATEGIES
 from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candidates
 from slam2d.exploration.config import ExplorationConfig
-from slam2d.exploration.frontiers import WALL_GAP, depth_cells, find_frontiers, frontier_mask
+from slam2d.exploration.frontiers import (
+    WALL_GAP,
+    depth_cells,
+    find_frontiers,
+    frontier_mask,
+)
 from slam2d.exploration.gridops import (
     OCCUPIED,
     UNKNOWN,
@@ -39,6 +43,7 @@ from slam2d.exploration.gridops import (
 )
 from slam2d.exploration.hybrid import FINAL, HybridMap
 from slam2d.exploration.pockets import opaque_faces, pocket_state, without_outside
+from slam2d.exploration.regret import tour_regret
 from slam2d.segmentation.observations import raycast_grid
 
 POCKET_SPACING = 0.2  # m between the places tried as views of pockets
@@ -443,45 +448,6 @@ def _option(goal, candidate: bool, terms) -> dict:
     """One option of a utility decision as goals.json keeps it: where (x, y) m, the kind, and ``OPTION_TERMS``."""
     return {"position": np.round(goal, 3).tolist(), "kind": "candidate" if candidate else "frontier",
             **{key: float(f"{v:.4g}") for key, v in zip(OPTION_TERMS, terms)}}
-
-
-@njit(cache=True)
-def mean_arrivals(first, between, weight):
-    """Mean distance (P,) driven before each goal is reached, weighted by ``weight`` (P,), on a greedy open
-    tour through all P goals starting at each: ``first`` (P,) the cost to reach each goal, then always the
-    nearest goal not yet visited by ``between`` (P, P)."""
-    n = len(first)
-    out = np.empty(n)
-    total_weight = max(weight.sum(), 1e-9)
-    for s in range(n):
-        seen = np.zeros(n, dtype=np.bool_)
-        seen[s] = True
-        cur, driven = s, first[s]
-        late = weight[s] * driven
-        for _ in range(n - 1):
-            best, nxt = np.inf, -1
-            for j in range(n):
-                if not seen[j] and between[cur, j] < best:
-                    best, nxt = between[cur, j], j
-            if nxt < 0:
-                break
-            seen[nxt] = True
-            driven += best
-            late += weight[nxt] * driven
-            cur = nxt
-        out[s] = late / total_weight
-    return out
-
-
-def tour_regret(goals, path, gain) -> np.ndarray:
-    """How much later (P,) m, on average over the hidden cells (``gain`` (P,) each goal's), the robot reaches
-    them when each goal is visited first: path (P,) m from the robot to it, then a greedy tour through the
-    rest (nearest next), minus the best such first goal. Between two goals the distance is its lower bound
-    max(straight line, difference of their path lengths from the robot): no grid search per goal."""
-    goals, path = np.asarray(goals, dtype=np.float64).reshape(-1, 2), np.asarray(path, dtype=np.float64)
-    between = np.maximum(np.hypot(*(goals[:, None] - goals[None]).transpose(2, 0, 1)), np.abs(path[:, None] - path))
-    arrival = mean_arrivals(path, between, np.asarray(gain, dtype=np.float64))
-    return arrival - arrival.min()
 
 
 def _path_lengths(view: GridView, distance: np.ndarray, points, reach: float) -> tuple[np.ndarray, np.ndarray]:
