@@ -78,7 +78,8 @@ def test_kill_9_ablate_takes_its_pool_along(tmp_path):
 
 def test_kill_9_ablate_on_ray_takes_its_local_ray_along(tmp_path):
     """Ray's servers, agents and task workers do not watch their parent; the sweep's watchdog kills them."""
-    pytest.importorskip("ray")
+    if os.environ.get("CI") != "true" and os.environ.get("SLAM2D_REQUIRE_DATA") != "1":
+        pytest.importorskip("ray")  # CI installs the [ray] extra: there a missing ray fails the test
     sweep = _sweep(tmp_path, [{"name": f"v{i}", "set": {"seed": i}} for i in range(3)], workers=2)
     proc = _cli("ablate", "-q", sweep, "--executor", "ray")
     parent = psutil.Process(proc.pid)
