@@ -63,7 +63,7 @@ def test_no_false_loop_every_false_loop_method_returns_the_plain_optimum():
         assert result.inlier.all() and rmse(result.poses, plain.poses) < 1e-5
         assert result.kept_error == pytest.approx(plain.final_error, rel=1e-6)
         assert result.verified and result.certified
-        assert {"screen", "solve", "verify", "certify"} <= set(result.timings)
+        assert {"screen", "solve", "certify"} <= set(result.timings)  # certified: no second start
 
 
 def test_gnc_with_1000_false_loops_graduates_in_bounded_steps():
