@@ -2,8 +2,8 @@
 
 The bare script: ``import gtsam``, ``readG2o``, a tight prior on the first pose, GTSAM's
 ``LevenbergMarquardtOptimizer`` with default parameters, the error printed. The command:
-``slam2d optimize GRAPH`` with its defaults (chordal start, verification from a second start,
-SE-Sync's certificate, graph.g2o, edges.csv, overlay.png, metrics.json). Both run as fresh
+``slam2d optimize GRAPH`` with its defaults (chordal start, verification: SE-Sync's certificate,
+and a second start only when it does not hold; graph.g2o, edges.csv, overlay.png, metrics.json). Both run as fresh
 processes, interleaved ``--repeats`` times so that a loaded machine slows both alike; the table
 gives the median wall time (min-max beside it), the ratio of the medians, and the median of each
 step's wall time as the command records it in ``metrics.json`` (``timings``; "other" is the

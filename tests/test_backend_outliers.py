@@ -55,6 +55,23 @@ def test_m3500_scaled_information_keeps_its_detour_loops(data_file, factor):
     assert rmse(result.poses, reference) < 1e-3
 
 
+def test_mit_loops_without_partners_enter_by_their_innovation(data_file):
+    """MIT's 20 loops are mostly alone: 12 fail the pairwise screen and lay 27 m off the screened solution,
+    so DCS and the final gate dropped them (10 of 20 kept, 21 m off the optimum). Admitted one by one by
+    their innovation against the kept graph, every one is kept, and 100 random false loops stay out but
+    for a few that fit MIT's loose information."""
+    clean = read_g2o(data_file("posegraphs/MIT.g2o"))
+    reference = solve_g2o(clean).poses
+    result = solve_g2o(clean, robust="pc_dcs")
+    assert result.inlier.all() and rmse(result.poses, reference) < 0.01
+    assert "admit" in result.timings
+    graph, injected = inject_outliers(clean, 100, "random", seed=0)
+    result = solve_g2o(graph, robust="pc_dcs")
+    m = loop_metrics(result.inlier, injected)
+    true_loops = ~odometry_mask(graph) & ~injected
+    assert np.sum(result.inlier & true_loops) >= 19 and m["outliers_rejected"] >= 95
+
+
 def test_no_false_loop_every_false_loop_method_returns_the_plain_optimum():
     clean = manhattan()
     plain = solve_g2o(clean)
@@ -63,7 +80,7 @@ def test_no_false_loop_every_false_loop_method_returns_the_plain_optimum():
         assert result.inlier.all() and rmse(result.poses, plain.poses) < 1e-5
         assert result.kept_error == pytest.approx(plain.final_error, rel=1e-6)
         assert result.verified and result.certified
-        assert {"screen", "solve", "verify", "certify"} <= set(result.timings)
+        assert {"screen", "solve", "certify"} <= set(result.timings)  # certified: no second start
 
 
 def test_gnc_with_1000_false_loops_graduates_in_bounded_steps():

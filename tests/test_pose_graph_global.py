@@ -82,6 +82,9 @@ def test_mit_reaches_best_known_minimum_from_default_start(data_file):
     assert local.final_error > 300  # the file's start ends in a local minimum
     cert = certificate.certify(graph, local.poses)
     assert cert.stationarity < 1e-9 and not cert.certified and cert.negative_pivots > 0
+    checked = solve_g2o(graph, init="file", verify=True)  # not certified: the other starts run and win
+    assert checked.init != "file" and "verify" in checked.timings
+    assert checked.final_error == pytest.approx(MIT_OPTIMUM, rel=1e-6) and checked.verified and checked.certified
 
 
 def test_gnc_rejects_50_outliers_where_lm_fails():

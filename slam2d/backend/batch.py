@@ -51,8 +51,8 @@ class BatchResult:
     least squares over every edge for "none", the robust cost otherwise: ``robust_cost``),
     ``kept_error`` the plain error over the edges kept as inliers (comparable between methods);
     LM iterations (all solves of the method), GNC graduation steps, wall time (s) of the
-    optimisation (the start excluded), the start's name; ``verified`` when a second start reached
-    the same error (None: not checked); ``inlier`` (M,) bool per edge (odometry always; for pc_dcs
+    optimisation (the start excluded), the start's name; ``verified`` when the certificate holds on
+    the kept edges or else a second start reached the same error (None: not checked); ``inlier`` (M,) bool per edge (odometry always; for pc_dcs
     and GNC the loops of their final least squares, else a loop within the chi-square 99 % gate);
     ``certified``: SE-Sync's certificate holds next to the result (``certificate.certify`` on the
     kept edges: every edge of an outlier-free least-squares solve; None when not checked);
@@ -143,9 +143,16 @@ def _agree(a: float, b: float) -> bool:
 
 def _verify_kept(graph: g2o.PoseGraphFile, poses, kept) -> tuple[bool, bool, dict]:
     """(verified, certified, timings) of a least-squares optimum ``poses`` (N, 3) over the ``kept``
-    edges (M,) bool: plain LM over those edges alone from the starts of ``VERIFY_STARTS`` in turn until
-    one reaches the same error (verified) or a lower one (not verified); the certificate on them."""
+    edges (M,) bool: SE-Sync's certificate on those edges; when it does not hold, plain LM over them from
+    the starts of ``VERIFY_STARTS`` in turn until one reaches the same error (verified) or a lower one
+    (not verified). A certified optimum is verified (the stronger check: no start reaches a lower cost of
+    the isotropic problem), and no second start runs."""
     sub = consistency.subgraph(graph, kept)
+    t0 = time.perf_counter()
+    certified = certificate.certify(sub, poses).certified
+    timings = {"certify": time.perf_counter() - t0}
+    if certified:
+        return True, True, timings
     t0 = time.perf_counter()
     fg = g2o_factors(sub)
     error, verified = g2o_error(sub, poses), False
@@ -154,9 +161,7 @@ def _verify_kept(graph: g2o.PoseGraphFile, poses, kept) -> tuple[bool, bool, dic
         if _agree(cost, error) or cost < error:
             verified = _agree(cost, error)
             break
-    t1 = time.perf_counter()
-    certified = certificate.certify(sub, poses).certified
-    return verified, certified, {"verify": t1 - t0, "certify": time.perf_counter() - t1}
+    return verified, certified, {**timings, "verify": time.perf_counter() - t0}
 
 
 def _solve_outliers(graph: g2o.PoseGraphFile, robust: str, robust_param: float, init: str | None,
@@ -205,12 +210,12 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     (``outliers.pc_dcs``: pairwise screen, DCS with Phi = ``robust_param``, least squares over the
     loops kept) or GNC ("gnc" = TLS, "gnc_gm"; ``outliers.gnc``: warm-started from pc_dcs's
     solution unless ``init`` names a start). ``init``: "chordal", "spanning_tree" or "file";
-    default ``G2O_INIT``, ``G2O_ROBUST_INIT`` under an M-estimator. ``verify``: plain and
-    M-estimators also optimise from the other starts of ``VERIFY_STARTS``, in order, until one
-    agrees with the kept run (verified; False when none does); of several runs the first is kept
-    unless another reaches a lower cost beyond VERIFY_REL. pc_dcs and GNC are verified on the edges
-    they keep (``_verify_kept``). Plain least squares, pc_dcs and GNC with ``verify`` are also
-    checked by SE-Sync's certificate (``BatchResult.certified``)."""
+    default ``G2O_INIT``, ``G2O_ROBUST_INIT`` under an M-estimator. ``verify``: plain least squares
+    is first checked by SE-Sync's certificate (``BatchResult.certified``) on the edges within the gate;
+    certified on every edge, it is verified. Otherwise (and under M-estimators) the other starts of
+    ``VERIFY_STARTS`` run, in order, until one agrees with the kept run (verified; False when none
+    does); of several runs the first is kept unless another reaches a lower cost beyond VERIFY_REL.
+    pc_dcs and GNC are certified and verified on the edges they keep (``_verify_kept``)."""
     loss, screened = rb.gnc_loss(robust), rb.screened_kernel(robust)
     if loss or screened:
         return _solve_outliers(graph, robust, robust_param, init, verify)
@@ -218,26 +223,32 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     first = str(init).lower() if init else (G2O_INIT if plain else G2O_ROBUST_INIT)
     fg = factor_graph(g2o_factor_list(graph, robust, robust_param))
     runs = [_run(graph, fg, first)]
-    best, verified = runs[0], None  # the first start's run unless another reaches a clearly lower cost
+    best, verified, certified = runs[0], None, None  # the first start's run unless another is clearly lower
     timings = {"start": best.start_seconds, "solve": best.seconds}
+    poses = _poses_in_vertex_order(best.values, graph.ids)
+    inlier = _classify(graph, poses)
+    if verify and plain:  # on the edges within the gate: a solution bent by false loops is not worth a
+        t0 = time.perf_counter()  # certificate of the whole graph's (M3500 + 1000 false loops: 450 s)
+        certified = certificate.certify(consistency.subgraph(graph, inlier), poses).certified
+        timings["certify"] = time.perf_counter() - t0
+        verified = True if certified and inlier.all() else None  # the optimum of every edge: no second start
     t0 = time.perf_counter()
-    for name in [n for n in VERIFY_STARTS if n != first] if verify else []:
+    for name in [n for n in VERIFY_STARTS if n != first] if verify and verified is None else []:
         runs.append(_run(graph, fg, name))
         if runs[-1].cost < best.cost and not _agree(runs[-1].cost, best.cost):
             best = runs[-1]
         verified = any(_agree(r.cost, best.cost) for r in runs if r is not best)
         if verified:
             break
-    if verify:
+    if len(runs) > 1:
         timings["verify"] = time.perf_counter() - t0
     for r in runs:
         log.info("g2o %s from %s: cost %.9g%s", robust, r.init, r.cost, " (kept)" if r is best else "")
-    poses = _poses_in_vertex_order(best.values, graph.ids)
-    certified, inlier = None, _classify(graph, poses)
-    if verify and plain:  # on the edges within the gate: a solution bent by false loops is not worth a
-        t0 = time.perf_counter()  # certificate of the whole graph's (M3500 + 1000 false loops: 450 s)
-        certified = certificate.certify(consistency.subgraph(graph, inlier), poses).certified
-        timings["certify"] = time.perf_counter() - t0
+    if best is not runs[0]:
+        poses = _poses_in_vertex_order(best.values, graph.ids)
+        inlier = _classify(graph, poses)
+        if certified is not None:
+            certified = certificate.certify(consistency.subgraph(graph, inlier), poses).certified
     cost = (lambda p: g2o_error(graph, p)) if plain else (lambda p: float(fg.error(g2o_values(graph.ids, p))))
     out = BatchResult(poses, cost(graph.poses), float(fg.error(best.values)), best.iterations, best.seconds,
                       best.init, cost(best.start), verified, inlier, certified,

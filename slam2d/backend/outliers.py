@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from slam2d.backend import consistency
+from slam2d.backend import admission, consistency
 from slam2d.backend import initialization as ini
 from slam2d.backend.consistency import (
     CHI2_3DOF_99,
@@ -124,7 +124,9 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
     3. DCS from that solution over the odometry and every loop within ``READMIT_NOISE_CHI2`` times the
        noise ratio (the graph's noise units: the same loops at any scale of the information);
     4. least squares over the odometry and the loops within ``INLIER_GATE`` times ``gate_scale``, judged
-       again at its solution (``least_squares_kept``)."""
+       again at its solution (``least_squares_kept``);
+    5. the loops left out enter one by one while their innovation against the kept graph is within that
+       gate (``admission.admit_consistent``: the loops the screen could not support, as on MIT)."""
     t0 = time.perf_counter()
     odometry = g2o.odometry_mask(graph)
     screened = consistency.pairwise_support(graph)
@@ -156,7 +158,11 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
     iterations += n
     keep, poses, n = least_squares_kept(graph, plain, poses, INLIER_GATE * scale)
     seconds["solve"] = time.perf_counter() - t0
-    return Solution(poses, keep, iterations + n, 0, scale, name, seconds, phi_used)
+    t0 = time.perf_counter()
+    keep, poses, more, _ = admission.admit_consistent(graph, plain, keep, poses, INLIER_GATE * scale,
+                                                      lambda k, p: _solve(graph, _pick(plain, k), p))
+    seconds["admit"] = time.perf_counter() - t0
+    return Solution(poses, keep, iterations + n + more, 0, scale, name, seconds, phi_used)
 
 
 def least_squares_kept(graph: g2o.PoseGraphFile, plain: list, poses, gate: float, rounds: int = FINAL_ROUNDS):

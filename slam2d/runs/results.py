@@ -22,8 +22,6 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
 from slam2d.config import MAX_NAME_BYTES
 from slam2d.errors import InputError
@@ -199,8 +197,11 @@ def live_view(viz: str | Path | None, name: str, kind: str, *args):
         view.close()
 
 
-def progress_console() -> Console:
-    """Where progress bars are drawn: stderr (stdout carries the results only)."""
+def progress_console():
+    """rich's Console where progress bars are drawn: stderr (stdout carries the results only). rich is
+    imported here, not by commands that draw no bar."""
+    from rich.console import Console
+
     return Console(stderr=True)
 
 
@@ -219,6 +220,13 @@ def progress(source, quiet: bool):
         total = source.expected() if hasattr(source, "expected") else len(source)
     except (TypeError, NotImplementedError):
         total = None
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TimeRemainingColumn,
+    )
+
     with Progress(
         "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
         console=progress_console(),
@@ -234,6 +242,8 @@ def progress_bar(description: str, total: float | None, quiet: bool):
     if not shows_progress(quiet):
         yield lambda done, note="": None
         return
+    from rich.progress import BarColumn, Progress, TimeRemainingColumn
+
     with Progress("[progress.description]{task.description}", BarColumn(), TimeRemainingColumn(),
                   console=progress_console()) as bar:
         task = bar.add_task(description, total=total)
