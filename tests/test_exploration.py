@@ -580,7 +580,7 @@ def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped()
     t = np.linspace(0, 2 * np.pi, 60)
     circle = np.column_stack([4.2 + 0.3 * np.sin(t), 1.5 + 0.2 * (1 - np.cos(t))])  # a loop of 1.6 m
     est = [np.array([x, y, 0.0]) for x, y in np.vstack([straight, circle])]
-    loop = SimpleNamespace(view=lambda: view, robot=SimpleNamespace(cfg=SimpleNamespace(radius=0.2)),
+    loop = SimpleNamespace(view=lambda: view, body=SimpleNamespace(radius=0.2),
                            slam=SimpleNamespace(pose=est[-1]), retraces=0)  # fmt: skip
     way = way_out(loop, est)
     assert way is not None and loop.retraces == 1
@@ -590,7 +590,7 @@ def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped()
     assert np.hypot(*(way[0] - est[-1][:2])) < 0.15  # from where the robot stands
     length = np.hypot(*np.diff(way, axis=0).T).sum()
     assert length < 1.2 * (est[-1][0] - way[-1][0])  # straight back: the loop in the small room is not retraced
-    outside = SimpleNamespace(view=lambda: view, robot=loop.robot, slam=SimpleNamespace(pose=np.array([2.0, 1.5, 0.0])),
+    outside = SimpleNamespace(view=lambda: view, body=loop.body, slam=SimpleNamespace(pose=np.array([2.0, 1.5, 0.0])),
                               retraces=0)  # fmt: skip
     assert way_out(outside, [np.array([x, y, 0.0]) for x, y in straight[:30]]) is None  # not cut off
     loop.retraces = MAX_RETRACES

@@ -155,13 +155,15 @@ class Explorer:
 
     def decide(self, pose, view: GridView) -> Goal | None:
         """The next goal from ``pose`` on ``view``, or None when nothing is left to explore. Paths keep the
-        robot's radius + the navigator's inflation margin from obstacles; when no goal is left so, the radius
-        alone (the navigator takes a gap that tight as a last resort: the robot may have come in through one)."""
+        robot's radius + the safety margin + the navigator's inflation margin from obstacles; when no goal is left
+        so, the radius + the safety margin (the navigator takes a gap that tight as a last resort: the robot may
+        have come in through one)."""
         t0 = time.perf_counter()
         pose = np.asarray(pose, dtype=np.float64)
-        goal = self._decide(pose, view, self.radius + self.inflation)
+        keep = self.radius + self.cfg.safety_margin
+        goal = self._decide(pose, view, keep + self.inflation)
         if goal is None and self.inflation > 0:
-            goal = self._decide(pose, view, self.radius)
+            goal = self._decide(pose, view, keep)
             self.tight_goals += goal is not None
         self.decision_seconds.append(time.perf_counter() - t0)
         return goal
