@@ -8,7 +8,7 @@ from slam2d.exploration import config as explore_config
 from slam2d.exploration.loop import explore
 
 
-def narrow_door_png(tmp_path, door: float = 0.6):
+def narrow_door_png(tmp_path, door: float = 0.7):
     """Two 4 x 3 m rooms joined by a door ``door`` m wide in a wall 0.2 m thick, 5 cm pixels; a partition in the
     second room (x = 5.5 m, y 1.5-3.5 m) hides most of it from the door."""
     from PIL import Image

@@ -29,7 +29,7 @@ from slam2d.exploration.coverage import (
     truth_map,
 )
 from slam2d.exploration.explorer import Explorer, Goal
-from slam2d.exploration.gridops import GridView, LiveClearance, inside_polygon
+from slam2d.exploration.gridops import GridView, LiveClearance, geodesic, inside_polygon
 from slam2d.exploration.recovery import escape, retrace, way_out
 from slam2d.navigation import Navigator
 from slam2d.navigation.config import navigator_config
@@ -128,19 +128,39 @@ class _Loop:
             self.nav = None
             return
         self.legs = [np.asarray(w, float) for w in goal.waypoints] + [goal.position]
-        self.nav = Navigator(self.legs[0], self.body, self.options)
+        self.nav = Navigator(self.legs[0], self.disc(), self.options)
         self.goal_t0, self.best = now, (np.inf, now)
         self.goal_from = self.robot.pose[:2].copy()
         self.goals.append({"time": now, "position": goal.position.tolist(), "kind": goal.kind,
                            "waypoints": len(goal.waypoints), "outcome": "active"})  # fmt: skip
         if goal.options:
             self.goals[-1]["options"] = goal.options
+        if goal.tight:
+            self.goals[-1]["tight"] = True
 
     def next_leg(self, now: float) -> None:
         self._count(self.nav)
         self.legs.pop(0)
-        self.nav = Navigator(self.legs[0], self.body, self.options)
+        self.nav = Navigator(self.legs[0], self.disc(), self.options)
         self.goal_t0, self.best = now, (np.inf, now)
+
+    def disc(self) -> RobotConfig:
+        """The robot as the navigator drives it: grown by the safety margin, but for a ``tight`` goal (a gap the
+        margin does not fit through, the last resort)."""
+        return self.robot.cfg if self.goal is not None and self.goal.tight else self.body
+
+    def widen(self, pose) -> None:
+        """A ``tight`` goal whose current leg the map now lets the robot reach with the safety margin (a door
+        drawn wider as more of it is seen) is driven with the margin again, from here on."""
+        view = self.view()
+        cell = view.to_cell(self.legs[0])
+        if not (view.inside(cell[None])[0] and self.body.radius > self.robot.cfg.radius):
+            return
+        if np.isfinite(geodesic(view.traversable(self.body.radius), view.to_cell(pose[:2]), view.resolution)[
+                cell[0], cell[1]]):  # fmt: skip
+            self._count(self.nav)
+            self.goal.tight = False
+            self.nav = Navigator(self.legs[0], self.body, self.options)
 
     def close_goal(self, outcome: str) -> None:
         self._count(self.nav)
@@ -206,6 +226,8 @@ def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
             next_check = now + ecfg.check_period
             if loop.explorer.spent(loop.goal, loop.view()):
                 loop.close_goal("spent")
+            elif loop.goal.tight:
+                loop.widen(pose)
         if loop.goal is None and loop.retrace is None:
             loop.set_goal(loop.explorer.decide(pose, loop.view()), now)
             if loop.goal is None and now >= WARMUP:
