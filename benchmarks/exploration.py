@@ -116,6 +116,7 @@ def tables(runs: list[dict], subject: str = "utility") -> str:
         "nearest_frontier", "utility", subject)  # fmt: skip
     out.extend(distances_by_world(runs, trio))
     out.extend(paired_ratios(runs, subject, REFERENCES + (("utility",) if subject != "utility" else ())))
+    out.extend(per_run_safety(runs))
     out.append("| strategy | runs | median path repetition | median goals | median inaccessible goals |")
     out.append("|---|---|---|---|---|")
     for s, rs in by.items():
@@ -142,6 +143,23 @@ def distances_by_world(runs: list[dict], trio=("nearest_frontier", "explore_lite
         ratios = ", ".join(fmt(d99[-1] / d, 2) for d in d99[:-1])
         totals = " / ".join(f"{r['distance']:.0f}" for r in rs)
         out.append(f"| {world} | {seed} | {rs[0]['reachable_area_m2']:.0f} | {' | '.join(cells)} | {totals} | {ratios} |")
+    return out + [""]
+
+
+def per_run_safety(runs: list[dict]) -> list[str]:
+    """Per run: the online pose error (what the robot drove on against the truth: p95, max and when, the largest
+    heading error) and the smallest clearance between the robot's disc and a wall or person, with the targets
+    (p95 ≤ 10 cm, max ≤ 25 cm, clearance ≥ 5 cm) met or not; runs logged before these were measured show –."""
+    head = ("| world | strategy | seed | pose error p95 / max (cm) | max at (s) | heading error max (°) | "
+            "smallest clearance (cm) | coverage | targets met |")  # fmt: skip
+    out = [head, "|" + "---|" * 9]
+    nan = float("nan")
+    for r in sorted(runs, key=lambda r: (r["world"], r["strategy"], r["seed"])):
+        p95, worst, clear = r.get("pose_error_p95", nan), r.get("pose_error_max", nan), r["min_clearance"]
+        met = "–" if math.isnan(p95) else ("yes" if p95 <= 0.10 and worst <= 0.25 and clear >= 0.05 else "no")
+        out.append(f"| {r['world']} | {r['strategy']} | {r['seed']} | {fmt(100 * p95)} / {fmt(100 * worst)} | "
+                   f"{fmt(r.get('pose_error_max_time', nan), 0)} | {fmt(r.get('heading_error_max_deg', nan))} | "
+                   f"{fmt(100 * clear)} | {100 * r['coverage']:.1f} % | {met} |")  # fmt: skip
     return out + [""]
 
 

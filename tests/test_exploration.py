@@ -580,7 +580,7 @@ def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped()
     t = np.linspace(0, 2 * np.pi, 60)
     circle = np.column_stack([4.2 + 0.3 * np.sin(t), 1.5 + 0.2 * (1 - np.cos(t))])  # a loop of 1.6 m
     est = [np.array([x, y, 0.0]) for x, y in np.vstack([straight, circle])]
-    loop = SimpleNamespace(view=lambda: view, robot=SimpleNamespace(cfg=SimpleNamespace(radius=0.2)),
+    loop = SimpleNamespace(view=lambda: view, body=SimpleNamespace(radius=0.2),
                            slam=SimpleNamespace(pose=est[-1]), retraces=0)  # fmt: skip
     way = way_out(loop, est)
     assert way is not None and loop.retraces == 1
@@ -590,7 +590,7 @@ def test_a_robot_its_map_has_cut_off_drives_back_the_way_it_came_loops_skipped()
     assert np.hypot(*(way[0] - est[-1][:2])) < 0.15  # from where the robot stands
     length = np.hypot(*np.diff(way, axis=0).T).sum()
     assert length < 1.2 * (est[-1][0] - way[-1][0])  # straight back: the loop in the small room is not retraced
-    outside = SimpleNamespace(view=lambda: view, robot=loop.robot, slam=SimpleNamespace(pose=np.array([2.0, 1.5, 0.0])),
+    outside = SimpleNamespace(view=lambda: view, body=loop.body, slam=SimpleNamespace(pose=np.array([2.0, 1.5, 0.0])),
                               retraces=0)  # fmt: skip
     assert way_out(outside, [np.array([x, y, 0.0]) for x, y in straight[:30]]) is None  # not cut off
     loop.retraces = MAX_RETRACES
@@ -717,8 +717,8 @@ def test_the_live_clearance_of_a_growing_map_is_the_clearance_of_each_view():
 
 
 def test_a_robot_boxed_in_by_the_margin_leaves_through_the_gap_it_came_in_by():
-    """A room whose only door is 0.45 m wide: the robot's disc (0.4 m) fits, its disc + margin (0.5 m) does
-    not. Beyond the door, unknown space: the explorer must not call the exploration done from inside."""
+    """A room whose only door is 0.45 m wide: the robot's disc (0.4 m) fits, its disc + margins (0.5 m, 0.6 m)
+    do not. Beyond the door, unknown space: the explorer must not call the exploration done from inside."""
     state = np.full((80, 240), UNKNOWN, dtype=np.int8)
     state[10:70, 10:50] = FREE  # the room, 2 x 3 m
     state[10:70, 50:52] = OCCUPIED  # its east wall
@@ -732,6 +732,7 @@ def test_a_robot_boxed_in_by_the_margin_leaves_through_the_gap_it_came_in_by():
     explorer = Explorer(cfg, 0.2, 0.05, 12.0)
     goal = explorer.decide(np.array([1.5, 2.0, 0.0]), view)
     assert goal is not None and goal.kind == "frontier" and goal.position[0] > 10 and explorer.tight_goals == 1
+    assert goal.tight  # driven with the robot's own disc: the safety margin does not fit through the door
     wide = state.copy()
     wide[30:50, 50:52] = FREE  # a 1 m door: the margin is kept, no tight goal
     explorer = Explorer(cfg, 0.2, 0.05, 12.0)

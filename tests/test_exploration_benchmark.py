@@ -43,3 +43,16 @@ def test_the_figure_of_the_spread_is_drawn(tmp_path):
     out = tmp_path / "spread.png"
     _bench().figure(RUNS, str(out))
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 10_000
+
+
+def test_every_run_reports_its_online_pose_error_and_clearance_against_the_targets():
+    bench = _bench()
+    runs = [{"world": "lab", "strategy": "utility", "seed": 0, "pose_error_p95": 0.04, "pose_error_max": 0.12,
+             "pose_error_max_time": 310.0, "heading_error_max_deg": 1.5, "min_clearance": 0.061, "coverage": 0.999},
+            {"world": "lab", "strategy": "tour", "seed": 0, "pose_error_p95": 0.04, "pose_error_max": 0.31,
+             "pose_error_max_time": 90.0, "heading_error_max_deg": 2.0, "min_clearance": 0.07, "coverage": 0.995},
+            {"world": "lab", "strategy": "nearest_frontier", "seed": 0, "min_clearance": 0.02, "coverage": 0.99}]
+    rows = bench.per_run_safety(runs)[2:-1]
+    assert rows[0] == "| lab | nearest_frontier | 0 | – / – | – | – | 2.0 | 99.0 % | – |"  # logged before
+    assert rows[1].endswith("| 4.0 / 31.0 | 90 | 2.0 | 7.0 | 99.5 % | no |")  # the max over 25 cm
+    assert rows[2].endswith("| 4.0 / 12.0 | 310 | 1.5 | 6.1 | 99.9 % | yes |")

@@ -53,6 +53,9 @@ class ExplorationConfig(Section):
     check_period: float = Field(1.0, gt=0, description="s between checks that the current goal is still worth it")
     goal_timeout: float = Field(20.0, gt=0, description="s without 0.3 m of progress: the goal is inaccessible")
     goal_reached: float = Field(0.3, gt=0, description="m from the goal that counts as reached")
+    safety_margin: float = Field(0.05, ge=0, description="m kept between the robot's disc and walls or people: the "
+                                 "explorer, the navigator and its local planner plan and drive with the radius grown "
+                                 "by this (the coverage still counts from the robot's own radius)")  # fmt: skip
     goal_clearance: float = Field(0.2, ge=0, description="m kept between the robot's disc and the map's "
                                                          "obstacles at a goal")  # fmt: skip
     avoid_radius: float = Field(0.5, gt=0, description="m: goals this close to a visited or inaccessible one are skipped")

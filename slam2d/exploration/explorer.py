@@ -59,7 +59,8 @@ class Goal:
     """A chosen goal: ``position`` (x, y) m, ``kind`` ("frontier" / "candidate" / "pocket" / "viewpoint": a view
     of frontier cells, ``targets``), the candidate if any,
     ``waypoints`` (x, y) m to pass first (backtracking over the graph), ``score`` of the choice, and for the
-    utility the decision's best ``options`` (the chosen goal first): why it went there."""
+    utility the decision's best ``options`` (the chosen goal first): why it went there; ``tight``: reached only
+    on paths closer to obstacles than the safety margin (the robot's own disc is driven there)."""
 
     position: np.ndarray
     kind: str
@@ -68,6 +69,7 @@ class Goal:
     score: float = float("nan")
     targets: np.ndarray | None = None  # (K, 2) m: the hidden cells a pocket view (frontier cells a viewpoint) is to see
     options: list = field(default_factory=list)  # dicts: position, kind, gain_m2, share_m2, path_m, L_m, gamma_rad, F
+    tight: bool = False
 
 
 class Explorer:
@@ -155,14 +157,21 @@ class Explorer:
 
     def decide(self, pose, view: GridView) -> Goal | None:
         """The next goal from ``pose`` on ``view``, or None when nothing is left to explore. Paths keep the
-        robot's radius + the navigator's inflation margin from obstacles; when no goal is left so, the radius
-        alone (the navigator takes a gap that tight as a last resort: the robot may have come in through one)."""
+        robot's radius + the safety margin + the navigator's inflation margin from obstacles; when no goal is left
+        so, the radius + the safety margin; then the radius alone, and the goal is ``tight`` (the navigator takes a
+        gap that tight as a last resort: the robot may have come in through one, or the map draws a door narrower
+        than it is)."""
         t0 = time.perf_counter()
         pose = np.asarray(pose, dtype=np.float64)
-        goal = self._decide(pose, view, self.radius + self.inflation)
+        keep = self.radius + self.cfg.safety_margin
+        goal = self._decide(pose, view, keep + self.inflation)
         if goal is None and self.inflation > 0:
+            goal = self._decide(pose, view, keep)
+        if goal is None and self.cfg.safety_margin > 0:
             goal = self._decide(pose, view, self.radius)
-            self.tight_goals += goal is not None
+            if goal is not None:
+                goal.tight = True
+        self.tight_goals += goal is not None and goal.tight
         self.decision_seconds.append(time.perf_counter() - t0)
         return goal
 

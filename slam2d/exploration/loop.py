@@ -29,7 +29,7 @@ from slam2d.exploration.coverage import (
     truth_map,
 )
 from slam2d.exploration.explorer import Explorer, Goal
-from slam2d.exploration.gridops import GridView, LiveClearance, inside_polygon
+from slam2d.exploration.gridops import GridView, LiveClearance, geodesic, inside_polygon
 from slam2d.exploration.recovery import escape, retrace, way_out
 from slam2d.navigation import Navigator
 from slam2d.navigation.config import navigator_config
@@ -89,6 +89,8 @@ class _Loop:
         if self.ecfg.bounds is not None and not inside_polygon(start[None, :2], self.ecfg.bounds)[0]:
             raise InputError("exploration.bounds", f"the start ({start[0]:.2f}, {start[1]:.2f}) is outside the polygon")
         self.robot = Robot(self.world, start, RobotConfig(laser=sim.laser, odometry=sim.odometry), seed=cfg.seed)
+        # the robot as it plans and drives: its disc grown by the safety margin
+        self.body = self.robot.cfg.model_copy(update={"radius": self.robot.cfg.radius + self.ecfg.safety_margin})
         # a goal the map comes to block is inaccessible at once: the explorer picks another
         self.options = navigator_config({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
                                           True, "exploration.options")  # fmt: skip
@@ -103,8 +105,8 @@ class _Loop:
         self.explorer = Explorer(self.ecfg, self.robot.cfg.radius, self.options.inflation_margin,
                                  sim.laser.range_max)  # fmt: skip
         # the explorer asks for room of its radius + the larger of the inflation and the goal clearance
-        self.clearance = LiveClearance(self.robot.cfg.radius + max(self.options.inflation_margin,
-                                                                   self.ecfg.goal_clearance) + 2 * cfg.mapping.resolution)  # fmt: skip
+        self.clearance = LiveClearance(self.body.radius + max(self.options.inflation_margin, self.ecfg.goal_clearance)
+                                       + 2 * cfg.mapping.resolution)  # fmt: skip
         self.nav = None
         self.goal: Goal | None = None
         self.dwell: float | None = None  # s: until when the robot stands at a view of a pocket
@@ -126,19 +128,39 @@ class _Loop:
             self.nav = None
             return
         self.legs = [np.asarray(w, float) for w in goal.waypoints] + [goal.position]
-        self.nav = Navigator(self.legs[0], self.robot.cfg, self.options)
+        self.nav = Navigator(self.legs[0], self.disc(), self.options)
         self.goal_t0, self.best = now, (np.inf, now)
         self.goal_from = self.robot.pose[:2].copy()
         self.goals.append({"time": now, "position": goal.position.tolist(), "kind": goal.kind,
                            "waypoints": len(goal.waypoints), "outcome": "active"})  # fmt: skip
         if goal.options:
             self.goals[-1]["options"] = goal.options
+        if goal.tight:
+            self.goals[-1]["tight"] = True
 
     def next_leg(self, now: float) -> None:
         self._count(self.nav)
         self.legs.pop(0)
-        self.nav = Navigator(self.legs[0], self.robot.cfg, self.options)
+        self.nav = Navigator(self.legs[0], self.disc(), self.options)
         self.goal_t0, self.best = now, (np.inf, now)
+
+    def disc(self) -> RobotConfig:
+        """The robot as the navigator drives it: grown by the safety margin, but for a ``tight`` goal (a gap the
+        margin does not fit through, the last resort)."""
+        return self.robot.cfg if self.goal is not None and self.goal.tight else self.body
+
+    def widen(self, pose) -> None:
+        """A ``tight`` goal whose current leg the map now lets the robot reach with the safety margin (a door
+        drawn wider as more of it is seen) is driven with the margin again, from here on."""
+        view = self.view()
+        cell = view.to_cell(self.legs[0])
+        if not (view.inside(cell[None])[0] and self.body.radius > self.robot.cfg.radius):
+            return
+        if np.isfinite(geodesic(view.traversable(self.body.radius), view.to_cell(pose[:2]), view.resolution)[
+                cell[0], cell[1]]):  # fmt: skip
+            self._count(self.nav)
+            self.goal.tight = False
+            self.nav = Navigator(self.legs[0], self.body, self.options)
 
     def close_goal(self, outcome: str) -> None:
         self._count(self.nav)
@@ -181,7 +203,7 @@ def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
     truth, est, stamps = [step.pose], [loop.slam.pose.copy()], [t0]
     loop.explorer.observe(est[-1], step.scan, loop.view(), force=True)
     curve, snaps = [], []
-    driven, collisions, in_contact, min_clear = 0.0, 0, False, clearance(loop.world, loop.robot)
+    driven, collisions, in_contact, min_clear = 0.0, 0, False, (clearance(loop.world, loop.robot), 0.0)
     next_check = next_sample = next_snap = 0.0
     idle, stop = 0, ""
     while not stop:
@@ -204,6 +226,8 @@ def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
             next_check = now + ecfg.check_period
             if loop.explorer.spent(loop.goal, loop.view()):
                 loop.close_goal("spent")
+            elif loop.goal.tight:
+                loop.widen(pose)
         if loop.goal is None and loop.retrace is None:
             loop.set_goal(loop.explorer.decide(pose, loop.view()), now)
             if loop.goal is None and now >= WARMUP:
@@ -253,7 +277,9 @@ def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
         if step.collision and not in_contact:
             loop.contacts.append((now, *np.round(step.pose, 2), step.contact, cmd.state if cmd else ""))
         in_contact = step.collision
-        min_clear = min(min_clear, clearance(loop.world, loop.robot))
+        gap = clearance(loop.world, loop.robot)
+        if gap < min_clear[0]:
+            min_clear = gap, now
         loop.slam.add(step.scan)
         truth.append(step.pose)
         est.append(loop.slam.pose.copy())
@@ -299,7 +325,7 @@ class _Lazy:
         return getattr(self._view, name)
 
 
-def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, collisions: int, min_clear: float,
+def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, collisions: int, min_clear: tuple,
              wall: float) -> dict:  # fmt: skip
     curve, ex = run.curve, run.explorer
     t90, d90 = at_coverage(curve, 0.90)
@@ -312,7 +338,7 @@ def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, colli
         "stop_reason": stop, "coverage": float(curve[-1, 2]), "time": sim_time, "distance": float(curve[-1, 1]),
         "time_to_90": t90, "distance_to_90": d90, "time_to_99": t99, "distance_to_99": d99,
         "premature_stop": stop == "done" and curve[-1, 2] < 0.99,
-        "collisions": collisions, "min_clearance": float(min_clear),
+        "collisions": collisions, "min_clearance": float(min_clear[0]), "min_clearance_time": float(min_clear[1]),
         "goals": len(run.goals), "goals_reached": outcomes.count("reached"), "goals_spent": outcomes.count("spent"),
         "goals_inaccessible": outcomes.count("inaccessible"), "frontier_fallbacks": ex.fallbacks,
         "pocket_goals": ex.pocket_goals, "tight_goals": ex.tight_goals,
@@ -321,12 +347,24 @@ def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, colli
         "coverage_disc": Coverage(loop.reachable_disc, loop.truth_frame, loop.cfg.mapping)(run.grid),
         "map_iou": cover.iou(run.grid),
         "ate_rmse": ate(run.estimate, run.truth, align=False)["rmse"],
+        **_pose_error(run),
         "decisions": len(ex.decision_seconds), "decision_ms_median": float(np.median(dec)),
         "decision_ms_p95": float(np.percentile(dec, 95)),
         **ex.hybrid.counts(),
         "reachable_area_m2": float(loop.reachable.sum() * loop.truth_frame.resolution**2),
         "wall_s": wall, "real_time_factor": sim_time / wall if wall > 0 else float("nan"),
     }  # fmt: skip
+
+
+def _pose_error(run: ExplorationRun) -> dict:
+    """The online estimate the robot drove on against the truth, no alignment: position error p95 and max (m),
+    when the max was (s from the start), and the largest heading error (deg)."""
+    err = np.hypot(*(run.estimate[:, :2] - run.truth[:, :2]).T)
+    turn = np.abs(np.angle(np.exp(1j * (run.estimate[:, 2] - run.truth[:, 2]))))
+    worst = int(np.argmax(err))
+    return {"pose_error_p95": float(np.percentile(err, 95)), "pose_error_max": float(err[worst]),
+            "pose_error_max_time": float(run.stamps[worst] - run.stamps[0]),
+            "heading_error_max_deg": float(np.degrees(turn.max()))}  # fmt: skip
 
 
 def _snapshot(loop: _Loop, n_poses: int) -> dict:

@@ -34,13 +34,13 @@ def escape(loop, step, now: float):
         return None
     points = step.scan.points_in_base()
     if heading is None:
-        heading = pose[2] + open_heading(points, loop.robot.cfg.radius)
+        heading = pose[2] + open_heading(points, loop.body.radius)
         loop.escape = heading, start, since
         loop.escapes += 1
     err = heading_error(heading, pose)
     if abs(err) > 0.15:
         return towards(err, 0.0, "escape turn")
-    if blocked_ahead(points, loop.robot.cfg.radius, 0.25, 0.01):
+    if blocked_ahead(points, loop.body.radius, 0.25, 0.01):
         loop.escape = None, start, since  # blocked after all: choose again
         return Command(0.0, 0.0, False, "escape")
     return towards(err, 0.15, "escape")
@@ -59,7 +59,7 @@ def way_out(loop, est: list) -> np.ndarray | None:
     if loop.retraces >= MAX_RETRACES:
         return None
     view = loop.view()
-    passable = view.traversable(loop.robot.cfg.radius)
+    passable = view.traversable(loop.body.radius)
     reach = np.isfinite(geodesic(passable, view.to_cell(loop.slam.pose[:2]), view.resolution))
     if reach.sum() >= TRAPPED_SHARE * passable.sum():
         return None
@@ -101,7 +101,7 @@ def retrace(loop, step, now: float):
     err = heading_error(float(np.arctan2(target[1] - pose[1], target[0] - pose[0])), pose)
     if abs(err) > 0.3:
         return towards(err, 0.0, "retrace turn")
-    if blocked_ahead(step.scan.points_in_base(), loop.robot.cfg.radius, 0.15, 0.0):
+    if blocked_ahead(step.scan.points_in_base(), loop.body.radius, 0.15, 0.0):
         loop.retrace = None
         return None
     return towards(err, 0.15, "retrace")
