@@ -9,6 +9,8 @@ distance (m) of those points to scan 1's local lines (``slam2d.backend.dense``).
 also aligned point-to-line from the estimate (``dense.align_pairs``), and that alignment is scored
 against the relations as the estimate is. If the relations were the scans' best alignment, the
 alignment would score near zero and the relations would fit better than the estimate nearly always.
+The last column is the frame (a laser mount, fitted to the relations) in which the estimate scores
+best, and that score: a relations file made in another frame than the one scored would show here.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import minimize
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from relations_audit import read_tum, scan_points
@@ -68,12 +71,18 @@ def pair_fit(log: str, folder: Path) -> dict:
         e = geometry.compose(delta, geometry.inverse(truth))
         return np.hypot(e[:, 0], e[:, 1])
 
+    def remounted(m):  # the estimate between frames at ``m`` (x, y, theta) in the laser's
+        return error(geometry.compose(geometry.compose(geometry.inverse(m), estimate), m)).mean()
+
+    mount = minimize(remounted, np.zeros(3), method="Nelder-Mead").x
+
     fits = np.array([[line_fit(surfaces[where[a]], geometry.transform_points(d, points[b])) for d in (t, e)]
                      for a, b, t, e in zip(s1, s2, truth, estimate)])  # fmt: skip
     both = np.isfinite(fits).all(axis=1)
     overlap = share >= 0.25
     return {"n": len(truth), "ours": error(estimate).mean(), "aligned": np.where(overlap, error(aligned), error(estimate)).mean(),
-            "overlap": overlap.mean(), "fit": np.median(fits[both], axis=0), "better": np.mean(fits[both, 0] < fits[both, 1])}
+            "overlap": overlap.mean(), "fit": np.median(fits[both], axis=0), "better": np.mean(fits[both, 0] < fits[both, 1]),
+            "mount": mount, "remounted": remounted(mount)}
 
 
 def main(argv: list[str]) -> None:
@@ -83,13 +92,15 @@ def main(argv: list[str]) -> None:
     args = ap.parse_args(argv)
     given = dict(item.split("=", 1) for item in args.results)
     print("| log | relations | slam2d error (m) | pairwise alignment's error (m) | pairs aligned | "
-          "line fit, relations / slam2d (m) | relations fit better |")
-    print("|---|---|---|---|---|---|---|")
+          "line fit, relations / slam2d (m) | relations fit better | best frame (x m, y m, θ °): error (m) |")
+    print("|---|---|---|---|---|---|---|---|")
     for log in args.logs or list(PUBLISHED):
         folder = Path(given[log]) if log in given else Path(run(log, [])["folder"])
         a = pair_fit(log, folder)
         print(f"| {log} | {a['n']} | {a['ours']:.4f} | {a['aligned']:.4f} | {100 * a['overlap']:.0f} % "
-              f"| {a['fit'][0]:.4f} / {a['fit'][1]:.4f} | {100 * a['better']:.1f} % |", flush=True)
+              f"| {a['fit'][0]:.4f} / {a['fit'][1]:.4f} | {100 * a['better']:.1f} % "
+              f"| ({a['mount'][0]:.3f}, {a['mount'][1]:.3f}, {np.rad2deg(a['mount'][2]):.2f}): {a['remounted']:.4f} |",
+              flush=True)
 
 
 if __name__ == "__main__":
