@@ -24,6 +24,7 @@ NORMAL_MIN_NEIGHBOURS = 3  # points (with itself) within NORMAL_RADIUS to fit a 
 NORMAL_MAX_FLATNESS = 0.3  # ratio of the neighbourhood's smaller to larger principal spread (a line: ~0)
 SIGMA = 0.02  # m: point-to-line noise; the information is the Hessian over SIGMA^2
 KERNEL_WIDTH = 0.05  # m: Cauchy kernel width on point-to-line distances
+DAMPING = 1e-6  # share of the Hessian's trace on its diagonal: a direction no line constrains does not move
 ITERATIONS = 3  # Gauss-Newton steps (each re-associates) per alignment: the graph starts them close
 
 
@@ -106,7 +107,8 @@ def align_pairs(targets: list[Surface], sources: list[np.ndarray], pairs, relati
         used = np.bincount(own, minlength=n_pairs).astype(float)
         ok = used >= 3
         step = np.zeros((n_pairs, 3))
-        step[ok] = -np.linalg.solve(h[ok] + 1e-9 * np.eye(3), g[ok][..., None])[..., 0]
+        damp = DAMPING * np.trace(h[ok], axis1=1, axis2=2)[:, None, None] * np.eye(3)  # a corridor's free direction
+        step[ok] = -np.linalg.solve(h[ok] + damp, g[ok][..., None])[..., 0]
         x[:, :2] += step[:, :2]
         x[:, 2] = geometry.wrap_angle(x[:, 2] + step[:, 2])
         info = h
