@@ -177,7 +177,7 @@ class RefineConfig(Section):
     again, ``rounds`` times (``slam2d.backend.refine``)."""
 
     rounds: int = Field(0, ge=0, le=10, description="refinement rounds (0: none)")
-    radius: float = Field(1.0, gt=0, le=20, description="m between keyframes paired for alignment")
+    radius: float = Field(1.0, gt=0, le=5, description="m between keyframes paired for alignment")
     min_overlap: float = Field(0.25, gt=0, le=1, description="share of a scan's points that must find a line")
 
 

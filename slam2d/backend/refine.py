@@ -28,6 +28,7 @@ log = logging.getLogger(__name__)
 SOURCE_VOXEL = 0.15  # m: a source scan keeps one point per square of this side
 MAX_HEADING_GAP = np.deg2rad(90.0)  # rad: keyframes facing further apart are not paired
 REGULARISE = 1e-9  # share of the trace added to the diagonal: a corridor's pair leaves one direction free
+CHUNK = 20000  # pairs aligned together
 MAX_CORRECTION = (0.3, np.deg2rad(5.0))  # m, rad: an alignment that moved further is dropped
 
 
@@ -41,6 +42,15 @@ def pairs_within(poses, radius: float) -> np.ndarray:
     return pairs[gap <= MAX_HEADING_GAP]
 
 
+def _align(targets, sources, pairs, start):
+    """``dense.align_pairs`` over ``CHUNK`` pairs at a time (memory grows with the points stacked)."""
+    parts = [dense.align_pairs(targets, sources, pairs[a:a + CHUNK], start[a:a + CHUNK])
+             for a in range(0, len(pairs), CHUNK)]  # fmt: skip
+    if not parts:
+        return np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0)
+    return tuple(np.concatenate(p) for p in zip(*parts))
+
+
 def refine(graph, points: list[np.ndarray], cfg: RefineConfig) -> tuple[np.ndarray, dict[str, float]]:
     """Refine ``graph`` (a PoseGraph after its final batch) against the keyframes' ``points`` (each
     (M, 2), base frame, m, in key order); returns the poses (K, 3) and counts for the summary."""
@@ -52,7 +62,7 @@ def refine(graph, points: list[np.ndarray], cfg: RefineConfig) -> tuple[np.ndarr
     for _ in range(cfg.rounds):
         pairs = pairs_within(poses, cfg.radius)
         start = geometry.between(poses[pairs[:, 0]], poses[pairs[:, 1]])
-        aligned, info, share = dense.align_pairs(targets, sources, pairs, start)
+        aligned, info, share = _align(targets, sources, pairs, start)
         moved = geometry.between(start, aligned)
         keep = ((share >= cfg.min_overlap) & (np.hypot(moved[:, 0], moved[:, 1]) <= MAX_CORRECTION[0])
                 & (np.abs(moved[:, 2]) <= MAX_CORRECTION[1]))  # fmt: skip
