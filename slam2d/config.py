@@ -171,6 +171,16 @@ class LoopClosureConfig(Section):
     ambiguity_ratio: float = Field(0.9, gt=0, le=1, description="... scoring at least this fraction of its score")
 
 
+class RefineConfig(Section):
+    """Dense refinement after the final batch: every pair of keyframes within ``radius`` aligned
+    point-to-line from the optimised poses, the pairs that overlap added as factors, the graph solved
+    again, ``rounds`` times (``slam2d.backend.refine``)."""
+
+    rounds: int = Field(0, ge=0, le=10, description="refinement rounds (0: none)")
+    radius: float = Field(1.0, gt=0, le=5, description="m between keyframes paired for alignment")
+    min_overlap: float = Field(0.25, gt=0, le=1, description="share of a scan's points that must find a line")
+
+
 class BackendConfig(Section):
     name: Annotated[str, Choice("backends")] = Field(
         "pose_graph", description="'pose_graph' optimises with GTSAM; 'none' chains the frontend's deltas "
@@ -182,6 +192,7 @@ class BackendConfig(Section):
     robust_param: float = Field(2.0, gt=0, description="kernel width (whitened units)")
     gnc: bool = Field(False, description="graduated non-convexity in the final batch optimisation")
     loop_closure: LoopClosureConfig = LoopClosureConfig()
+    refine: RefineConfig = RefineConfig()
 
 
 class MappingConfig(Section):

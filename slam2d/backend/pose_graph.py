@@ -305,6 +305,25 @@ class PoseGraph:
         )
         return self._restart_at(result)
 
+    def solve_with(self, pairs, deltas, informations) -> np.ndarray:
+        """Levenberg-Marquardt over the active factors plus one between factor per row of ``pairs``
+        (P, 2) (keyframes i, j; ``deltas`` (P, 3) j's pose in i's frame, ``informations`` (P, 3, 3)),
+        each under the loops' kernel, from the current estimate. The extra factors are not kept: the
+        solution replaces the estimate and iSAM2 restarts from it over the graph's own factors.
+        Returns the poses (K, 3)."""
+        import gtsam
+
+        graph, _ = self._batch_graph()
+        kernel = rb.m_estimator(self.cfg.robust, self.cfg.robust_param)
+        infos = rb.check_information_stack(informations, lambda k: f"dense pair {pairs[k]}")
+        for (i, j), d, info in zip(np.asarray(pairs).tolist(), np.asarray(deltas, float), infos):
+            model = rb.wrap(gtsam.noiseModel.Gaussian.Information(info), kernel)
+            graph.add(between_factor(self._check_key(i), self._check_key(j), d, model))
+        initial = self._isam.calculateEstimate()
+        initial.insert(self._new_values)
+        result = gtsam.LevenbergMarquardtOptimizer(graph, initial, lm_params()).optimize()
+        return self._restart_at(result)
+
     def _restart_at(self, values) -> np.ndarray:
         """Restart iSAM2 at gtsam.Values ``values`` (a batch solution) over the active factors
         (rejected loops left out); returns the poses (K, 3)."""

@@ -24,6 +24,7 @@ import numpy as np
 from slam2d import geometry
 from slam2d.backend.base import register_backend
 from slam2d.backend.loop_closure import SESSION_GAP, LoopClosure
+from slam2d.backend.refine import refine
 from slam2d.backend.session import LOOP, ODOMETRY, Session
 from slam2d.config import BackendConfig
 from slam2d.errors import InputError
@@ -55,6 +56,7 @@ class GraphSlamBackend:
         self._link: tuple | None = None  # (pose, keyframe, delta, information) of the next scan's keyframe
         self._pin: LoopClosure | None = None  # ... and the loop its link pins
         self._attempts = 0  # global searches to place this session
+        self._points: list[np.ndarray] = []  # keyframes' points (M, 2), base frame, for the dense refinement
 
     def add(self, scan: Scan, result: FrontendResult) -> None:
         """Take one scan and its frontend result (``result.delta`` unused for the first)."""
@@ -84,6 +86,9 @@ class GraphSlamBackend:
             raise InputError("session.localize_in", f"no scan of the {len(self._placing)} of this session "
                              f"matched the saved map unambiguously ({self._attempts} global searches)")
         kf = self.graph.optimize_batch() if self.graph.num_keyframes > 1 else self.graph.estimate()
+        if self.cfg.refine.rounds and self.graph.num_keyframes > 1:
+            kf, counts = refine(self.graph, self._points, self.cfg.refine)
+            self.stats.update(counts)
         return geometry.compose(kf[np.array(self._scan_keyframe)], np.array(self._scan_offset))
 
     def current_pose(self) -> np.ndarray:
@@ -108,6 +113,8 @@ class GraphSlamBackend:
             self.stats["landmark observations"] += 1
         self._scan_keyframe.append(key)
         self._scan_offset.append(np.zeros(3))
+        if self.cfg.refine.rounds:
+            self._points.append(scan.points_in_base())
         self._delta, self._cov = np.zeros(3), np.zeros((3, 3))
         self.stats["keyframes"] += 1
         self.graph.update()
@@ -196,6 +203,8 @@ class GraphSlamBackend:
         else:
             self.graph.update()
         scans = session.scans()
+        if self.cfg.refine.rounds:
+            self._points = [scans[n].points_in_base() for n in session.keyframe_scans()]
         if self.loops is not None:
             for k, n in enumerate(session.keyframe_scans()):
                 self.loops.add_keyframe(k, scans[n].points_in_base(), session.travelled[k])
