@@ -20,9 +20,8 @@ from slam2d import geometry
 from slam2d.localization.mcl import ParticleFilter
 from slam2d.localization.sensor import BeamModel
 
-__all__ = ["Goal", "disambiguating_goal", "separation"]
+__all__ = ["Goal", "Looker", "contenders", "disambiguating_goal", "separation"]
 
-MIN_WEIGHT = 0.01  # hypotheses lighter than this are not looked at
 
 
 @dataclass(frozen=True)
@@ -35,13 +34,23 @@ class Goal:
     distance: float
 
 
+def contenders(pf: ParticleFilter) -> list:
+    """The compact hypotheses that keep the filter from tracking: the best and every other one whose
+    weight is within the evidence threshold of it (heaviest first)."""
+    est = pf.estimate
+    if not est.hypotheses:
+        return []
+    floor = est.hypotheses[0].weight * np.exp(-min(pf.evidence_threshold, 50.0))
+    return [h for h in est.hypotheses if h.weight >= floor and h.sd_xy < pf.cfg.converged_sd]
+
+
 def separation(pf: ParticleFilter, goals: np.ndarray, beams: int = 72, clearance: float | None = None
                ) -> tuple[np.ndarray, np.ndarray]:
     """For goals (G, 3) relative to the best compact hypothesis, the weighted mean range difference (G,) m
     between the scans predicted under it and under the other compact hypotheses, and whether each goal is
     free, ``clearance`` m from walls (the filter's free_clearance by default), under every hypothesis (G,)."""
     clearance = pf.cfg.free_clearance if clearance is None else clearance
-    hyps = [h for h in pf.estimate.hypotheses if h.weight >= MIN_WEIGHT and h.sd_xy < pf.cfg.converged_sd]
+    hyps = contenders(pf)
     known, model = pf.map, BeamModel(pf.map, pf.cfg, pf.range_max)
     angles = np.linspace(-np.pi, np.pi, beams, endpoint=False)
     relative = np.array([geometry.between(hyps[0].pose, g) for g in goals]) if hyps else goals
@@ -92,3 +101,72 @@ def disambiguating_goal(pf: ParticleFilter, candidates: int = 400, max_distance:
     good = np.flatnonzero(sep >= 0.5 * sep.max())
     i = good[np.argmin(distance[good])]
     return Goal(goals[i], float(sep[i]), float(distance[i]))
+
+
+GOAL_REACHED = 0.5  # m from a goal (on the estimate) at which the next one is chosen
+GOAL_PATIENCE = 20.0  # s driving to one goal before choosing another
+RETRY = 2.0  # s after finding no goal before looking again
+_LOOKAHEAD = 0.7  # m, the point on the way to the goal steered at
+_WALL_COST = 0.4  # m: cells closer to walls cost 20 x (the way keeps off walls, starts near them still lead out)
+
+
+def way_to(known, goal: np.ndarray) -> np.ndarray:
+    """Geodesic cost (H, W) of every free cell to ``goal`` (x, y) over the map's free space, walls
+    avoided (inf where unreachable)."""
+    from skimage.graph import MCP_Geometric
+
+    cost = np.where(known.distance() < _WALL_COST, 20.0, 1.0)
+    cost[~known.free] = np.inf
+    cell = known.world_to_cell(np.asarray(goal[:2], dtype=np.float64)[None])[0]
+    if not known.in_bounds(cell[None])[0] or not known.free[cell[0], cell[1]]:
+        return np.full(known.shape, np.inf)
+    field, _ = MCP_Geometric(cost).find_costs([tuple(int(c) for c in cell)])
+    return field
+
+
+def heading_to(known, field: np.ndarray, pose: np.ndarray) -> float | None:
+    """Direction (rad, in the map) from ``pose`` (3,) towards the cell ``_LOOKAHEAD`` m round it with the
+    lowest cost in ``field`` (:func:`way_to`); None when no cell there reaches the goal."""
+    r = round(_LOOKAHEAD / known.resolution)
+    cell = known.world_to_cell(pose[None, :2])[0]
+    rows, cols = np.mgrid[-r:r + 1, -r:r + 1]
+    ring = np.column_stack([rows.ravel(), cols.ravel()])
+    ring = ring[np.hypot(ring[:, 0], ring[:, 1]) <= r] + cell
+    ring = ring[known.in_bounds(ring)]
+    cost = field[ring[:, 0], ring[:, 1]]
+    if len(cost) == 0 or not np.isfinite(cost.min()):
+        return None
+    d = ring[int(np.argmin(cost))] - cell
+    return float(np.arctan2(d[0], d[1]))  # rows run along y
+
+
+class Looker:
+    """Active localisation for a robot without a navigation stack: while ``pf`` is ambiguous it steers
+    (on the best hypothesis's pose) towards the :func:`disambiguating_goal`, the next one once it is
+    within GOAL_REACHED m, after GOAL_PATIENCE s or when the estimate moves away from it (another
+    hypothesis leads); ``goals`` keeps those chosen."""
+
+    def __init__(self, pf: ParticleFilter):
+        self.pf, self.goals = pf, []
+        self._field: np.ndarray | None = None
+        self._since = self._none_at = -np.inf
+
+    def heading(self, pose: np.ndarray, stamp: float) -> float | None:
+        """Direction (rad, in the map, as the estimate ``pose`` (3,) sees it) to drive in at time
+        ``stamp`` s, or None (no goal: the filter is not ambiguous or no place separates its hypotheses)."""
+        if self.pf.state != "ambiguous":
+            self._field = None
+            return None
+        goal = self.goals[-1].pose if self._field is not None else None
+        away = np.hypot(*(pose[:2] - goal[:2])) if goal is not None else np.inf
+        if goal is None or away < GOAL_REACHED or away > self.goals[-1].distance + 1.0 or \
+                stamp - self._since > GOAL_PATIENCE:
+            if stamp - self._none_at < RETRY:
+                return None
+            chosen = disambiguating_goal(self.pf, seed=len(self.goals))
+            if chosen is None:
+                self._field, self._none_at = None, stamp
+                return None
+            self.goals.append(chosen)
+            self._field, self._since = way_to(self.pf.map, chosen.pose), stamp
+        return heading_to(self.pf.map, self._field, pose)
