@@ -192,7 +192,7 @@ def active_run(world, known: KnownMap, pf: ParticleFilter, seconds: float, seed:
     scans, truth, turning = [step.scan], [step.pose], 0.0
     pose = rec.add(pf, step.scan)
     for _ in range(round(seconds / PERIOD)):
-        heading = looker.heading(pose, step.scan.stamp)
+        heading = looker.heading(pose, step.scan)
         toward = None if heading is None else _towards(step.scan, float(geometry.wrap_angle(heading - pose[2])))
         if toward is not None:
             (v, w), turning = toward, 0.0
