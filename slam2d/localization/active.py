@@ -25,6 +25,7 @@ from slam2d.localization.sensor import BeamModel
 __all__ = ["Goal", "Looker", "contenders", "disambiguating_goal", "separation"]
 
 GAIN = 1.0  # log evidence per scan from which a goal is decisive (the nearest such is chosen)
+WORTH = 0.1  # log evidence per scan below which no place separates the hypotheses (copies drawn a cell apart)
 
 @dataclass(frozen=True)
 class Goal:
@@ -108,7 +109,7 @@ def disambiguating_goal(pf: ParticleFilter, candidates: int = 400, max_distance:
     """The nearest of ``candidates`` free places (``clearance`` m from walls) within ``max_distance`` m
     of the estimate (in the best hypothesis's map) whose scan would add GAIN of evidence (or half the
     most any candidate would) against the other hypotheses (:func:`separation`; ``angles``: the
-    laser's); None when fewer than two compact hypotheses hold weight or no place separates them."""
+    laser's); None when fewer than two compact hypotheses hold weight or no place is worth WORTH."""
     best = pf.estimate.hypotheses[0] if pf.estimate.hypotheses else None
     if best is None:
         return None
@@ -125,7 +126,7 @@ def disambiguating_goal(pf: ParticleFilter, candidates: int = 400, max_distance:
     goals = np.column_stack([pick, np.arctan2(pick[:, 1] - best.pose[1], pick[:, 0] - best.pose[0])])
     sep, free = separation(pf, goals, angles, clearance)
     sep = np.where(free, sep, 0.0)
-    if sep.max() <= 0.0:
+    if sep.max() < WORTH:
         return None
     distance = np.hypot(*(goals[:, :2] - best.pose[:2]).T)
     good = np.flatnonzero(sep >= min(GAIN, 0.5 * sep.max()))
