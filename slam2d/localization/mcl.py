@@ -454,14 +454,16 @@ class ParticleFilter:
                 self._tested = False
         if not self._tested:
             self._tested = True
-            if not self._anchored:
-                self._add_lookalikes(est)
+            if not self._anchored:  # held places are raised only when the pose turns compact
+                self._add_lookalikes(est, before is None or before.state == "lost")
             self._estimate = self._cluster_estimate()
 
-    def _add_lookalikes(self, est: Estimate) -> int:
-        """Give the best hypothesis's look-alike places its weight: a hypothesis already there is raised
-        to it (before the pose was compact, the weights told how many global candidates fell near each
-        place more than how the scans fit), elsewhere its particles are copied there; how many places."""
+    def _add_lookalikes(self, est: Estimate, raise_held: bool = True) -> int:
+        """Give the best hypothesis's look-alike places its weight: with ``raise_held`` a hypothesis
+        already there is raised to it (before the pose was compact, the weights told how many global
+        candidates fell near each place more than how the scans fit; once another hypothesis takes the
+        lead they tell the evidence, which is kept), elsewhere its particles are copied there; how many
+        places."""
         best = est.hypotheses[0]
         inside = self._labels == self._best_label
         source, source_w = self.particles[inside], self.log_w[inside]
@@ -472,7 +474,7 @@ class ParticleFilter:
             held = [i for i, h in enumerate(est.hypotheses) if _same_place(image, h.pose)]
             if not held:
                 images.append(place.image(source))
-            elif held[0] > 0:
+            elif held[0] > 0 and raise_held:
                 members = self._labels == self._hypothesis_labels[held[0]]
                 self.log_w[members] += best_mass - logsumexp(self.log_w[members])
                 raised += 1
