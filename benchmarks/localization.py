@@ -2,7 +2,7 @@
 on the office and the room plans, global localisation, kidnapping and tracking.
 
 Usage: nice .venv/bin/python benchmarks/localization.py [--worlds office rooms ring wings] [--runs N] [--first-seed 0]
-       [--workers 2] [--scenarios global kidnap tracking] [--filters slam2d amcl amcl_recovery]
+       [--workers 2] [--scenarios global active kidnap tracking] [--filters slam2d amcl amcl_recovery]
        [--out results/bench-localization]
 
 Every seeded run records one stream of the wandering robot (scans, odometry,
@@ -11,6 +11,9 @@ truth) and replays it through every filter, so that all see the same data:
   and < 5 deg held for 5 s, counted when it starts within 10 m of travel; a false
   convergence is the state tracking more than 0.5 m wrong for 5 s (any scenario); the
   state at the end (tracking / ambiguous / lost) is counted;
+- active: global localisation (slam2d's filter) with active moves: the same start, but while
+  the filter is ambiguous the robot drives towards the places that tell its hypotheses apart
+  (slam2d.localization.active.Looker), so the stream is its own; counted as global;
 - kidnap: tracking from the true pose (sd 0.1 m, 3 deg) for 10 s, then a teleport of
   at least 5 m; recovered = converged again within 15 s of driving;
 - tracking: from the true pose with the rough initial spread (0.5 m, 15 deg), 60 s;
@@ -35,8 +38,8 @@ from pathlib import Path
 import numpy as np
 
 FILTERS = {"global": ["slam2d", "amcl", "amcl_recovery"], "kidnap": ["slam2d", "amcl", "amcl_recovery"],
-           "tracking": ["slam2d", "amcl"]}  # fmt: skip
-SECONDS = {"global": 40.0, "kidnap": 30.0, "tracking": 60.0}
+           "tracking": ["slam2d", "amcl"], "active": ["slam2d"]}  # fmt: skip
+SECONDS = {"global": 40.0, "kidnap": 30.0, "tracking": 60.0, "active": 40.0}
 KIDNAP_AT = 10.0  # s
 GLOBAL_TRAVEL = 10.0  # m
 RECOVERY = 15.0  # s
@@ -113,6 +116,7 @@ def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) 
     from slam2d.localization import ParticleFilter, preset
     from slam2d.localization.scenario import (
         PERIOD,
+        active_run,
         converged_at,
         false_convergence,
         final_state,
@@ -122,24 +126,28 @@ def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) 
 
     world, known = _load(spec)
     kidnap = [KIDNAP_AT] if scenario == "kidnap" else []
-    stream = wander(world, known, SECONDS[scenario], seed, kidnap_at=kidnap)
+    seconds = PERIOD if scenario == "active" else SECONDS[scenario]  # the active robot drives its own stream
+    stream = wander(world, known, seconds, seed, kidnap_at=kidnap)
     rows = []
     for name in [f for f in FILTERS[scenario] if not filters or f in filters]:
         pf = ParticleFilter(known, preset(name), stream.scans[0].range_max, seed=seed)
-        if scenario == "global":
+        if scenario in ("global", "active"):
             pf.init_global()
         elif scenario == "kidnap":
             pf.init_pose(stream.truth[0], 0.1, math.radians(3.0))
         else:
             pf.init_pose(stream.truth[0])
         t0 = time.perf_counter()
-        track = replay(pf, stream)
+        if scenario == "active":
+            stream, track = active_run(world, known, pf, SECONDS[scenario], seed)
+        else:
+            track = replay(pf, stream)
         row = {"world": Path(spec).stem.replace("_furnitures", ""), "scenario": scenario, "filter": name,
                "seed": seed, "wall_s": time.perf_counter() - t0,
                "update_ms": float(np.median(track.update_ms)) if len(track.update_ms) else None,
                "false": bool(false_convergence(track)), "end_state": final_state(track),
                "lookalikes_at_end": None if pf.lookalikes is None else len(pf.lookalikes.at(stream.truth[-1]))}  # fmt: skip
-        if scenario == "global":
+        if scenario in ("global", "active"):
             c = converged_at(track)
             row.update(converged=bool(c is not None and stream.travelled[c] <= GLOBAL_TRAVEL),
                        travel=None if c is None else float(stream.travelled[c]),
@@ -189,23 +197,27 @@ def _count(rows, key) -> str:
 def table(rows: list[dict]) -> str:
     """Markdown: per filter, all worlds pooled and per world."""
     worlds = sorted({r["world"] for r in rows})
-    lines = [("| world | filter | global converged ≤ 10 m | global end tracking / ambiguous / lost | false conv. "
-              "global / kidnap / tracking | ambiguous at a look-alike | median travel (m) | kidnap recovered ≤ 15 s | kidnap end t / a / l "
+    lines = [("| world | filter | global converged ≤ 10 m | global end tracking / ambiguous / lost | with active moves "
+              "converged ≤ 10 m | active end t / a / l | active median travel (m) | false conv. "
+              "global / active / kidnap / tracking | ambiguous at a look-alike | median travel (m) | kidnap recovered ≤ 15 s | kidnap end t / a / l "
               "| median recovery (s) | tracking RMSE (m) | heading RMSE (°) | particles tracking | ms/update | runs |"),
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for world in ["all", *worlds]:
         for name in [n for n in FILTERS["global"] if any(r["filter"] == n for r in rows)]:
             sel = [r for r in rows if r["filter"] == name and world in ("all", r["world"])]
             g = [r for r in sel if r["scenario"] == "global"]
             k = [r for r in sel if r["scenario"] == "kidnap"]
             t = [r for r in sel if r["scenario"] == "tracking"]
+            a = [r for r in sel if r["scenario"] == "active"]
             lines.append(f"| {world} | {name} | {_rate(g, 'converged')} | {_states(g) if g else '-'} | "
-                         f"{_count(g, 'false')} / {_count(k, 'false')} / {_count(t, 'false')} | {_predicted(sel)} | "
+                         f"{_rate(a, 'converged')} | {_states(a) if a else '-'} | {_median(a, 'travel', '{:.1f}')} | "
+                         f"{_count(g, 'false')} / {_count(a, 'false')} / {_count(k, 'false')} / {_count(t, 'false')} | "
+                         f"{_predicted(sel)} | "
                          f"{_median(g, 'travel', '{:.1f}')} | {_rate(k, 'recovered')} | "
                          f"{_states(k) if k else '-'} | "
                          f"{_median(k, 'recovery_s', '{:.1f}')} | {_median(t, 'rmse')} | "
                          f"{_median(t, 'heading_rmse_deg', '{:.2f}')} | {_median(t, 'particles', '{:.0f}')} | "
-                         f"{_median(sel, 'update_ms', '{:.1f}')} | {max(len(g), len(k), len(t))} |")  # fmt: skip
+                         f"{_median(sel, 'update_ms', '{:.1f}')} | {max(len(g), len(a), len(k), len(t))} |")  # fmt: skip
     return "\n".join(lines) + "\n"
 
 

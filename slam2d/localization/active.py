@@ -4,10 +4,12 @@ After Burgard, Fox & Thrun, "Active mobile robot localization" (IJCAI 1997): whi
 the filter is ``ambiguous``, a place from which the scans predicted under each
 hypothesis differ tells them apart. A goal is a pose relative to the best
 hypothesis; under hypothesis h the robot would stand at h composed with that
-relative pose, so the predicted ranges (ray cast in the map) at those poses are
-compared. Only goals free in every hypothesis are offered (driving there is safe
-whichever is true); the nearest whose separation reaches half the most any
-candidate reaches is chosen.
+relative pose. The scan predicted there under the best (ray cast in the map) is
+scored under each other hypothesis as the filter would score it: the evidence one
+scan would add. Only goals free in every hypothesis are offered (driving there is
+safe whichever is true); the nearest whose evidence reaches GAIN (or, if none
+does, half the most any candidate reaches) is chosen. :class:`Looker` steers a
+robot without a navigation stack there.
 """
 
 from __future__ import annotations
@@ -20,56 +22,94 @@ from slam2d import geometry
 from slam2d.localization.mcl import ParticleFilter
 from slam2d.localization.sensor import BeamModel
 
-__all__ = ["Goal", "disambiguating_goal", "separation"]
+__all__ = ["Goal", "Looker", "contenders", "disambiguating_goal", "separation"]
 
-MIN_WEIGHT = 0.01  # hypotheses lighter than this are not looked at
-
+GAIN = 1.0  # log evidence per scan from which a goal is decisive (the nearest such is chosen)
+WORTH = 0.1  # log evidence per scan below which no place separates the hypotheses (copies drawn a cell apart)
 
 @dataclass(frozen=True)
 class Goal:
-    """A pose (3,) in the map as the best hypothesis sees it, the mean range difference (m) its scans
-    would show between the hypotheses (weighted), and its straight distance (m) from the estimate."""
+    """A pose (3,) in the map as the best hypothesis sees it (heading: the way from the estimate), the
+    evidence (log likelihood ratio) one scan there would add against the other hypotheses (weighted mean),
+    and its straight distance (m) from the estimate."""
 
     pose: np.ndarray
     separation: float
     distance: float
 
 
-def separation(pf: ParticleFilter, goals: np.ndarray, beams: int = 72, clearance: float | None = None
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """For goals (G, 3) relative to the best compact hypothesis, the weighted mean range difference (G,) m
-    between the scans predicted under it and under the other compact hypotheses, and whether each goal is
-    free, ``clearance`` m from walls (the filter's free_clearance by default), under every hypothesis (G,)."""
+def contenders(pf: ParticleFilter) -> list:
+    """The compact hypotheses that keep the filter from tracking: the best and every other one whose
+    weight is within the evidence threshold of it (heaviest first)."""
+    est = pf.estimate
+    if not est.hypotheses:
+        return []
+    floor = est.hypotheses[0].weight * np.exp(-min(pf.evidence_threshold, 50.0))
+    return [h for h in est.hypotheses if h.weight >= floor and h.sd_xy < pf.cfg.converged_sd]
+
+
+def separation(pf: ParticleFilter, goals: np.ndarray, angles: np.ndarray | None = None,
+               clearance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """For goals (G, 3) relative to the best compact hypothesis, the evidence (G,) one scan taken there
+    would give it over the other :func:`contenders` (log likelihood ratio as the filter weighs
+    hypotheses: the scan predicted under the best, its end points scored under each other one on the
+    smooth likelihood field, each beam raised to beam_weight; the weighted mean over the others, each
+    capped at the evidence threshold), and whether each goal is free, ``clearance`` m from walls (the
+    filter's free_clearance by default), under every hypothesis (G,). ``angles`` (rad): the laser's
+    beams (72 over the full turn by default)."""
     clearance = pf.cfg.free_clearance if clearance is None else clearance
-    hyps = [h for h in pf.estimate.hypotheses if h.weight >= MIN_WEIGHT and h.sd_xy < pf.cfg.converged_sd]
-    known, model = pf.map, BeamModel(pf.map, pf.cfg, pf.range_max)
-    angles = np.linspace(-np.pi, np.pi, beams, endpoint=False)
+    hyps, cfg, known = contenders(pf), pf.cfg, pf.map
+    angles = np.linspace(-np.pi, np.pi, 72, endpoint=False) if angles is None else np.asarray(angles)
     relative = np.array([geometry.between(hyps[0].pose, g) for g in goals]) if hyps else goals
+    dist = known.distance()
     free = np.ones(len(goals), dtype=bool)
-    ranges, weights = [], []
+    under = []
     for h in hyps:
         poses = np.array([geometry.compose(h.pose, r) for r in relative])
         cells = known.world_to_cell(poses[:, :2])
         inside = known.in_bounds(cells)
         ok = np.zeros(len(goals), dtype=bool)
-        ok[inside] = known.free[cells[inside, 0], cells[inside, 1]]
-        ok[inside] &= known.distance()[cells[inside, 0], cells[inside, 1]] >= clearance
+        ok[inside] = known.free[cells[inside, 0], cells[inside, 1]] & (dist[cells[inside, 0], cells[inside, 1]]
+                                                                        >= clearance)  # fmt: skip
         free &= ok
-        ranges.append(model.expected_ranges(poses, np.zeros(3), angles))
-        weights.append(h.weight)
+        under.append(poses)
     if len(hyps) < 2:
         return np.zeros(len(goals)), free
-    diff = np.array([np.mean(np.abs(r - ranges[0]), axis=1) for r in ranges[1:]])  # (H-1, G)
-    w = np.array(weights[1:])
-    return (w @ diff) / w.sum(), free
+    model = BeamModel(known, cfg, pf.range_max)
+    ranges = [model.expected_ranges(p, np.zeros(3), angles) for p in under]  # (G, n) each
+    gains, weights = [], []
+    for i in range(1, len(hyps)):  # whichever of the two is true, its scan must misfit the other
+        gain = np.minimum(_misfit(pf, ranges[0], under[i], angles), _misfit(pf, ranges[i], under[0], angles))
+        gains.append(np.minimum(gain, pf.evidence_threshold))
+        weights.append(hyps[i].weight)
+    w = np.array(weights)
+    return (w @ np.array(gains)) / w.sum(), free
+
+
+def _misfit(pf: ParticleFilter, ranges: np.ndarray, poses: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Log likelihood lost (G,) when the scans ``ranges`` (G, n) (no-return beams at range_max, skipped)
+    are scored at ``poses`` (G, 3) instead of where they were cast (their end points on walls): the
+    smooth field, each beam raised to beam_weight, the filter's beam count."""
+    cfg, known = pf.cfg, pf.map
+    returned = ranges < pf.range_max
+    a = poses[:, 2, None] + angles
+    cells = known.world_to_cell(np.stack([poses[:, 0, None] + ranges * np.cos(a),
+                                          poses[:, 1, None] + ranges * np.sin(a)], axis=-1))  # fmt: skip
+    d = np.full(ranges.shape, cfg.max_dist)
+    inside = known.in_bounds(cells)
+    d[inside] = np.minimum(known.distance()[cells[inside][:, 0], cells[inside][:, 1]], cfg.max_dist)
+    floor = cfg.z_rand / pf.range_max
+    loss = np.log(cfg.z_hit + floor) - np.log(cfg.z_hit * np.exp(-(d**2) / (2 * cfg.sigma_hit_uncertain**2)) + floor)
+    mean = np.sum(loss * returned, axis=1) / np.maximum(returned.sum(axis=1), 1)
+    return cfg.beam_weight * np.minimum(returned.sum(axis=1), cfg.beams) * mean
 
 
 def disambiguating_goal(pf: ParticleFilter, candidates: int = 400, max_distance: float = 15.0,
-                        clearance: float = 0.5, seed: int = 0) -> Goal | None:  # fmt: skip
+                        clearance: float = 0.5, seed: int = 0, angles: np.ndarray | None = None) -> Goal | None:
     """The nearest of ``candidates`` free places (``clearance`` m from walls) within ``max_distance`` m
-    of the estimate (in the best hypothesis's map) whose scans tell the hypotheses apart at least half
-    as well as the best of them; None when fewer than two compact hypotheses hold weight or no place
-    separates them."""
+    of the estimate (in the best hypothesis's map) whose scan would add GAIN of evidence (or half the
+    most any candidate would) against the other hypotheses (:func:`separation`; ``angles``: the
+    laser's); None when fewer than two compact hypotheses hold weight or no place is worth WORTH."""
     best = pf.estimate.hypotheses[0] if pf.estimate.hypotheses else None
     if best is None:
         return None
@@ -83,12 +123,82 @@ def disambiguating_goal(pf: ParticleFilter, candidates: int = 400, max_distance:
     if len(near) == 0:
         return None
     pick = near[rng.choice(len(near), min(candidates, len(near)), replace=False)]
-    goals = np.column_stack([pick, np.full(len(pick), best.pose[2])])
-    sep, free = separation(pf, goals, clearance=clearance)
+    goals = np.column_stack([pick, np.arctan2(pick[:, 1] - best.pose[1], pick[:, 0] - best.pose[0])])
+    sep, free = separation(pf, goals, angles, clearance)
     sep = np.where(free, sep, 0.0)
-    if sep.max() <= 0.0:
+    if sep.max() < WORTH:
         return None
     distance = np.hypot(*(goals[:, :2] - best.pose[:2]).T)
-    good = np.flatnonzero(sep >= 0.5 * sep.max())
+    good = np.flatnonzero(sep >= min(GAIN, 0.5 * sep.max()))
     i = good[np.argmin(distance[good])]
     return Goal(goals[i], float(sep[i]), float(distance[i]))
+
+
+GOAL_REACHED = 0.5  # m from a goal (on the estimate) at which the next one is chosen
+GOAL_PATIENCE = 20.0  # s driving to one goal before choosing another
+RETRY = 2.0  # s after finding no goal before looking again
+_LOOKAHEAD = 0.7  # m, the point on the way to the goal steered at
+_WALL_COST = 0.4  # m: cells closer to walls cost 20 x (the way keeps off walls, starts near them still lead out)
+
+
+def way_to(known, goal: np.ndarray) -> np.ndarray:
+    """Geodesic cost (H, W) of every free cell to ``goal`` (x, y) over the map's free space, walls
+    avoided (inf where unreachable)."""
+    from skimage.graph import MCP_Geometric
+
+    cost = np.where(known.distance() < _WALL_COST, 20.0, 1.0)
+    cost[~known.free] = np.inf
+    cell = known.world_to_cell(np.asarray(goal[:2], dtype=np.float64)[None])[0]
+    if not known.in_bounds(cell[None])[0] or not known.free[cell[0], cell[1]]:
+        return np.full(known.shape, np.inf)
+    field, _ = MCP_Geometric(cost).find_costs([tuple(int(c) for c in cell)])
+    return field
+
+
+def heading_to(known, field: np.ndarray, pose: np.ndarray) -> float | None:
+    """Direction (rad, in the map) from ``pose`` (3,) towards the cell ``_LOOKAHEAD`` m round it with the
+    lowest cost in ``field`` (:func:`way_to`); None when no cell there reaches the goal."""
+    r = round(_LOOKAHEAD / known.resolution)
+    cell = known.world_to_cell(pose[None, :2])[0]
+    rows, cols = np.mgrid[-r:r + 1, -r:r + 1]
+    ring = np.column_stack([rows.ravel(), cols.ravel()])
+    ring = ring[np.hypot(ring[:, 0], ring[:, 1]) <= r] + cell
+    ring = ring[known.in_bounds(ring)]
+    cost = field[ring[:, 0], ring[:, 1]]
+    if len(cost) == 0 or not np.isfinite(cost.min()):
+        return None
+    d = ring[int(np.argmin(cost))] - cell
+    return float(np.arctan2(d[0], d[1]))  # rows run along y
+
+
+class Looker:
+    """Active localisation for a robot without a navigation stack: while ``pf`` is ambiguous it steers
+    (on the best hypothesis's pose) towards the :func:`disambiguating_goal`, the next one once it is
+    within GOAL_REACHED m, after GOAL_PATIENCE s or when the estimate moves away from it (another
+    hypothesis leads); ``goals`` keeps those chosen."""
+
+    def __init__(self, pf: ParticleFilter):
+        self.pf, self.goals = pf, []
+        self._field: np.ndarray | None = None
+        self._since = self._none_at = -np.inf
+
+    def heading(self, pose: np.ndarray, scan) -> float | None:
+        """Direction (rad, in the map, as the estimate ``pose`` (3,) sees it) to drive in when ``scan``
+        comes, or None (no goal: the filter is not ambiguous or no place separates its hypotheses)."""
+        if self.pf.state != "ambiguous":
+            self._field = None
+            return None
+        stamp = scan.stamp
+        goal = self.goals[-1].pose if self._field is not None else None
+        away = np.hypot(*(pose[:2] - goal[:2])) if goal is not None else np.inf
+        if goal is None or away < GOAL_REACHED or away > self.goals[-1].distance + 1.0 or \
+                stamp - self._since > GOAL_PATIENCE:
+            if stamp - self._none_at < RETRY:
+                return None
+            chosen = disambiguating_goal(self.pf, seed=len(self.goals), angles=scan.angles)
+            if chosen is None:
+                self._field, self._none_at = None, stamp
+                return None
+            self.goals.append(chosen)
+            self._field, self._since = way_to(self.pf.map, chosen.pose), stamp
+        return heading_to(self.pf.map, self._field, pose)

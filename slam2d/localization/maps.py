@@ -31,7 +31,7 @@ class KnownMap(GridFrame):
     resolution: float
     origin: tuple[float, float]
     name: str = "map"
-    wall_distance: np.ndarray | None = None  # exact distance (H, W) m from cell centres to the walls, if known
+    wall_distance: np.ndarray | None = None  # distance (H, W) m from cell centres to the walls (see distance())
 
     def __post_init__(self):
         self.occupied = np.ascontiguousarray(self.occupied, dtype=bool)
@@ -59,11 +59,11 @@ class KnownMap(GridFrame):
     def distance(self) -> np.ndarray:
         """Distance (H, W) in metres from every cell centre to the nearest wall: the exact one when
         known (a World), else to the nearest occupied cell's edge: scipy's exact Euclidean distance
-        transform between cell centres less half a cell (a wall's face is its cells' edge)."""
-        if self.wall_distance is not None:
-            return self.wall_distance
-        edt = ndimage.distance_transform_edt(~self.occupied) * self.resolution
-        return np.maximum(edt - 0.5 * self.resolution, 0.0)
+        transform between cell centres less half a cell (a wall's face is its cells' edge), computed once."""
+        if self.wall_distance is None:
+            edt = ndimage.distance_transform_edt(~self.occupied) * self.resolution
+            self.wall_distance = np.maximum(edt - 0.5 * self.resolution, 0.0)
+        return self.wall_distance
 
     def in_wall(self, xy) -> np.ndarray:
         """Whether points ``xy`` (P, 2) m lie in occupied cells (False off the map)."""

@@ -154,6 +154,7 @@ class ParticleFilter:
         self._hypothesis_labels = np.zeros(1, dtype=np.int64)  # the cluster label of each hypothesis
         self._tested = False  # the compact best hypothesis's look-alike places were added
         self._anchored = False  # an initial pose rules look-alike places out
+        self._searching = False  # no tracking since the global start or the last random particles
         self._estimate_odom: np.ndarray | None = None  # odometry at the last estimate
         self.lookalikes = None  # the map's look-alike places (slam2d.localization.lookalike), with hypotheses
         self.evidence_threshold = math.inf  # log weight ratio best / runner-up from which the state is tracking
@@ -195,6 +196,7 @@ class ParticleFilter:
         times as many when the first scan comes, of which it keeps ``max_particles``)."""
         self._reset(self.random_poses(self.cfg.max_particles))
         self._candidates = self.cfg.global_candidates > 1
+        self._searching = True
 
     def init_pose(self, pose, sd_xy: float | None = None, sd_theta: float | None = None) -> None:
         """A rough initial pose (3,): ``max_particles`` Gaussian poses around it (sd m, rad; config's by default);
@@ -216,7 +218,7 @@ class ParticleFilter:
         self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
         self.w_fit = 0.0
         self._estimate = self._labels = None
-        self._tested = self._anchored = False
+        self._tested = self._anchored = self._searching = False
 
     # the filter ------------------------------------------------------------
 
@@ -329,8 +331,11 @@ class ParticleFilter:
         grid) is no kidnapping, a place where even those beams stop fitting is. Once it is not,
         those of every beam: it searches on until a place explains the whole scan, not half of it.
         While confident, a share up to ``CONFIDENT_NOISE`` is the averages' noise and draws nothing:
-        a single random particle on a look-alike corridor would outscore a place whose map lacks a wall."""
-        confident = self.cfg.recovery_best_beams < 1.0 and self.confident()
+        a single random particle on a look-alike corridor would outscore a place whose map lacks a wall.
+        A search (no ``tracking`` since the global start or the last random particles) whose cloud has
+        settled where the scans fit worse than usual is not confident either: after a kidnap the cloud
+        can settle on a wrong place whose best half of the beams fits."""
+        confident = self.cfg.recovery_best_beams < 1.0 and self.confident() and not (self._searching and not self._fits())
         i = 1 if confident else 0
         if not self._recovering() or self.w_slow[i] <= 0:
             return 0.0
@@ -369,6 +374,7 @@ class ParticleFilter:
         if n_random:
             self.injected += n_random
             self._anchored = False  # the pose is searched for again: its look-alikes are hypotheses
+            self._searching = True
             if cfg.combine == "amcl":  # amcl restarts its averages after injecting
                 self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
 
@@ -421,8 +427,13 @@ class ParticleFilter:
             return "tracking" if compact and best.weight >= 0.9 else "lost"
         if not compact:
             return "lost"
-        fits = not self._recovering() or self.w_slow[0] <= 0 or self.w_fit >= (1 - FIT_DEFICIT) * self.w_slow[0]
-        return "tracking" if self._tested and fits and evidence >= self.evidence_threshold else "ambiguous"
+        return "tracking" if self._tested and self._fits() and evidence >= self.evidence_threshold else "ambiguous"
+
+    def _fits(self) -> bool:
+        """Whether the scans fit as they usually do (``w_fit`` within FIT_DEFICIT of the long-term average
+        of every beam; always without hypotheses or recovery)."""
+        return (not self.cfg.hypotheses or not self._recovering() or self.w_slow[0] <= 0
+                or self.w_fit >= (1 - FIT_DEFICIT) * self.w_slow[0])  # fmt: skip
 
     def _update_estimate(self) -> None:
         """The estimate; when the best hypothesis turns compact (or another one takes the lead), its
@@ -430,6 +441,7 @@ class ParticleFilter:
         hypothesis holds yet), unless an initial pose rules them out and no random particle came since."""
         before, odom_before = self._estimate, self._estimate_odom
         est = self._estimate = self._cluster_estimate()
+        self._searching = self._searching and est.state != "tracking"
         self._estimate_odom = self._odom.copy() if self._odom is not None else None
         if not self.cfg.hypotheses:
             return
@@ -442,14 +454,16 @@ class ParticleFilter:
                 self._tested = False
         if not self._tested:
             self._tested = True
-            if not self._anchored:
-                self._add_lookalikes(est)
+            if not self._anchored:  # held places are raised only when the pose turns compact
+                self._add_lookalikes(est, before is None or before.state == "lost")
             self._estimate = self._cluster_estimate()
 
-    def _add_lookalikes(self, est: Estimate) -> int:
-        """Give the best hypothesis's look-alike places its weight: a hypothesis already there is raised
-        to it (before the pose was compact, the weights told how many global candidates fell near each
-        place more than how the scans fit), elsewhere its particles are copied there; how many places."""
+    def _add_lookalikes(self, est: Estimate, raise_held: bool = True) -> int:
+        """Give the best hypothesis's look-alike places its weight: with ``raise_held`` a hypothesis
+        already there is raised to it (before the pose was compact, the weights told how many global
+        candidates fell near each place more than how the scans fit; once another hypothesis takes the
+        lead they tell the evidence, which is kept), elsewhere its particles are copied there; how many
+        places."""
         best = est.hypotheses[0]
         inside = self._labels == self._best_label
         source, source_w = self.particles[inside], self.log_w[inside]
@@ -460,7 +474,7 @@ class ParticleFilter:
             held = [i for i, h in enumerate(est.hypotheses) if _same_place(image, h.pose)]
             if not held:
                 images.append(place.image(source))
-            elif held[0] > 0:
+            elif held[0] > 0 and raise_held:
                 members = self._labels == self._hypothesis_labels[held[0]]
                 self.log_w[members] += best_mass - logsumexp(self.log_w[members])
                 raised += 1

@@ -36,10 +36,12 @@ class MclPoseSource:
         self.active = active
         self.goals: list = []  # disambiguating goals driven to
         self._goal: np.ndarray | None = None
+        self._angles: np.ndarray | None = None  # the laser's beams (rad)
 
     def __call__(self, step) -> np.ndarray:
         """The pose (3,) after feeding ``step``'s scan (a :class:`slam2d.sim.robot.StepResult`)."""
         self.filter.add(step.scan)
+        self._angles = step.scan.angles
         pose = self.filter.pose(step.scan.odom)
         self.estimates.append(pose)
         return pose
@@ -55,7 +57,7 @@ class MclPoseSource:
             self._goal = None
             return None
         if self._goal is None:
-            goal = disambiguating_goal(self.filter, seed=len(self.goals))
+            goal = disambiguating_goal(self.filter, seed=len(self.goals), angles=self._angles)
             if goal is None:
                 return None
             self._goal = goal.pose

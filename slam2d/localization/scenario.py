@@ -10,6 +10,7 @@ does not depend on any filter.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,7 +20,7 @@ from slam2d.localization.maps import KnownMap
 from slam2d.localization.mcl import ParticleFilter
 from slam2d.types import Scan
 
-__all__ = ["Stream", "Track", "converged_at", "false_convergence", "final_state", "random_free_pose", "replay",
+__all__ = ["Stream", "Track", "active_run", "converged_at", "false_convergence", "final_state", "random_free_pose", "replay",
            "wander"]
 
 SPEED = 0.5  # m/s, the wanderer's cruise speed
@@ -128,34 +129,95 @@ class Track:
 SNAPSHOT_PARTICLES = 400  # particles kept per snapshot (an even subset)
 
 
+class _Recorder:
+    """Per-scan estimates of a filter (what :class:`Track` holds), gathered while the scans come."""
+
+    def __init__(self):
+        self.est, self.count, self.share, self.sd, self.state, self.ms = [], [], [], [], [], []
+
+    def add(self, pf: ParticleFilter, scan: Scan) -> np.ndarray:
+        """Feed ``scan`` to ``pf`` and record its estimate; the pose (3,) moved to the scan's odometry."""
+        t0 = time.perf_counter()
+        if pf.add(scan):
+            self.ms.append((time.perf_counter() - t0) * 1000)
+        e = pf.estimate
+        pose = pf.pose(scan.odom)
+        self.est.append(pose)
+        self.count.append(e.particles)
+        self.share.append(e.share)
+        self.sd.append(e.sd_xy)
+        self.state.append(e.state)
+        return pose
+
+    def track(self, truth: np.ndarray, snapshots: dict | None = None) -> Track:
+        est = np.array(self.est)
+        err = np.hypot(*(est[:, :2] - truth[:, :2]).T)
+        head = np.abs(geometry.wrap_angle(est[:, 2] - truth[:, 2]))
+        return Track(est, err, head, np.array(self.count), np.array(self.share), np.array(self.sd),
+                     np.array(self.ms), snapshots or {}, np.array(self.state, dtype=str))  # fmt: skip
+
+
 def replay(pf: ParticleFilter, stream: Stream, snapshot_at=(), view=None, progress=None) -> Track:
     """Feed every scan of ``stream`` to ``pf`` (initialised). At the scan indices ``snapshot_at``
     (or at every update for ``"updates"``) keep up to SNAPSHOT_PARTICLES particles, their weights
     and the estimate. ``view`` (a :class:`slam2d.viz.ParticleView`) logs each scan's step;
     ``progress(done)``, if given, is told the scans done after each."""
-    import time
-
-    n = len(stream.scans)
-    est, count, share, sd, ms = np.zeros((n, 3)), np.zeros(n, int), np.zeros(n), np.zeros(n), []
-    state = np.empty(n, dtype=object)
-    snaps = {}
+    rec, snaps = _Recorder(), {}
     for i, scan in enumerate(stream.scans):
-        t0 = time.perf_counter()
-        updated = pf.add(scan)
-        if updated:
-            ms.append((time.perf_counter() - t0) * 1000)
-        e = pf.estimate
-        est[i], count[i], share[i], sd[i], state[i] = pf.pose(scan.odom), e.particles, e.share, e.sd_xy, e.state
+        updates = pf.updates
+        pose = rec.add(pf, scan)
+        updated = pf.updates != updates
         if view is not None:
-            view.step(i, scan.stamp - stream.scans[0].stamp, pf, est[i], stream.truth[i], updated)
+            view.step(i, scan.stamp - stream.scans[0].stamp, pf, pose, stream.truth[i], updated)
         if (updated and snapshot_at == "updates") or (snapshot_at != "updates" and i in snapshot_at):
             keep = np.linspace(0, len(pf.particles) - 1, min(SNAPSHOT_PARTICLES, len(pf.particles))).astype(int)
-            snaps[i] = (pf.particles[keep].copy(), np.exp(pf.log_w[keep]), est[i].copy())
+            snaps[i] = (pf.particles[keep].copy(), np.exp(pf.log_w[keep]), pose.copy())
         if progress is not None:
             progress(i + 1)
-    err = np.hypot(*(est[:, :2] - stream.truth[:, :2]).T)
-    head = np.abs(geometry.wrap_angle(est[:, 2] - stream.truth[:, 2]))
-    return Track(est, err, head, count, share, sd, np.array(ms), snaps, state.astype(str))
+    return rec.track(stream.truth, snaps)
+
+
+def active_run(world, known: KnownMap, pf: ParticleFilter, seconds: float, seed: int) -> tuple[Stream, Track]:
+    """Global localisation with active moves: the robot of :func:`wander` (same start and noise for the
+    same ``seed``), but while ``pf`` (initialised) is ambiguous it drives towards the places that tell its
+    hypotheses apart (:class:`slam2d.localization.active.Looker`, on the estimate), keeping off what its
+    laser sees ahead; otherwise it wanders. The stream it drove and the filter's track."""
+    from slam2d.localization.active import Looker
+    from slam2d.sim import Robot
+
+    rng = np.random.default_rng(seed)
+    robot = Robot(world, random_free_pose(world, known, rng), seed=seed)
+    looker, rec = Looker(pf), _Recorder()
+    step = robot.step(0.0, 0.0, 0.0)
+    scans, truth, turning = [step.scan], [step.pose], 0.0
+    pose = rec.add(pf, step.scan)
+    for _ in range(round(seconds / PERIOD)):
+        heading = looker.heading(pose, step.scan)
+        toward = None if heading is None else _towards(step.scan, float(geometry.wrap_angle(heading - pose[2])))
+        if toward is not None:
+            (v, w), turning = toward, 0.0
+        else:
+            v, w, turning = wander_command(step.scan, turning)
+        step = robot.step(v, w, PERIOD)
+        scans.append(step.scan)
+        truth.append(step.pose)
+        pose = rec.add(pf, step.scan)
+    truth = np.array(truth)
+    travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(truth[:, :2], axis=0).T))])
+    return Stream(scans, truth, travelled), rec.track(truth)
+
+
+def _towards(scan: Scan, bearing: float) -> tuple[float, float] | None:
+    """(v m/s, w rad/s) heading for ``bearing`` rad (robot frame): turning in place while it is more
+    than 0.5 rad off, else driving while steering; None when the lane ahead is blocked within 0.4 m
+    (the wanderer's turn then leads out)."""
+    r = np.where(np.isfinite(scan.ranges), scan.ranges, scan.range_max)
+    x, y = r * np.cos(scan.angles), r * np.sin(scan.angles)
+    if abs(bearing) > 0.5:
+        return 0.0, math.copysign(1.0, bearing)
+    if np.any((x > 0) & (x < 0.4) & (np.abs(y) < _LANE)):
+        return None
+    return SPEED, float(np.clip(1.5 * bearing, -1.0, 1.0))
 
 
 def _held(ok: np.ndarray, from_index: int, steps: int) -> int | None:
