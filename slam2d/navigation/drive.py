@@ -106,7 +106,7 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
         points, obstacles = step.scan.points_in_base(), None
         if camera is not None:
             layer.update(pose, camera.render(world, robot.pose, robot.obstacle_circles()), step.scan.stamp, points)
-            obstacles = layer.points()
+            obstacles = layer.corners()
         if holding is not None and holding():  # the pose is not claimed: do not drive to the goal
             if not nav.events or nav.events[-1][1] != "hold":
                 nav.events.append((float(step.scan.stamp), "hold", "localisation not tracking"))
