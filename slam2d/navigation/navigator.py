@@ -107,8 +107,8 @@ class Navigator:
         self._manoeuvre: list[list] = []
         self._layer = None  # (H, W) bool on ``_raw``: cells of the obstacle layer (``step``'s obstacles)
         self._look = None  # the depth camera's start-up sweep
-        if (cam := self.cfg.depth_camera).enabled and cam.look_around:
-            from slam2d.navigation.depth_layer import LookAround  # open3d: imported only with a camera
+        if (cam := self.cfg.depth_camera).enabled and cam.look_around:  # open3d: imported only with a camera
+            from slam2d.navigation.depth_layer import LookAround
 
             self._look = LookAround(cam, self.robot.max_turn_rate, self.robot.max_turn_accel, self.cfg.period)
 
