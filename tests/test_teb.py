@@ -24,6 +24,7 @@ from slam2d.navigation.teb_factors import (
     kinematics_residual,
     obstacle_residual,
     segments,
+    time_residual,
     velocity_residual,
     via_residual,
 )
@@ -40,6 +41,7 @@ RESIDUALS = {
                          near=0.25, soft=0.5), False),
     "velocity": (partial(velocity_residual, v_lo=-0.2, v_hi=1.0, w_max=2.0, min_dt=0.22), True),
     "kinematics": (kinematics_residual, False),
+    "time": (time_residual, True),
     "acceleration": (partial(acceleration_residual, start=np.array([0.8, -0.5]), end=np.zeros(2), a_max=1.0,
                              alpha_max=3.0), True),
     "acceleration, open end": (partial(acceleration_residual, start=np.array([0.2, 0.0]), end=np.full(2, np.nan),
@@ -52,7 +54,7 @@ def band_values(poses, dts) -> gtsam.Values:
     for i, p in enumerate(poses):
         values.insert(X(i), gtsam.Pose2(*p))
     for i, dt in enumerate(dts):
-        values.insert(T(i), float(dt))
+        values.insert(T(i), np.array([dt]))
     return values
 
 
@@ -76,8 +78,8 @@ def test_factor_jacobians_match_numerical_derivatives(name):
                 plus.update(key, values.atPose2(key).retract(step))
                 minus.update(key, values.atPose2(key).retract(-step))
             else:
-                plus.update(key, values.atDouble(key) + h)
-                minus.update(key, values.atDouble(key) - h)
+                plus.update(key, values.atVector(key) + h)
+                minus.update(key, values.atVector(key) - h)
             columns.append((factor.unwhitenedError(plus) - factor.unwhitenedError(minus)) / (2 * h))
     numeric = np.column_stack(columns)
     np.testing.assert_allclose(analytic, numeric, atol=1e-5, rtol=1e-4)
