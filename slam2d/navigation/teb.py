@@ -27,8 +27,9 @@ A band whose first ``check_time`` s would bring the disc onto a laser point, or 
 command cannot stop short, is dropped: the robot brakes and reports itself blocked. With
 ``homotopies`` on, a band that still runs through a point (a person on the path, a box the
 map lacks: pulled from both sides, it stays in the obstacle) is optimised again from two starts
-moved round that point, one on each side, and the cheapest band clear of every point is kept
-(teb_local_planner's alternatives in distinct topologies, two at a time).
+moved round that point, one on each side (with half the iterations: the kept one is refined at the
+following calls), and the cheapest band clear of every point is kept (teb_local_planner's
+alternatives in distinct topologies, two at a time).
 """
 
 from __future__ import annotations
@@ -76,7 +77,9 @@ class TebConfig(Section):
     min_dt: float = Field(0.02, gt=0, description="s, the shortest time interval")
     min_poses: int = Field(3, ge=3, le=100, description="poses in the band, at least")
     max_poses: int = Field(15, ge=3, le=200, description="poses in the band, at most (the cost grows with their square)")
-    iterations: int = Field(8, ge=1, le=100, description="Levenberg-Marquardt iterations a call")
+    iterations: int = Field(8, ge=1, le=100, description="Levenberg-Marquardt iterations a call, at most")
+    tolerance: float = Field(1e-3, gt=0, lt=1, description="relative decrease of the band's error below which "
+                             "Levenberg-Marquardt stops (the band is warm-started and solved again next period)")
     margin: float = Field(0.05, ge=0, description="m kept between the robot's disc and any laser point")
     inflation: float = Field(0.25, ge=0, description="m beyond the margin over which a soft cost keeps clear")
     max_speed_back: float = Field(0.2, ge=0, description="m/s, fastest backwards")
@@ -142,7 +145,7 @@ class TimedElasticBand:
         class); None if no band is clear."""
         found = [self.optimise(poses, dts, velocity, points, moving, local, final) for poses, dts in starts]
         if detours and self.cfg.homotopies and (hit := self._first_contact(min(found, key=lambda b: b[2]), points)) is not None:
-            found += [self.optimise(*detour, velocity, points, moving, local, final)
+            found += [self.optimise(*detour, velocity, points, moving, local, final, max(2, self.cfg.iterations // 2))
                       for detour in self._detours(min(found, key=lambda b: b[2]), *hit)]  # fmt: skip
         clear = [b for b in found if self._clear(b[0], b[1], points)]
         through = [self._first_contact(b, points) is not None for b in clear]
@@ -248,11 +251,13 @@ class TimedElasticBand:
 
     # the graph ----------------------------------------------------------------------------------------
 
-    def optimise(self, poses, dts, velocity, points, moving, local, final: bool):
-        """The band (poses (n, 3) robot frame, dts (n - 1,) s) optimised from the given one, and its cost."""
+    def optimise(self, poses, dts, velocity, points, moving, local, final: bool, iterations: int | None = None):
+        """The band (poses (n, 3) robot frame, dts (n - 1,) s) optimised from the given one (``iterations``, default
+        the config's), and its cost."""
         graph, values = self.graph(poses, dts, velocity, points, moving, local, final)
         params = gtsam.LevenbergMarquardtParams()
-        params.setMaxIterations(self.cfg.iterations)
+        params.setMaxIterations(iterations or self.cfg.iterations)
+        params.setRelativeErrorTol(self.cfg.tolerance)
         result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
         n = len(poses)
         out = np.array([[p.x(), p.y(), p.theta()] for p in (result.atPose2(X(i)) for i in range(n))])
