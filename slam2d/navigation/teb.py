@@ -88,7 +88,8 @@ class TebConfig(Section):
     obstacle_speed: float = Field(0.8, ge=0, description="m/s assumed for points the map does not explain")
     obstacle_reach: float = Field(0.5, ge=0, description="m, the most such a point's margin grows along the band")
     check_time: float = Field(1.0, ge=0, description="s of band checked for contact before its command goes out")
-    turn_first: float = Field(1.4, gt=0, description="rad; a path this far off the heading is turned to on the spot")
+    turn_first: float = Field(0.785, gt=0, description="rad; a path this far off the heading is turned to on the "
+                              "spot, until within a quarter of this (nav2's rotate-to-heading angle)")
     homotopies: bool = Field(True, description="a band through a point is optimised again round either side of it")
     obstacle_weight: float = Field(100.0, ge=0, description="inside radius + margin, per m^2")
     inflation_weight: float = Field(2.0, ge=0, description="within the inflation, per m^2")
@@ -111,10 +112,11 @@ class TimedElasticBand:
         self.robot, self.cfg = robot or RobotConfig(), config or TebConfig()
         self.band: tuple[np.ndarray, np.ndarray] | None = None  # world poses (n, 3), dts (n - 1,) s
         self.cost = np.nan  # the kept band's graph error
+        self.turning = False  # turning on the spot to the path
 
     def reset(self) -> None:
         """Forget the band: the next call starts a new one along the path."""
-        self.band = None
+        self.band, self.turning = None, False
 
     def command(self, pose, velocity, points, path, unmapped=None) -> Command:
         """(v, w) of the optimised band's first segment; ``blocked`` when the band would touch a point."""
@@ -125,9 +127,11 @@ class TimedElasticBand:
         local = in_robot_frame(pose, path_ahead(path, pose))
         goal, final = self._local_goal(local)
         ahead = point_along(local, min(0.5, _length(local)))
-        if abs(math.atan2(ahead[1], ahead[0])) > self.cfg.turn_first and np.hypot(*ahead) > 0.05:
+        bearing = math.atan2(ahead[1], ahead[0])
+        self.turning = abs(bearing) > self.cfg.turn_first / (4 if self.turning else 1) and np.hypot(*ahead) > 0.05
+        if self.turning:  # an arc to a path far off the heading would lengthen the way
             self.band = None
-            return self._turn(velocity, math.atan2(ahead[1], ahead[0]))
+            return self._turn(velocity, bearing)
         start = self._warm(pose, goal, local) if self.band is not None else self._along(goal, local)
         best = self._best([start], velocity, points, moving, local, final)
         if best is None and self.band is not None:  # the warm band is stuck: one along the path (no detours)
