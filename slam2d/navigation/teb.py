@@ -24,7 +24,8 @@ moved into the new robot frame, with poses inserted or removed so that each dt s
 period and slowed on its arc until the robot, braking at full deceleration after the period,
 stops short of every point (a point that may move with its margin grown, as the DWA's arcs).
 A band whose first ``check_time`` s would bring the disc onto a laser point, or whose slowest
-command cannot stop short, is dropped: the robot brakes and reports itself blocked. With
+command cannot stop short, is dropped: the robot brakes and reports itself blocked. A path more than
+``turn_first`` off the heading is first turned to on the spot, down to a quarter of that. With
 ``homotopies`` on, a band that still runs through a point (a person on the path, a box the
 map lacks: pulled from both sides, it stays in the obstacle) is optimised again from two starts
 moved round that point, one on each side (with half the iterations: the kept one is refined at the
