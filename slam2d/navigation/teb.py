@@ -89,8 +89,8 @@ class TebConfig(Section):
     obstacle_speed: float = Field(0.8, ge=0, description="m/s assumed for points the map does not explain")
     obstacle_reach: float = Field(0.5, ge=0, description="m, the most such a point's margin grows along the band")
     check_time: float = Field(1.0, ge=0, description="s of band checked for contact before its command goes out")
-    turn_first: float = Field(0.785, gt=0, description="rad; a path this far off the heading is turned to on the "
-                              "spot, until within a quarter of this (nav2's rotate-to-heading angle)")
+    turn_first: float = Field(1.4, gt=0, description="rad; a path this far off the heading is turned to on the "
+                              "spot, until within a quarter of this")
     homotopies: bool = Field(True, description="a band through a point is optimised again round either side of it")
     obstacle_weight: float = Field(100.0, ge=0, description="inside radius + margin, per m^2")
     inflation_weight: float = Field(2.0, ge=0, description="within the inflation, per m^2")
