@@ -122,6 +122,8 @@ def run_row(specs, n, planner, people, slam, seed, overrides=(), pool=None, only
         "pose_cm": 100 * med("pose_rmse"),
         "rtf": med("real_time_factor"),
         "hz": float(np.nanmedian([r["planner_hz"] for r in runs])),  # nan: a run that never planned
+        "ms": [float(np.nanmedian([r[f"planner_ms_{k}"] for r in runs])) for k in ("median", "p95")],
+        "runs_metrics": runs,
     }
 
 
@@ -143,16 +145,34 @@ def main(argv: list[str]) -> None:
     specs = worlds(args.worlds)
     print("| worlds | planner | people | pose from | runs | success | runs with a collision | median time (s) "
           "| median length / optimal | median goal error (cm) | median pose RMSE (cm) | real-time factor "
-          "| local planner (Hz) |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| local planner (Hz) | call ms, median / p95 (wall) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    rows = {}
     for slam in args.slam:
         for planner in args.planners:
             for people in args.people:
                 r = run_row(specs, args.pairs, planner, people, slam == "on", args.seed, args.set, pool, set(args.only))
+                rows[slam, planner, people] = r["runs_metrics"]
                 print(f"| {' '.join(args.worlds)} | {planner} | {people} | {'SLAM' if slam == 'on' else 'truth'} "
                       f"| {r['runs']} | {100 * r['success']:.0f} % | {r['collided']} | {r['time']:.1f} "
                       f"| {r['ratio']:.2f} | {r['goal_cm']:.1f} | {r['pose_cm']:.1f} | {r['rtf']:.1f} "
-                      f"| {r['hz']:.0f} |", flush=True)
+                      f"| {r['hz']:.0f} | {r['ms'][0]:.1f} / {r['ms'][1]:.1f} |", flush=True)
+    paired(rows)
+
+
+def paired(rows: dict) -> None:
+    """Each planner against the DWA on the same runs: the median of the per-run ratios of time to goal and of
+    length / optimal (runs both planners reached)."""
+    for (slam, planner, people), runs in rows.items():
+        base = rows.get((slam, "dwa", people))
+        if planner == "dwa" or base is None:
+            continue
+        both = [(a, b) for a, b in zip(runs, base) if a["success"] and b["success"]]
+        if both:
+            time = statistics.median(a["time"] / b["time"] for a, b in both)
+            length = statistics.median(a["length_ratio"] / b["length_ratio"] for a, b in both)
+            print(f"{planner} / dwa, {people} people, {slam}: median over {len(both)} paired runs: time {time:.2f}, "
+                  f"length / optimal {length:.2f}", flush=True)
 
 
 if __name__ == "__main__":

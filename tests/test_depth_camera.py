@@ -156,3 +156,34 @@ def test_object_files_and_config_are_checked(tmp_path):
         NavigatorConfig.model_validate({"depth_camera": {"band": [0.3, 0.1]}})
     with pytest.raises(ValidationError, match="extra"):
         NavigatorConfig.model_validate({"depth_camera": {"pitch": 10}})
+
+
+def test_the_look_around_marks_a_box_beside_the_start_before_the_robot_drives_and_it_is_not_hit():
+    """A 3.5 cm box beside the start, the goal past it: the camera, looking ahead, never sees it; the start-up
+    sweep marks it before the robot moves, and the robot then drives round it (without the sweep it turns
+    into it)."""
+    world = room(box(2.0, 1.7, 0.035), width=6.0)
+    start, goal = [2.0, 1.0, 0.0], [2.0, 3.4]
+    cfg = DepthCameraConfig(enabled=True)
+    robot, nav = Robot(world, start), Navigator(goal, config=NavigatorConfig(depth_camera=cfg))
+    camera, layer, grid = DepthCamera(cfg, seed=0), ObstacleLayer(cfg), world_grid(world)
+    step, states = robot.step(0.0, 0.0, 0.0), []
+    for _ in range(100):
+        layer.update(step.pose, camera.render(world, step.pose), step.scan.stamp, step.scan.points_in_base())
+        cmd = nav.step(step.pose, step.velocity, step.scan.points_in_base(), grid, step.scan.stamp, layer.points())
+        states.append(cmd.state)
+        if cmd.state != "look around":
+            break
+        assert cmd.v == 0.0
+        step = robot.step(cmd.v, cmd.w, 0.1)
+    assert states[0] == "look around" and states[-1] != "look around"
+    assert np.hypot(*(robot.pose[:2] - start[:2])) < 1e-6  # turned on the spot
+    assert abs(nav._look.left) < 0.05 and nav._look.sweep > 5.0  # the whole sweep, ending facing the path
+    on_box = np.all(np.abs(layer.points() - [2.0, 1.7]) <= 0.15 + 0.03, axis=1)
+    assert on_box.sum() >= 3
+    runs = {}
+    for look in (False, True):
+        options = NavigatorConfig.model_validate({"depth_camera": {"enabled": True, "look_around": look}})
+        runs[look] = run_navigation(world, Robot(world, start), grid, goal, "dwa", options, seed=0)
+    assert runs[False].object_collisions >= 1
+    assert runs[True].success and runs[True].collisions == 0

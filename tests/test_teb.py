@@ -24,6 +24,7 @@ from slam2d.navigation.teb_factors import (
     kinematics_residual,
     obstacle_residual,
     segments,
+    time_residual,
     velocity_residual,
     via_residual,
 )
@@ -40,6 +41,7 @@ RESIDUALS = {
                          near=0.25, soft=0.5), False),
     "velocity": (partial(velocity_residual, v_lo=-0.2, v_hi=1.0, w_max=2.0, min_dt=0.22), True),
     "kinematics": (kinematics_residual, False),
+    "time": (time_residual, True),
     "acceleration": (partial(acceleration_residual, start=np.array([0.8, -0.5]), end=np.zeros(2), a_max=1.0,
                              alpha_max=3.0), True),
     "acceleration, open end": (partial(acceleration_residual, start=np.array([0.2, 0.0]), end=np.full(2, np.nan),
@@ -52,7 +54,7 @@ def band_values(poses, dts) -> gtsam.Values:
     for i, p in enumerate(poses):
         values.insert(X(i), gtsam.Pose2(*p))
     for i, dt in enumerate(dts):
-        values.insert(T(i), float(dt))
+        values.insert(T(i), np.array([dt]))
     return values
 
 
@@ -76,8 +78,8 @@ def test_factor_jacobians_match_numerical_derivatives(name):
                 plus.update(key, values.atPose2(key).retract(step))
                 minus.update(key, values.atPose2(key).retract(-step))
             else:
-                plus.update(key, values.atDouble(key) + h)
-                minus.update(key, values.atDouble(key) - h)
+                plus.update(key, values.atVector(key) + h)
+                minus.update(key, values.atVector(key) - h)
             columns.append((factor.unwhitenedError(plus) - factor.unwhitenedError(minus)) / (2 * h))
     numeric = np.column_stack(columns)
     np.testing.assert_allclose(analytic, numeric, atol=1e-5, rtol=1e-4)
@@ -164,3 +166,25 @@ def test_teb_drives_round_a_box_the_map_lacks_to_its_goal():
     assert np.abs(passing[:, 1] - 2.0).min() > 0.3 + robot.cfg.radius  # it went round
     assert result.goal_error <= 0.03
     assert result.planner_hz >= 5.0
+
+
+def test_a_path_far_off_the_heading_is_turned_to_on_the_spot_then_driven_straight():
+    """Starting 1.5 rad off a straight path, the TEB turns on the spot (past turn_first, down to a quarter of
+    it) and then drives: the way is within 1 % of the straight line (an arc from where turning stopped at
+    turn_first was longer by up to 5 %)."""
+    path = np.column_stack([np.linspace(0.0, 4.0, 81), np.zeros(81)])
+    teb, pose, velocity, trajectory, index = TimedElasticBand(), np.array([0.0, 0.0, 1.5]), np.zeros(2), [], 0
+    for _ in range(120):
+        index += int(np.argmin(np.hypot(*(path[index : index + 40] - pose[:2]).T)))
+        cmd = teb.command(pose, velocity, np.zeros((0, 2)), path[index:])
+        velocity = np.array([cmd.v, cmd.w])
+        for _ in range(10):  # a unicycle, 10 ms steps
+            pose = pose + 0.01 * np.array([cmd.v * np.cos(pose[2]), cmd.v * np.sin(pose[2]), cmd.w])
+        trajectory.append(pose[:2].copy())
+        if np.hypot(*(pose[:2] - path[-1])) < 0.2:
+            break
+    trajectory = np.array(trajectory)
+    assert np.hypot(*(trajectory[-1] - path[-1])) < 0.2
+    length = np.hypot(*trajectory[0]) + np.linalg.norm(np.diff(trajectory, axis=0), axis=1).sum()
+    assert length < 1.01 * np.hypot(*trajectory[-1])
+    assert np.abs(trajectory[:, 1]).max() < 0.05

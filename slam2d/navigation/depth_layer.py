@@ -10,8 +10,11 @@ heights are then measured from z = 0.) Obstacle points within ``laser_overlap`` 
 are left to the laser. The layer keeps one point per ``resolution`` cell (world frame) with the
 time it was last seen. A kept point goes when the camera sees through it (the pixel it projects to
 reads deeper than it by ``clear_margin`` + 3 sigma of the noise), or after ``persistence`` s unseen
-(out of the camera's view, e.g. too near for it). The navigator (:meth:`Navigator.step`, its
-``obstacles``) blocks the layer's cells in its map and hands the points to the local planner as
+(out of the camera's view, e.g. too near for it). A camera looks one way: before the robot drives off,
+:class:`LookAround` turns it on the spot until the camera has swept every bearing (as nav2's spin
+behaviour), so that a box beside or behind the start is in the layer before the robot turns into it
+(the layer keeps it ``persistence`` s). The navigator (:meth:`Navigator.step`, its
+``obstacles``: :meth:`ObstacleLayer.corners`) blocks the layer's cells in its map and hands them to the local planner as
 points that stay.
 """
 
@@ -22,9 +25,10 @@ import open3d as o3d
 from scipy.spatial import cKDTree
 
 from slam2d import geometry
+from slam2d.navigation.common import Command
 from slam2d.sim.depth import CameraGeometry, DepthCameraConfig, depth_noise_sd
 
-__all__ = ["ObstacleLayer", "obstacle_points"]
+__all__ = ["LookAround", "ObstacleLayer", "obstacle_points"]
 
 _LEVEL = np.cos(np.deg2rad(15.0))  # a floor plane's normal is within 15 degrees of vertical ...
 _FLOOR_OFFSET = 0.05  # m ... and the plane passes within this of z = 0 under the robot
@@ -100,3 +104,49 @@ class ObstacleLayer:
     def points(self) -> np.ndarray:
         """The kept obstacle points (K, 2), world frame, m."""
         return self.xy.copy()
+
+    def corners(self) -> np.ndarray:
+        """The corners (C, 2) world m of the kept points' ``resolution`` cells, each once: what the navigator
+        avoids. A cell is blocked in full, as a costmap's lethal cell (a point seen on a box's top lies up to
+        a voxel inside its edge; the cell's corners reach the edge or beyond)."""
+        cells = np.floor(self.xy / self.resolution).astype(np.int64)
+        corners = (cells[:, None, :] + np.array([[0, 0], [1, 0], [0, 1], [1, 1]])[None]).reshape(-1, 2)
+        return np.unique(corners, axis=0) * self.resolution
+
+
+_SWEEP_OVERLAP = 0.8  # the share of the camera's horizontal field of view counted as seen by one frame
+
+
+class LookAround:
+    """The start-up sweep: turning on the spot (a disc touches nothing doing so) through at least 360 degrees
+    less ``_SWEEP_OVERLAP`` x the camera's horizontal field of view, in the direction that then ends facing
+    ``bearing`` (the path's), the shorter way; :meth:`command` gives the turn, None once done."""
+
+    def __init__(self, cfg: DepthCameraConfig, max_turn_rate: float, max_turn_accel: float, period: float):
+        self.sweep = 2 * np.pi - _SWEEP_OVERLAP * np.deg2rad(cfg.fov_deg[0])  # rad turned at least
+        self.rate, self.accel, self.period = max_turn_rate, max_turn_accel, period
+        self.left: float | None = None  # rad still to turn (signed), None before the first call
+        self.heading = 0.0  # rad, the last pose's heading
+        self.done = False
+        self._sign = 1.0
+
+    def command(self, pose, velocity, bearing: float) -> Command | None:
+        """Turn (v = 0, w rad/s) for the robot at ``pose`` (3,) moving at ``velocity`` (v, w) whose path leaves
+        at ``bearing`` (rad, robot frame); None once the sweep is done (and thereafter)."""
+        if self.done:
+            return None
+        if self.left is None:
+            ahead = np.mod(bearing - self.sweep, 2 * np.pi) + self.sweep  # turning left, ending facing the path
+            behind = np.mod(-bearing - self.sweep, 2 * np.pi) + self.sweep  # turning right
+            self.left = ahead if ahead <= behind else -behind
+            self._sign = float(np.sign(self.left))
+        else:
+            self.left -= float(geometry.wrap_angle(pose[2] - self.heading))
+        self.heading = float(pose[2])
+        w0 = float(velocity[1])
+        if self.left * self._sign < 0.02:  # turned through (or past) the sweep
+            self.done = True
+            return None
+        w = np.sign(self.left) * min(self.rate, np.sqrt(self.accel * abs(self.left)))  # stops at half the accel
+        w = float(np.clip(w, w0 - self.accel * self.period, w0 + self.accel * self.period))
+        return Command(0.0, w, False, "look around")

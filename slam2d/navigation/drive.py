@@ -25,7 +25,8 @@ class NavigationResult:
     ``collisions`` (contact events), ``min_clearance`` (m between the robot's disc and walls or
     obstacles), ``replans``, ``recoveries``, ``goal_error`` (m) and ``heading_error`` (rad) at the
     end, the true ``trajectory`` (N, 3), ``commands`` (N - 1, 2), ``stamps`` (N,) s, the planned
-    ``paths``, the local planner's mean ``planner_hz`` and the navigator's ``events``
+    ``paths``, the local planner's mean ``planner_hz``, the median and 95th percentile of its calls
+    ``planner_ms`` (wall-clock ms) and the navigator's ``events``
     (time s, "replan" / "recovery", why)."""
 
     success: bool
@@ -45,6 +46,7 @@ class NavigationResult:
     stamps: np.ndarray
     paths: list = field(default_factory=list)
     planner_hz: float = float("nan")
+    planner_ms: tuple[float, float] = (float("nan"), float("nan"))  # median, 95th percentile of a call (wall)
     steps: int = 0
     events: list = field(default_factory=list)
     object_collisions: int = 0  # contact events with 3D objects (``world.objects``) at the body's height
@@ -59,7 +61,9 @@ class NavigationResult:
         keys = ("success", "status", "reason", "time", "path_length", "optimal_length", "collisions", "min_clearance",
                 "replans", "recoveries", "goal_error", "heading_error", "planner_hz", "steps",
                 "object_collisions")  # fmt: skip
-        return {k: getattr(self, k) for k in keys} | {"length_ratio": self.length_ratio}
+        return {k: getattr(self, k) for k in keys} | {"length_ratio": self.length_ratio,
+                                                      "planner_ms_median": self.planner_ms[0],
+                                                      "planner_ms_p95": self.planner_ms[1]}  # fmt: skip
 
 
 HOLD_TURN = 0.5  # rad/s: turning in place while the pose source holds
@@ -106,7 +110,7 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
         points, obstacles = step.scan.points_in_base(), None
         if camera is not None:
             layer.update(pose, camera.render(world, robot.pose, robot.obstacle_circles()), step.scan.stamp, points)
-            obstacles = layer.points()
+            obstacles = layer.corners()
         if holding is not None and holding():  # the pose is not claimed: do not drive to the goal
             if not nav.events or nav.events[-1][1] != "hold":
                 nav.events.append((float(step.scan.stamp), "hold", "localisation not tracking"))
@@ -147,7 +151,9 @@ def run_navigation(world, robot, map_grid, goal, planner: str = "dwa", config: N
 def _result(nav: Navigator, start, traj, commands, stamps, collisions, min_clear) -> NavigationResult:
     end, goal = traj[-1], nav.goal
     heading = float(abs(geometry.wrap_angle(goal[2] - end[2]))) if len(goal) == 3 else 0.0
-    hz = 1.0 / float(np.mean(nav.planner_seconds)) if nav.planner_seconds else float("nan")
+    seconds = np.asarray(nav.planner_seconds)
+    hz = 1.0 / float(seconds.mean()) if len(seconds) else float("nan")
+    ms = tuple(1e3 * np.percentile(seconds, [50, 95])) if len(seconds) else (float("nan"),) * 2
     optimal = nav.optimal_length(start) if nav._grid is not None else float("inf")
     return NavigationResult(
         success=nav.status == REACHED, status=nav.status, reason=nav.reason, time=float(stamps[-1] - stamps[0]),
@@ -155,6 +161,6 @@ def _result(nav: Navigator, start, traj, commands, stamps, collisions, min_clear
         optimal_length=optimal, collisions=collisions, min_clearance=float(min_clear),
         replans=nav.replans, recoveries=nav.recoveries,
         goal_error=float(np.hypot(*(end[:2] - goal[:2]))), heading_error=heading,
-        trajectory=traj, commands=commands, stamps=stamps, paths=nav.paths, planner_hz=hz,
+        trajectory=traj, commands=commands, stamps=stamps, paths=nav.paths, planner_hz=hz, planner_ms=ms,
         steps=len(commands), events=nav.events,
     )  # fmt: skip

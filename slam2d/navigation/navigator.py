@@ -106,6 +106,11 @@ class Navigator:
         self._stand_in = False  # the path ends at a free cell near a goal the map blocks (see _goal_cell)
         self._manoeuvre: list[list] = []
         self._layer = None  # (H, W) bool on ``_raw``: cells of the obstacle layer (``step``'s obstacles)
+        self._look = None  # the depth camera's start-up sweep
+        if (cam := self.cfg.depth_camera).enabled and cam.look_around:  # open3d: imported only with a camera
+            from slam2d.navigation.depth_layer import LookAround
+
+            self._look = LookAround(cam, self.robot.max_turn_rate, self.robot.max_turn_accel, self.cfg.period)
 
     # map and plan --------------------------------------------------------
 
@@ -290,6 +295,8 @@ class Navigator:
                           "the new map blocks the path")
             if why := self.plan(pose):
                 return self._finish(UNREACHABLE, why)
+        if self._look is not None and (cmd := self._look_command(pose, velocity, now)) is not None:
+            return cmd
         if self._at_goal(pose, velocity):
             return self._goal_command(pose, velocity)
         if self._manoeuvre:
@@ -313,6 +320,13 @@ class Navigator:
         else:
             self._blocked_since = None
         return cmd
+
+    def _look_command(self, pose, velocity, now: float) -> Command | None:
+        """The depth camera's start-up sweep (:class:`LookAround`), ending facing the path; None once done."""
+        ahead = in_robot_frame(pose, point_along(self.path[self._index :], 0.5))
+        if self._look.left is None:
+            self.events.append((float(now), "look around", "sweep the depth camera before driving off"))
+        return self._look.command(pose, velocity, float(np.arctan2(ahead[1], ahead[0])))
 
     def _cells_of(self, xy) -> np.ndarray:
         """(H, W) bool on the map: the cells of world points ``xy`` (K, 2)."""

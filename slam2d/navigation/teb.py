@@ -24,16 +24,17 @@ moved into the new robot frame, with poses inserted or removed so that each dt s
 period and slowed on its arc until the robot, braking at full deceleration after the period,
 stops short of every point (a point that may move with its margin grown, as the DWA's arcs).
 A band whose first ``check_time`` s would bring the disc onto a laser point, or whose slowest
-command cannot stop short, is dropped: the robot brakes and reports itself blocked. With
+command cannot stop short, is dropped: the robot brakes and reports itself blocked. A path more than
+``turn_first`` off the heading is first turned to on the spot, down to a quarter of that. With
 ``homotopies`` on, a band that still runs through a point (a person on the path, a box the
 map lacks: pulled from both sides, it stays in the obstacle) is optimised again from two starts
-moved round that point, one on each side, and the cheapest band clear of every point is kept
-(teb_local_planner's alternatives in distinct topologies, two at a time).
+moved round that point, one on each side (with half the iterations: the kept one is refined at the
+following calls), and the cheapest band clear of every point is kept (teb_local_planner's
+alternatives in distinct topologies, two at a time).
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 from functools import partial
 
@@ -50,13 +51,13 @@ from slam2d.navigation.dwa import arcs
 from slam2d.navigation.teb_factors import (
     T,
     X,
-    _sigmas,
     acceleration_residual,
     band_factor,
     kinematics_residual,
     obstacle_residual,
     segments,
     stacked,
+    time_residual,
     velocity_residual,
     via_residual,
 )
@@ -77,7 +78,9 @@ class TebConfig(Section):
     min_dt: float = Field(0.02, gt=0, description="s, the shortest time interval")
     min_poses: int = Field(3, ge=3, le=100, description="poses in the band, at least")
     max_poses: int = Field(15, ge=3, le=200, description="poses in the band, at most (the cost grows with their square)")
-    iterations: int = Field(8, ge=1, le=100, description="Levenberg-Marquardt iterations a call")
+    iterations: int = Field(8, ge=1, le=100, description="Levenberg-Marquardt iterations a call, at most")
+    tolerance: float = Field(1e-3, gt=0, lt=1, description="relative decrease of the band's error below which "
+                             "Levenberg-Marquardt stops (the band is warm-started and solved again next period)")
     margin: float = Field(0.05, ge=0, description="m kept between the robot's disc and any laser point")
     inflation: float = Field(0.25, ge=0, description="m beyond the margin over which a soft cost keeps clear")
     max_speed_back: float = Field(0.2, ge=0, description="m/s, fastest backwards")
@@ -86,7 +89,8 @@ class TebConfig(Section):
     obstacle_speed: float = Field(0.8, ge=0, description="m/s assumed for points the map does not explain")
     obstacle_reach: float = Field(0.5, ge=0, description="m, the most such a point's margin grows along the band")
     check_time: float = Field(1.0, ge=0, description="s of band checked for contact before its command goes out")
-    turn_first: float = Field(1.4, gt=0, description="rad; a path this far off the heading is turned to on the spot")
+    turn_first: float = Field(1.4, gt=0, description="rad; a path this far off the heading is turned to on the "
+                              "spot, until within a quarter of this")
     homotopies: bool = Field(True, description="a band through a point is optimised again round either side of it")
     obstacle_weight: float = Field(100.0, ge=0, description="inside radius + margin, per m^2")
     inflation_weight: float = Field(2.0, ge=0, description="within the inflation, per m^2")
@@ -109,10 +113,11 @@ class TimedElasticBand:
         self.robot, self.cfg = robot or RobotConfig(), config or TebConfig()
         self.band: tuple[np.ndarray, np.ndarray] | None = None  # world poses (n, 3), dts (n - 1,) s
         self.cost = np.nan  # the kept band's graph error
+        self.turning = False  # turning on the spot to the path
 
     def reset(self) -> None:
         """Forget the band: the next call starts a new one along the path."""
-        self.band = None
+        self.band, self.turning = None, False
 
     def command(self, pose, velocity, points, path, unmapped=None) -> Command:
         """(v, w) of the optimised band's first segment; ``blocked`` when the band would touch a point."""
@@ -123,9 +128,11 @@ class TimedElasticBand:
         local = in_robot_frame(pose, path_ahead(path, pose))
         goal, final = self._local_goal(local)
         ahead = point_along(local, min(0.5, _length(local)))
-        if abs(math.atan2(ahead[1], ahead[0])) > self.cfg.turn_first and np.hypot(*ahead) > 0.05:
+        bearing = math.atan2(ahead[1], ahead[0])
+        self.turning = abs(bearing) > self.cfg.turn_first / (4 if self.turning else 1) and np.hypot(*ahead) > 0.05
+        if self.turning:  # an arc to a path far off the heading would lengthen the way
             self.band = None
-            return self._turn(velocity, math.atan2(ahead[1], ahead[0]))
+            return self._turn(velocity, bearing)
         start = self._warm(pose, goal, local) if self.band is not None else self._along(goal, local)
         best = self._best([start], velocity, points, moving, local, final)
         if best is None and self.band is not None:  # the warm band is stuck: one along the path (no detours)
@@ -143,7 +150,7 @@ class TimedElasticBand:
         class); None if no band is clear."""
         found = [self.optimise(poses, dts, velocity, points, moving, local, final) for poses, dts in starts]
         if detours and self.cfg.homotopies and (hit := self._first_contact(min(found, key=lambda b: b[2]), points)) is not None:
-            found += [self.optimise(*detour, velocity, points, moving, local, final)
+            found += [self.optimise(*detour, velocity, points, moving, local, final, max(2, self.cfg.iterations // 2))
                       for detour in self._detours(min(found, key=lambda b: b[2]), *hit)]  # fmt: skip
         clear = [b for b in found if self._clear(b[0], b[1], points)]
         through = [self._first_contact(b, points) is not None for b in clear]
@@ -249,15 +256,17 @@ class TimedElasticBand:
 
     # the graph ----------------------------------------------------------------------------------------
 
-    def optimise(self, poses, dts, velocity, points, moving, local, final: bool):
-        """The band (poses (n, 3) robot frame, dts (n - 1,) s) optimised from the given one, and its cost."""
+    def optimise(self, poses, dts, velocity, points, moving, local, final: bool, iterations: int | None = None):
+        """The band (poses (n, 3) robot frame, dts (n - 1,) s) optimised from the given one (``iterations``, default
+        the config's), and its cost."""
         graph, values = self.graph(poses, dts, velocity, points, moving, local, final)
         params = gtsam.LevenbergMarquardtParams()
-        params.setMaxIterations(self.cfg.iterations)
+        params.setMaxIterations(iterations or self.cfg.iterations)
+        params.setRelativeErrorTol(self.cfg.tolerance)
         result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
         n = len(poses)
         out = np.array([[p.x(), p.y(), p.theta()] for p in (result.atPose2(X(i)) for i in range(n))])
-        times = np.maximum([result.atDouble(T(i)) for i in range(n - 1)], self.cfg.min_dt)
+        times = np.maximum(gtsam.utilities.extractVectors(result, "t")[:, 0], self.cfg.min_dt)
         return out, times, graph.error(result)
 
     def graph(self, poses, dts, speed, points, moving, local, final: bool):
@@ -268,12 +277,12 @@ class TimedElasticBand:
         for i, p in enumerate(poses):
             values.insert(X(i), gtsam.Pose2(*p))
         for i, dt in enumerate(dts):
-            values.insert(T(i), float(dt))
-            graph.add(gtsam.PriorFactorDouble(T(i), 0.0, _sigmas([c.time_weight])))
+            values.insert(T(i), np.array([dt]))  # a 1-vector: inserted and read far faster than a double
         graph.add(gtsam.PriorFactorPose2(X(0), gtsam.Pose2(*poses[0]), gtsam.noiseModel.Isotropic.Sigma(3, 1e-4)))
         end_sigmas = np.array([0.01, 0.01, 1.0 if final else 0.2])
         graph.add(gtsam.PriorFactorPose2(X(n - 1), gtsam.Pose2(*poses[-1]), gtsam.noiseModel.Diagonal.Sigmas(end_sigmas)))
-        kinds = []  # (residual, weights (E,)): stacked into one factor, one Python callback an evaluation
+        kinds = [(time_residual, np.full(n - 1, c.time_weight))]  # (residual, weights (E,)): stacked into one
+        # factor, so that an evaluation of the graph is one Python callback
         if (vias := self._vias(poses, local)) is not None:
             kinds.append((partial(via_residual, index=vias[0], vias=vias[1]), np.full(2 * len(vias[0]), c.via_weight)))
         if len(points):
@@ -397,9 +406,9 @@ def _arc_length_at(path: np.ndarray, xy) -> float:
 def _densify(xy: np.ndarray, step: float, with_index: bool = False):
     """The polyline ``xy`` (K, 2) with points inserted so that none are more than ``step`` m apart; with
     ``with_index`` also the index (P,) of the vertex each point follows (the segment it lies on)."""
-    out, owner = [xy[:1]], [np.zeros(1, int)]
-    for i, (a, b) in enumerate(itertools.pairwise(xy)):
-        k = max(1, math.ceil(np.hypot(*(b - a)) / step))
-        out.append(a + np.linspace(1.0 / k, 1.0, k)[:, None] * (b - a))
-        owner.append(np.full(k, i))
-    return (np.vstack(out), np.concatenate(owner)) if with_index else np.vstack(out)
+    seg = np.diff(xy, axis=0)
+    counts = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / step)).astype(np.int64)
+    owner = np.repeat(np.arange(len(seg)), counts)
+    frac = (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts) + 1) / counts[owner]
+    out = np.vstack([xy[:1], xy[owner] + frac[:, None] * seg[owner]])
+    return (out, np.concatenate([[0], owner])) if with_index else out

@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["T", "X", "acceleration_residual", "band_factor", "kinematics_residual", "obstacle_residual", "segments",
-           "stacked", "velocity_residual", "via_residual"]  # fmt: skip
+           "stacked", "time_residual", "velocity_residual", "via_residual"]  # fmt: skip
 
 
 # --- factors: vectorised over the band, with analytic Jacobians ----------------------------------------------
@@ -181,16 +181,22 @@ def acceleration_residual(P, dts, start, end, a_max, alpha_max):
     return e, dP, ddt
 
 
+@njit(cache=True, nogil=True)
+def time_residual(P, dts):
+    """Pulls every time interval to 0 (the band is time-optimal): error (n - 1,) s."""
+    m = len(dts)
+    return dts.copy(), np.zeros((m, len(P), 3)), np.eye(m)
+
+
 def band_factor(n: int, residual, weights, timed: bool) -> gtsam.CustomFactor:
     """The factor over the band's ``n`` poses (and its n - 1 intervals if ``timed``) whose error is
     ``residual(P, dts) -> (e, dP, ddt)`` (see above) weighted by ``weights`` (E,): a pose's derivatives
     turn into its tangent space (``Pose2.retract`` moves the translation in the body frame)."""
-    pose_keys, all_dts = [X(i) for i in range(n)], [T(i) for i in range(n - 1)]
-    dt_keys = all_dts if timed else []
+    pose_keys, dt_keys = [X(i) for i in range(n)], [T(i) for i in range(n - 1)] if timed else []
 
     def error(this, values, jacobians):
         P = gtsam.utilities.extractPose2(values)  # (n, 3), in key order: the band's poses
-        dts = np.array([values.atDouble(k) for k in all_dts])
+        dts = gtsam.utilities.extractVectors(values, "t")[:, 0]  # (n - 1,), in key order: the band's intervals
         e, dP, ddt = residual(P, np.maximum(dts, 1e-6))
         if jacobians is not None:
             c, s = np.cos(P[:, 2]), np.sin(P[:, 2])
@@ -225,5 +231,5 @@ def X(i: int) -> int:
 
 
 def T(i: int) -> int:
-    """Key of the band's i-th time interval (between poses i and i + 1)."""
+    """Key of the band's i-th time interval (between poses i and i + 1; a 1-vector, s)."""
     return gtsam.symbol("t", i)

@@ -53,6 +53,9 @@ class DepthCameraConfig(Section):
         0.1, ge=0, description="m; an obstacle point this near a laser point is left to the laser (what it "
         "sees may move, the layer's points stay)")
     persistence: float = Field(30.0, gt=0, description="s an obstacle no longer seen is kept (out of view)")
+    look_around: bool = Field(
+        True, description="before driving off, turn on the spot until the camera has swept every bearing (what "
+        "stands beside or behind the start is marked before the robot turns into it), ending facing the path")
     clear_margin: float = Field(
         0.05, ge=0, description="m; a kept obstacle the camera sees through by this (+3 sigma of the noise) is cleared")
 
