@@ -18,9 +18,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from slam2d import geometry
+from slam2d.backend.probability_grid import scatter_normals
 
 NORMAL_RADIUS = 0.5  # m: neighbours that fit a point's local line
-NORMAL_MIN_NEIGHBOURS = 3  # points (with itself) within NORMAL_RADIUS to fit a line
+NORMAL_MIN_NEIGHBOURS = 3  # points (with itself) within NORMAL_RADIUS to fit a line (scatter_normals asks as many)
 NORMAL_MAX_FLATNESS = 0.3  # ratio of the neighbourhood's smaller to larger principal spread (a line: ~0)
 SIGMA = 0.02  # m: point-to-line noise; the information is the Hessian over SIGMA^2
 KERNEL_WIDTH = 0.05  # m: Cauchy kernel width on point-to-line distances
@@ -43,24 +44,8 @@ def surface(points) -> Surface:
     tree = cKDTree(pts)
     normals = np.full_like(pts, np.nan)
     if len(pts) >= NORMAL_MIN_NEIGHBOURS:
-        k = min(8, len(pts))
-        dist, idx = tree.query(pts, k=k)
-        near = dist <= NORMAL_RADIUS
-        count = near.sum(axis=1)
-        nb = pts[idx] * near[..., None]
-        mean = nb.sum(axis=1) / count[:, None]
-        d = (pts[idx] - mean[:, None, :]) * near[..., None]
-        cxx, cxy, cyy = (d[..., 0] ** 2).sum(1), (d[..., 0] * d[..., 1]).sum(1), (d[..., 1] ** 2).sum(1)
-        tr, det = cxx + cyy, cxx * cyy - cxy**2
-        disc = np.sqrt(np.maximum(0.25 * tr**2 - det, 0.0))
-        small, large = 0.5 * tr - disc, 0.5 * tr + disc
-        # eigenvector of the smaller eigenvalue: the normal
-        n = np.stack([cxy, small - cxx], axis=1)
-        alt = np.stack([small - cyy, cxy], axis=1)
-        n = np.where((np.abs(n).sum(1) < np.abs(alt).sum(1))[:, None], alt, n)
-        norm = np.linalg.norm(n, axis=1)
-        ok = (count >= NORMAL_MIN_NEIGHBOURS) & (norm > 0) & (small <= NORMAL_MAX_FLATNESS**2 * large)
-        normals[ok] = n[ok] / norm[ok, None]
+        found, line, _ = scatter_normals(tree, pts, NORMAL_RADIUS, NORMAL_MAX_FLATNESS**2)
+        normals[line] = found[line]
     return Surface(pts, normals, tree)
 
 

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-__all__ = ["ProbabilityGrid", "Pyramid", "voxel_filter", "facing_bits"]
+__all__ = ["ProbabilityGrid", "Pyramid", "facing_bits", "scatter_normals", "voxel_filter"]
 
 SIGMA_CELLS = 1.0  # std of the likelihood field, in cells
 FIELD_CUTOFF_SIGMAS = 4.0  # the field is 0 beyond this many sigma from the submap (exp(-8) = 3e-4)
@@ -104,7 +104,7 @@ class ProbabilityGrid:
         nx, ny = np.floor((pts.max(axis=0) + margin - self.origin) / resolution).astype(np.int64) + 1
         self.points = pts
         self.tree = cKDTree(pts)
-        self.normals, self.has_normal, spread = _normals(self.tree, pts, NORMAL_RADIUS_CELLS * resolution)
+        self.normals, self.has_normal, spread = scatter_normals(self.tree, pts, NORMAL_RADIUS_CELLS * resolution)
         self.facing = None  # (M, 2): the side each point's surface was seen from (a sided grid)
         bits = None
         if views is not None:  # normals face the side each point was seen from
@@ -261,12 +261,13 @@ def _splat_max(rows, cols, ny, nx, kernel, bits):  # pragma: no cover - compiled
     return field, sides
 
 
-def _normals(tree: cKDTree, pts: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def scatter_normals(tree: cKDTree, pts: np.ndarray, radius: float,
+                    flatness: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Unit normals (M, 2) of points from their neighbours' scatter, where they are reliable (M,),
     and where they have any (M,).
 
-    A normal is had with at least 3 neighbours within ``radius`` (m), and reliable
-    when they spread along a line (smaller scatter eigenvalue <= 10 % of the larger).
+    A normal is had with at least 3 of the ``NORMAL_NEIGHBOURS`` nearest within ``radius`` (m), and
+    reliable when they spread along a line (smaller scatter eigenvalue <= ``flatness`` times the larger).
     """
     k = min(NORMAL_NEIGHBOURS, len(pts))
     d, j = tree.query(pts, k=k, distance_upper_bound=radius)
@@ -281,4 +282,4 @@ def _normals(tree: cKDTree, pts: np.ndarray, radius: float) -> tuple[np.ndarray,
     half_gap = np.hypot(0.5 * (sxx - syy), sxy)
     small, large = 0.5 * (sxx + syy) - half_gap, 0.5 * (sxx + syy) + half_gap
     normals = np.column_stack([-np.sin(along), np.cos(along)])
-    return normals, (count >= 3) & (small <= 0.1 * large), count >= 3
+    return normals, (count >= 3) & (small <= flatness * large), count >= 3
