@@ -37,29 +37,32 @@ print(json.dumps({"ms": float(np.median(ms)), "commands": out}))
 """
 
 
-def record(pairs: int, people: int) -> list[tuple]:
-    """Every DWA call's arguments (pose, velocity, points, path, unmapped) along the office runs."""
+def record(pairs: int, people: int, planner: str = "dwa") -> list[list[tuple]]:
+    """Every call's arguments (pose, velocity, points, path, unmapped) to the local planner ``planner``
+    ("dwa" or "teb") along the office runs it drives (a list per run)."""
     from navigation import pairs as draw_pairs
 
     from slam2d import config
-    from slam2d.navigation import dwa
+    from slam2d.navigation import dwa, teb
     from slam2d.runs.navigate import simulate
 
-    calls, command = [], dwa.DynamicWindow.command
+    cls = {"dwa": dwa.DynamicWindow, "teb": teb.TimedElasticBand}[planner]
+    runs, command = [], cls.command
 
     def recording(self, pose, velocity, points, path, unmapped=None):
-        calls.append(tuple(None if a is None else np.array(a) for a in (pose, velocity, points, path, unmapped)))
+        runs[-1].append(tuple(None if a is None else np.array(a) for a in (pose, velocity, points, path, unmapped)))
         return command(self, pose, velocity, points, path, unmapped)
 
-    dwa.DynamicWindow.command = recording
+    cls.command = recording
     try:
         for k, (start, goal) in enumerate(draw_pairs("office", pairs, np.random.default_rng(0))):
+            runs.append([])
             simulate(config.load(None, {"seed": k, "navigation.start": start.tolist(), "navigation.goal": goal.tolist(),
-                                        "navigation.planner": "dwa", "navigation.people": people,
+                                        "navigation.planner": planner, "navigation.people": people,
                                         "navigation.slam": False}))  # fmt: skip
     finally:
-        dwa.DynamicWindow.command = command
-    return calls
+        cls.command = command
+    return runs
 
 
 def main() -> None:
@@ -70,7 +73,7 @@ def main() -> None:
     ap.add_argument("--people", type=int, default=5)
     ap.add_argument("--repeat", type=int, default=3)
     a = ap.parse_args()
-    calls = record(a.pairs, a.people)
+    calls = [c for run in record(a.pairs, a.people) for c in run]
     with tempfile.NamedTemporaryFile(suffix=".pkl") as f:
         pickle.dump(calls, f)
         f.flush()

@@ -19,31 +19,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-
-def record(pairs: int, people: int) -> list[list[tuple]]:
-    """Every TEB call's arguments along each office run (a list per run)."""
-    from navigation import pairs as draw_pairs
-
-    from slam2d import config
-    from slam2d.navigation import teb
-    from slam2d.runs.navigate import simulate
-
-    runs, command = [], teb.TimedElasticBand.command
-
-    def recording(self, pose, velocity, points, path, unmapped=None):
-        runs[-1].append(tuple(None if a is None else np.array(a) for a in (pose, velocity, points, path, unmapped)))
-        return command(self, pose, velocity, points, path, unmapped)
-
-    teb.TimedElasticBand.command = recording
-    try:
-        for k, (start, goal) in enumerate(draw_pairs("office", pairs, np.random.default_rng(0))):
-            runs.append([])
-            simulate(config.load(None, {"seed": k, "navigation.start": start.tolist(), "navigation.goal": goal.tolist(),
-                                        "navigation.planner": "teb", "navigation.people": people,
-                                        "navigation.slam": False}))  # fmt: skip
-    finally:
-        teb.TimedElasticBand.command = command
-    return runs
+from dwa_speed import record
 
 
 def main() -> None:
@@ -54,7 +30,7 @@ def main() -> None:
     ap.add_argument("--people", type=int, default=5)
     ap.add_argument("--repeat", type=int, default=2)
     a = ap.parse_args()
-    runs = record(a.pairs, a.people)
+    runs = record(a.pairs, a.people, "teb")
     ms = {"teb": {"wall": [], "cpu": []}, "dwa": {"wall": [], "cpu": []}}
     for _ in range(a.repeat):
         for calls in runs:
