@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from slam2d import geometry
 from slam2d.errors import InputError
 from slam2d.evaluation.trajectory import ate
 from slam2d.exploration.config import ExploreConfig
@@ -360,7 +361,7 @@ def _pose_error(run: ExplorationRun) -> dict:
     """The online estimate the robot drove on against the truth, no alignment: position error p95 and max (m),
     when the max was (s from the start), and the largest heading error (deg)."""
     err = np.hypot(*(run.estimate[:, :2] - run.truth[:, :2]).T)
-    turn = np.abs(np.angle(np.exp(1j * (run.estimate[:, 2] - run.truth[:, 2]))))
+    turn = np.abs(geometry.wrap_angle(run.estimate[:, 2] - run.truth[:, 2]))
     worst = int(np.argmax(err))
     return {"pose_error_p95": float(np.percentile(err, 95)), "pose_error_max": float(err[worst]),
             "pose_error_max_time": float(run.stamps[worst] - run.stamps[0]),
