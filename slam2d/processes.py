@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import gc
 import os
+import pickle
 import signal
 import socket
 import subprocess
@@ -26,6 +28,64 @@ def die_with_parent(parent: int, sig: int = signal.SIGKILL) -> None:
             pass
     if os.getppid() != parent:  # the parent died before prctl took effect
         os._exit(128 + int(sig))
+
+
+def call_forked(fn, *args):
+    """``fn(*args)`` computed in a forked child process and its (picklable) result returned through a pipe; an
+    exception there is raised here. Whatever interrupts the wait here (the KeyboardInterrupt of a SIGINT or
+    SIGTERM) kills the child at once (SIGKILL) and reaps it, so a long C++ call that holds the interpreter
+    (a GTSAM solve) stops as soon as the signal arrives. The child dies with this process (:func:`die_with_parent`).
+    Where ``os.fork`` is missing, ``fn(*args)`` runs here. Cost: 7 ms for an empty call, plus the copy-on-write
+    of the memory the child writes (a solve over M3500: +10 %)."""
+    if not hasattr(os, "fork"):
+        return fn(*args)
+    parent = os.getpid()
+    read, write = os.pipe()
+    gc.freeze()  # the child's collector then leaves the parent's objects alone: fewer pages copied on write
+    try:
+        pid = os.fork()
+    finally:
+        if os.getpid() == parent:
+            gc.unfreeze()
+    if pid == 0:
+        _child(read, write, parent, fn, args)
+    os.close(write)
+    try:
+        with os.fdopen(read, "rb") as pipe:
+            data = pipe.read()
+    except BaseException:
+        os.kill(pid, signal.SIGKILL)
+        raise
+    finally:
+        os.waitpid(pid, 0)
+    if not data:
+        raise RuntimeError(f"the worker process of {getattr(fn, '__qualname__', fn)} died without a result")
+    ok, value = pickle.loads(data)
+    if not ok:
+        raise value
+    return value
+
+
+def _child(read: int, write: int, parent: int, fn, args) -> None:
+    """In :func:`call_forked`'s child: compute, send ``(ok, result or exception)``, exit without clean-up."""
+    try:
+        os.close(read)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_DFL)
+        die_with_parent(parent)
+        gc.disable()
+        try:
+            out = (True, fn(*args))
+        except BaseException as err:  # noqa: BLE001 (raised again in the parent)
+            out = (False, err)
+        try:
+            data = pickle.dumps(out)
+        except Exception:  # noqa: BLE001 (an exception that does not pickle)
+            data = pickle.dumps((False, RuntimeError(repr(out[1]))))
+        with os.fdopen(write, "wb") as pipe:
+            pipe.write(data)
+    finally:
+        os._exit(0)
 
 
 _REAPER = """

@@ -95,14 +95,15 @@ def _anchor_prior(graph: g2o.PoseGraphFile, values):
     return prior_factor(anchor, values.atPose2(anchor))
 
 
-def _lm(graph: g2o.PoseGraphFile, fg, initial):
-    """Levenberg-Marquardt (GTSAM defaults, iteration by iteration: ``lm``) over ``fg`` and the anchor
-    prior from gtsam.Values ``initial``; returns (values, iterations)."""
+def _lm(graph: g2o.PoseGraphFile, fg, initial) -> tuple[np.ndarray, int, float]:
+    """Levenberg-Marquardt (GTSAM defaults, in a worker process: ``lm``) over ``fg`` and the anchor prior from
+    gtsam.Values ``initial``; returns (poses (N, 3) in vertex order, iterations, ``fg``'s error there)."""
     import gtsam
 
     anchored = gtsam.NonlinearFactorGraph(fg)
     anchored.add(_anchor_prior(graph, initial))
-    return levenberg_marquardt(anchored, initial)
+    return levenberg_marquardt(anchored, initial,
+                               lambda values, n: (_poses_in_vertex_order(values, graph.ids), n, float(fg.error(values))))
 
 
 def _classify(graph: g2o.PoseGraphFile, poses) -> np.ndarray:
@@ -116,7 +117,7 @@ class _Run:
 
     init: str
     start: np.ndarray
-    values: object
+    poses: np.ndarray
     iterations: int
     seconds: float
     cost: float
@@ -133,8 +134,8 @@ def _run(graph: g2o.PoseGraphFile, fg, name: str) -> _Run:
     t0 = time.perf_counter()
     start = _start(graph, name)
     t1 = time.perf_counter()
-    values, iterations = _lm(graph, fg, g2o_values(graph.ids, start))
-    return _Run(name, start, values, iterations, time.perf_counter() - t1, float(fg.error(values)), t1 - t0)
+    poses, iterations, cost = _lm(graph, fg, g2o_values(graph.ids, start))
+    return _Run(name, start, poses, iterations, time.perf_counter() - t1, cost, t1 - t0)
 
 
 def _agree(a: float, b: float) -> bool:
@@ -225,7 +226,7 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     runs = [_run(graph, fg, first)]
     best, verified, certified = runs[0], None, None  # the first start's run unless another is clearly lower
     timings = {"start": best.start_seconds, "solve": best.seconds}
-    poses = _poses_in_vertex_order(best.values, graph.ids)
+    poses = best.poses
     inlier = _classify(graph, poses)
     if verify and plain:  # on the edges within the gate: a solution bent by false loops is not worth a
         t0 = time.perf_counter()  # certificate of the whole graph's (M3500 + 1000 false loops: 450 s)
@@ -245,12 +246,12 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     for r in runs:
         log.info("g2o %s from %s: cost %.9g%s", robust, r.init, r.cost, " (kept)" if r is best else "")
     if best is not runs[0]:
-        poses = _poses_in_vertex_order(best.values, graph.ids)
+        poses = best.poses
         inlier = _classify(graph, poses)
         if certified is not None:
             certified = certificate.certify(consistency.subgraph(graph, inlier), poses).certified
     cost = (lambda p: g2o_error(graph, p)) if plain else (lambda p: float(fg.error(g2o_values(graph.ids, p))))
-    out = BatchResult(poses, cost(graph.poses), float(fg.error(best.values)), best.iterations, best.seconds,
+    out = BatchResult(poses, cost(graph.poses), best.cost, best.iterations, best.seconds,
                       best.init, cost(best.start), verified, inlier, certified,
                       g2o_error(consistency.subgraph(graph, inlier), poses), timings=timings)
     log.info("g2o %s from %s: error %.6g -> %.6g, %d iterations, %.3f s",

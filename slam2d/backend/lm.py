@@ -1,11 +1,12 @@
-"""Levenberg-Marquardt one iteration at a time, so that a signal stops a long solve promptly.
+"""Levenberg-Marquardt in a worker process, so that a signal stops a long solve at once.
 
-GTSAM's ``optimize()`` runs its whole loop in C++, where Python's signal handlers do not run:
-a SIGTERM waits for the solve to end. ``levenberg_marquardt`` calls ``iterate()`` from Python
-with GTSAM's own stopping rule (``checkConvergence`` on the relative and absolute error
-decrease, the iteration limit), so it reaches the same values and a KeyboardInterrupt raised by
-a signal handler surfaces between two iterations (one linear solve: well under a second on the
-benchmark graphs).
+GTSAM's solve runs in C++, where Python's signal handlers do not run: a SIGTERM would wait for
+the solve to end (M3500 with 1000 false loops: one iteration takes 1-4 s). ``levenberg_marquardt``
+runs it in a forked child (``processes.call_forked``) that the command kills as soon as SIGINT or
+SIGTERM arrives, and returns a summary of the result computed there. The child iterates with
+GTSAM's own stopping rule (``checkConvergence`` on the relative and absolute error decrease, the
+iteration limit): the same values, bit for bit, as GTSAM's ``optimize()`` and as a solve in this
+process.
 """
 
 from __future__ import annotations
@@ -13,11 +14,18 @@ from __future__ import annotations
 import math
 
 from slam2d.backend.factors import lm_params
+from slam2d.processes import call_forked
 
 
-def levenberg_marquardt(fg, initial, params=None):
-    """Optimise the gtsam graph ``fg`` from gtsam.Values ``initial`` (``params``: GTSAM's
-    LevenbergMarquardtParams, default ``factors.lm_params()``); returns (values, iterations)."""
+def levenberg_marquardt(fg, initial, summary, params=None):
+    """``summary(values, iterations)`` (picklable) of LM over the gtsam graph ``fg`` from gtsam.Values
+    ``initial`` (``params``: GTSAM's LevenbergMarquardtParams, default ``factors.lm_params()``), computed
+    in a worker process."""
+    return call_forked(_solve, fg, initial, summary, params)
+
+
+def _solve(fg, initial, summary, params):
+    """LM in this process, iteration by iteration with GTSAM's stopping rule; ``summary(values, iterations)``."""
     import gtsam
 
     params = params or lm_params()
@@ -25,12 +33,12 @@ def levenberg_marquardt(fg, initial, params=None):
     limit = params.getMaxIterations()
     current = opt.error()
     if limit == 0 or current <= params.getErrorTol():
-        return opt.values(), 0
+        return summary(opt.values(), 0)
     while True:
         opt.iterate()
         new = opt.error()
         if (opt.iterations() >= limit or not math.isfinite(new)
                 or gtsam.checkConvergence(params.getRelativeErrorTol(), params.getAbsoluteErrorTol(),
                                           params.getErrorTol(), current, new)):
-            return opt.values(), opt.iterations()
+            return summary(opt.values(), opt.iterations())
         current = new

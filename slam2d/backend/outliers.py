@@ -97,14 +97,13 @@ def _poses(values, ids) -> np.ndarray:
 
 
 def _solve(graph: g2o.PoseGraphFile, factors, poses):
-    """LM (iteration by iteration) over ``factors`` and a tight prior holding the first vertex at
+    """LM (in a worker process) over ``factors`` and a tight prior holding the first vertex at
     ``poses[0]``, from ``poses`` (N, 3); returns (poses, iterations)."""
     values = g2o_values(graph.ids, poses)
     fg = factor_graph(factors)
     key = pose_key(graph.ids[0])
     fg.add(prior_factor(key, values.atPose2(key)))
-    out, iterations = levenberg_marquardt(fg, values)
-    return _poses(out, graph.ids), iterations
+    return levenberg_marquardt(fg, values, lambda out, iterations: (_poses(out, graph.ids), iterations))
 
 
 def _pick(factors, keep) -> list:
