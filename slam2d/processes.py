@@ -70,8 +70,9 @@ def _child(read: int, write: int, parent: int, fn, args) -> None:
     """In :func:`call_forked`'s child: compute, send ``(ok, result or exception)``, exit without clean-up."""
     try:
         os.close(read)
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, signal.SIG_DFL)
+        for sig in (signal.SIGINT, signal.SIGTERM):  # the parent's Python handlers would wait for the solve
+            if signal.getsignal(sig) not in (signal.SIG_IGN, signal.SIG_DFL):  # an ignored signal stays ignored
+                signal.signal(sig, signal.SIG_DFL)
         die_with_parent(parent)
         gc.disable()
         try:
