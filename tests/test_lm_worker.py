@@ -7,6 +7,7 @@ import os
 import signal
 import threading
 import time
+from pathlib import Path
 
 import gtsam
 import numpy as np
@@ -50,7 +51,7 @@ def _children() -> set[int]:
     me, found = os.getpid(), set()
     for entry in os.listdir("/proc"):
         try:
-            if entry.isdigit() and int(open(f"/proc/{entry}/stat").read().rsplit(")", 1)[1].split()[1]) == me:
+            if entry.isdigit() and int(Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()[1]) == me:
                 found.add(int(entry))
         except (OSError, IndexError):
             pass
