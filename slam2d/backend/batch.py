@@ -32,6 +32,7 @@ from slam2d.backend.lm import levenberg_marquardt
 from slam2d.datasets import g2o
 from slam2d.errors import InputError
 from slam2d.evaluation.trajectory import ate
+from slam2d.processes import call_forked
 
 log = logging.getLogger(__name__)
 
@@ -124,9 +125,27 @@ class _Run:
     start_seconds: float = 0.0
 
 
+def _in_worker(fn, *args):
+    """``fn(*args)`` in a worker process that SIGINT / SIGTERM kills at once (``processes.call_forked``): a sparse
+    factorisation over false loops' fill-in holds the interpreter for seconds. scipy is imported here first, so
+    that no worker imports it anew."""
+    import scipy.sparse.linalg  # noqa: F401
+
+    return call_forked(fn, *args)
+
+
 def _start(graph: g2o.PoseGraphFile, name: str) -> np.ndarray:
-    """The start ``name`` ("chordal_isotropic": chordal with unit weights)."""
+    """The start ``name`` ("chordal_isotropic": chordal with unit weights), computed in a worker process."""
+    return _in_worker(_start_here, graph, name)
+
+
+def _start_here(graph: g2o.PoseGraphFile, name: str) -> np.ndarray:
     return ini.chordal(graph, weighted=False) if name == "chordal_isotropic" else ini.initial_poses(graph, name)
+
+
+def _certified(graph: g2o.PoseGraphFile, poses) -> bool:
+    """Whether SE-Sync's certificate holds at ``poses`` (``certificate.certify``, in a worker process)."""
+    return _in_worker(lambda: certificate.certify(graph, poses).certified)
 
 
 def _run(graph: g2o.PoseGraphFile, fg, name: str) -> _Run:
@@ -150,7 +169,7 @@ def _verify_kept(graph: g2o.PoseGraphFile, poses, kept) -> tuple[bool, bool, dic
     the isotropic problem), and no second start runs."""
     sub = consistency.subgraph(graph, kept)
     t0 = time.perf_counter()
-    certified = certificate.certify(sub, poses).certified
+    certified = _certified(sub, poses)
     timings = {"certify": time.perf_counter() - t0}
     if certified:
         return True, True, timings
@@ -178,7 +197,7 @@ def _solve_outliers(graph: g2o.PoseGraphFile, robust: str, robust_param: float, 
     if loss:
         method = loss
         if init:
-            start = ini.initial_poses(graph, init)  # a start's residuals say nothing of the noise: nominal gate
+            start = _start(graph, init)  # a start's residuals say nothing of the noise: nominal gate
             sol = outliers.gnc(graph, plain, start, loss, 1.0, warm=False, init=init)
         else:
             first = sol.iterations
@@ -230,7 +249,7 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     inlier = _classify(graph, poses)
     if verify and plain:  # on the edges within the gate: a solution bent by false loops is not worth a
         t0 = time.perf_counter()  # certificate of the whole graph's (M3500 + 1000 false loops: 450 s)
-        certified = certificate.certify(consistency.subgraph(graph, inlier), poses).certified
+        certified = _certified(consistency.subgraph(graph, inlier), poses)
         timings["certify"] = time.perf_counter() - t0
         verified = True if certified and inlier.all() else None  # the optimum of every edge: no second start
     t0 = time.perf_counter()
@@ -249,7 +268,7 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
         poses = best.poses
         inlier = _classify(graph, poses)
         if certified is not None:
-            certified = certificate.certify(consistency.subgraph(graph, inlier), poses).certified
+            certified = _certified(consistency.subgraph(graph, inlier), poses)
     cost = (lambda p: g2o_error(graph, p)) if plain else (lambda p: float(fg.error(g2o_values(graph.ids, p))))
     out = BatchResult(poses, cost(graph.poses), best.cost, best.iterations, best.seconds,
                       best.init, cost(best.start), verified, inlier, certified,
