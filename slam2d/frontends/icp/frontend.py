@@ -11,6 +11,7 @@ from slam2d import geometry
 from slam2d.frontends.base import FrontendResult, register_frontend
 from slam2d.frontends.common import bound_information, local_information, sigma_bounds
 from slam2d.frontends.icp.config import IcpConfig
+from slam2d.frontends.icp.degeneracy import remap
 from slam2d.frontends.icp.grid import SearchGrid
 from slam2d.frontends.icp.mapping import get_local_map
 from slam2d.frontends.icp.point_to_line import scan_normals
@@ -27,8 +28,9 @@ STILL_TRUST_XY = 0.02  # m; a registration corrected by less than this (and ...
 STILL_TRUST_THETA = np.deg2rad(1.0)  # ... this) lets the motion filter skip the next still scans
 STILL_RANGE_CHANGE = 2.0  # a scan whose median range change exceeds this x still_distance is registered
 STILL_SCAN_MOVED_EVENT = "scans registered though odometry said still (the scan changed)"  # key in ``events``
+DEGENERATE_EVENT = "scans with directions left to odometry (degenerate)"  # key in ``events``
 
-__all__ = ["IcpFrontend", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "ODOMETRY_OVERRULED_EVENT"]
+__all__ = ["IcpFrontend", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "ODOMETRY_OVERRULED_EVENT", "DEGENERATE_EVENT"]
 
 
 @register_frontend("icp")
@@ -104,7 +106,11 @@ class IcpFrontend:
         if start is not guess:
             self.events[ODOMETRY_OVERRULED_EVENT] += 1
             log.debug("odometry delta %s overruled by the scan match", np.round(odom_delta, 3))
-        information = self._information(fit)
+        scan_information = self._scan_information(fit)
+        pose, free = remap(self.pose, start, pose, scan_information, self._odom_information, cfg.degeneracy_ratio)
+        if free:
+            self.events[DEGENERATE_EVENT] += 1
+        information = self._information(scan_information)
         correction = geometry.between(start, pose)
         self._threshold.update(correction)
         self._trust_still = bool(
@@ -190,16 +196,18 @@ class IcpFrontend:
             return max(overruling, key=lambda r: r[1].matched)
         return None if best is None else (*best, guess)
 
-    def _information(self, fit: Fit) -> np.ndarray:
-        """Information (3, 3) of the delta: J^T W J / sigma^2 (+ odometry prior), bounded.
+    def _scan_information(self, fit: Fit) -> np.ndarray:
+        """The scan's information (3, 3) on the delta: J^T W J / sigma^2 of the match, sigma^2 from its
+        residuals; computed for the pose in the local frame, expressed in the previous base frame
+        (the frame of the delta)."""
+        sigma2 = max(fit.weighted_sq / max(fit.weight_sum - 3, 1.0), self.config.min_sigma_xy**2)
+        return local_information(fit.h / sigma2, self.pose[2])
 
-        Computed for the pose in the local frame, then expressed in the
-        previous base frame (the frame of the delta).
-        """
+    def _information(self, scan_information: np.ndarray) -> np.ndarray:
+        """Information (3, 3) of the delta: the scan's (+ the odometry prior), bounded."""
         cfg = self.config
-        sigma2 = max(fit.weighted_sq / max(fit.weight_sum - 3, 1.0), cfg.min_sigma_xy**2)
-        info = fit.h / sigma2 + (self._odom_information if cfg.odom_prior and cfg.method == "point_to_line" else 0.0)
-        return bound_information(local_information(info, self.pose[2]), *self._sigma_bounds)
+        prior = self._odom_information if cfg.odom_prior and cfg.method == "point_to_line" else 0.0
+        return bound_information(scan_information + prior, *self._sigma_bounds)
 
     def _diverged(self, pose, guess) -> str | None:
         """Reason the result is implausibly far from the odometry prediction, else None."""
