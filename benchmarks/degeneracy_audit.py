@@ -4,8 +4,8 @@ Usage: .venv/bin/python benchmarks/degeneracy_audit.py [intel aces fr079 fr-clin
        [--ratios 10 100 300 1000] [--results LOG=FOLDER ...]
 
 Runs the ICP frontend alone (the one default, no pose graph) over each log and records, per
-registered scan, the scan's information on the delta (``IcpFrontend._scan_information``) and
-the odometry and frontend deltas. It prints:
+registered scan, the scan's information on the delta (``IcpFrontend._scan_information`` in the
+delta's frame) and the odometry and frontend deltas. It prints:
 
 - the share of scans with a degenerate direction: a generalised eigenvalue of the scan's
   information against the odometry's (``odom_sigma_*``) below each ratio (the frontend's
@@ -31,6 +31,7 @@ from slam2d.config import load as load_config
 from slam2d.datasets.registry import open_dataset
 from slam2d.evaluation.relations import read_relations, relation_errors, relations_frame
 from slam2d.frontends import create_frontend
+from slam2d.frontends.common import local_information
 from slam2d.frontends.icp.degeneracy import constrained_projector
 from slam2d.frontends.odometry import odometry_information
 from slam2d.paths import resolve_data_path
@@ -46,9 +47,9 @@ def record(log: str) -> dict:
     seen: list[np.ndarray] = []
     scan_information = fe._scan_information
 
-    def spy(fit):
-        seen.append(scan_information(fit))
-        return seen[-1]
+    def spy(fit):  # the frontend's pose is still the previous scan's: the delta's frame
+        seen.append(local_information(scan_information(fit), fe.pose[2]))
+        return scan_information(fit)
 
     fe._scan_information = spy
     rows, previous = [], None

@@ -106,11 +106,8 @@ class IcpFrontend:
         if start is not guess:
             self.events[ODOMETRY_OVERRULED_EVENT] += 1
             log.debug("odometry delta %s overruled by the scan match", np.round(odom_delta, 3))
-        scan_information = self._scan_information(fit)
-        pose, free = remap(self.pose, start, pose, scan_information, self._odom_information, cfg.degeneracy_ratio)
-        if free:
-            self.events[DEGENERATE_EVENT] += 1
-        information = self._information(scan_information)
+        pose = self._remap(pose, start, fit)
+        information = self._information(fit)
         correction = geometry.between(start, pose)
         self._threshold.update(correction)
         self._trust_still = bool(
@@ -197,17 +194,30 @@ class IcpFrontend:
         return None if best is None else (*best, guess)
 
     def _scan_information(self, fit: Fit) -> np.ndarray:
-        """The scan's information (3, 3) on the delta: J^T W J / sigma^2 of the match, sigma^2 from its
-        residuals; computed for the pose in the local frame, expressed in the previous base frame
-        (the frame of the delta)."""
+        """The scan's information (3, 3) over the pose in the local frame: J^T W J / sigma^2 of the
+        match, sigma^2 from its residuals."""
         sigma2 = max(fit.weighted_sq / max(fit.weight_sum - 3, 1.0), self.config.min_sigma_xy**2)
-        return local_information(fit.h / sigma2, self.pose[2])
+        return fit.h / sigma2
 
-    def _information(self, scan_information: np.ndarray) -> np.ndarray:
-        """Information (3, 3) of the delta: the scan's (+ the odometry prior), bounded."""
+    def _information(self, fit: Fit) -> np.ndarray:
+        """Information (3, 3) of the delta: the scan's (+ odometry prior), bounded; expressed in the
+        previous base frame (the frame of the delta)."""
         cfg = self.config
         prior = self._odom_information if cfg.odom_prior and cfg.method == "point_to_line" else 0.0
-        return bound_information(scan_information + prior, *self._sigma_bounds)
+        return bound_information(local_information(self._scan_information(fit) + prior, self.pose[2]),
+                                 *self._sigma_bounds)
+
+    def _remap(self, pose, start, fit: Fit) -> np.ndarray:
+        """``pose`` with the directions the scan does not constrain taken from ``start`` (see
+        ``degeneracy``); counted under DEGENERATE_EVENT."""
+        ratio = self.config.degeneracy_ratio
+        if ratio <= 0:
+            return pose
+        information = local_information(self._scan_information(fit), self.pose[2])
+        pose, free = remap(self.pose, start, pose, information, self._odom_information, ratio)
+        if free:
+            self.events[DEGENERATE_EVENT] += 1
+        return pose
 
     def _diverged(self, pose, guess) -> str | None:
         """Reason the result is implausibly far from the odometry prediction, else None."""
