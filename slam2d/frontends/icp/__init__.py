@@ -74,5 +74,11 @@ from slam2d.frontends.icp.frontend import (
     IcpFrontend,
 )
 
-__all__ = ["IcpFrontend", "IcpConfig", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "ODOMETRY_OVERRULED_EVENT",
-           "DEGENERATE_EVENT"]
+__all__ = [
+    "DEGENERATE_EVENT",
+    "ODOMETRY_OVERRULED_EVENT",
+    "STILL_EVENT",
+    "STILL_SCAN_MOVED_EVENT",
+    "IcpConfig",
+    "IcpFrontend",
+]

@@ -30,7 +30,7 @@ STILL_RANGE_CHANGE = 2.0  # a scan whose median range change exceeds this x stil
 STILL_SCAN_MOVED_EVENT = "scans registered though odometry said still (the scan changed)"  # key in ``events``
 DEGENERATE_EVENT = "scans with directions left to odometry (degenerate)"  # key in ``events``
 
-__all__ = ["IcpFrontend", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "ODOMETRY_OVERRULED_EVENT", "DEGENERATE_EVENT"]
+__all__ = ["DEGENERATE_EVENT", "ODOMETRY_OVERRULED_EVENT", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "IcpFrontend"]
 
 
 @register_frontend("icp")
