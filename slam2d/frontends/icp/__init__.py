@@ -38,6 +38,13 @@ residual is within ``inlier_distance``. Too few points, a non-finite or
 non-planar result, a correction beyond the divergence bound or too few
 matches fall back to odometry with confidence 0, counted in ``events``.
 
+Degeneracy-aware fusion (``degeneracy``; off by default, ``degeneracy_ratio`` 0): where the
+scan constrains a direction less than ``degeneracy_ratio`` times the odometry does (a
+generalised eigenvalue of the scan's information against the odometry's), the match's
+correction in that direction is dropped and the prediction stands there (solution
+remapping, Zhang et al. ICRA 2016): along a corridor the distance comes from odometry,
+position across and heading from the walls. Counted under ``DEGENERATE_EVENT``.
+
 Odometry that lies (frozen then jumping, a wild step, slip): when the match
 from the odometry prediction diverges from it, the constant-velocity and the
 no-motion predictions are tried as starts and priors of their own; a match
@@ -60,10 +67,18 @@ that freezes while the robot moves says "still", the scan does not
 
 from slam2d.frontends.icp.config import IcpConfig
 from slam2d.frontends.icp.frontend import (
+    DEGENERATE_EVENT,
     ODOMETRY_OVERRULED_EVENT,
     STILL_EVENT,
     STILL_SCAN_MOVED_EVENT,
     IcpFrontend,
 )
 
-__all__ = ["IcpFrontend", "IcpConfig", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "ODOMETRY_OVERRULED_EVENT"]
+__all__ = [
+    "DEGENERATE_EVENT",
+    "ODOMETRY_OVERRULED_EVENT",
+    "STILL_EVENT",
+    "STILL_SCAN_MOVED_EVENT",
+    "IcpConfig",
+    "IcpFrontend",
+]

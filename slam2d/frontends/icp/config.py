@@ -59,6 +59,10 @@ class IcpConfig(Section):
         3e-3, gt=0, description="... in the adaptive-kernel pass before a refinement (m and rad)"
     )
     odom_prior: bool = Field(True, description="regularise the match with the odometry delta (point_to_line)")
+    degeneracy_ratio: float = Field(
+        0.0, ge=0, description="a direction where the scan's information is below this x the odometry's "
+        "(odom_sigma_*) is taken from the prediction, not the match (0: never; 10 suits corridors)"
+    )
     point_sigma: float = Field(0.03, gt=0, description="m; std of one point residual: prior weight vs points")
     inlier_distance: float = Field(0.1, gt=0, description="m; residual of a point counted as matched")
     retry_below: float = Field(0.6, ge=0, le=1, description="matched fraction below which other guesses are tried")

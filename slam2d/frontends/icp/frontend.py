@@ -11,6 +11,7 @@ from slam2d import geometry
 from slam2d.frontends.base import FrontendResult, register_frontend
 from slam2d.frontends.common import bound_information, local_information, sigma_bounds
 from slam2d.frontends.icp.config import IcpConfig
+from slam2d.frontends.icp.degeneracy import remap
 from slam2d.frontends.icp.grid import SearchGrid
 from slam2d.frontends.icp.mapping import get_local_map
 from slam2d.frontends.icp.point_to_line import scan_normals
@@ -27,8 +28,9 @@ STILL_TRUST_XY = 0.02  # m; a registration corrected by less than this (and ...
 STILL_TRUST_THETA = np.deg2rad(1.0)  # ... this) lets the motion filter skip the next still scans
 STILL_RANGE_CHANGE = 2.0  # a scan whose median range change exceeds this x still_distance is registered
 STILL_SCAN_MOVED_EVENT = "scans registered though odometry said still (the scan changed)"  # key in ``events``
+DEGENERATE_EVENT = "scans with directions left to odometry (degenerate)"  # key in ``events``
 
-__all__ = ["IcpFrontend", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "ODOMETRY_OVERRULED_EVENT"]
+__all__ = ["DEGENERATE_EVENT", "ODOMETRY_OVERRULED_EVENT", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "IcpFrontend"]
 
 
 @register_frontend("icp")
@@ -104,6 +106,7 @@ class IcpFrontend:
         if start is not guess:
             self.events[ODOMETRY_OVERRULED_EVENT] += 1
             log.debug("odometry delta %s overruled by the scan match", np.round(odom_delta, 3))
+        pose = self._remap(pose, start, fit)
         information = self._information(fit)
         correction = geometry.between(start, pose)
         self._threshold.update(correction)
@@ -190,16 +193,31 @@ class IcpFrontend:
             return max(overruling, key=lambda r: r[1].matched)
         return None if best is None else (*best, guess)
 
-    def _information(self, fit: Fit) -> np.ndarray:
-        """Information (3, 3) of the delta: J^T W J / sigma^2 (+ odometry prior), bounded.
+    def _scan_information(self, fit: Fit) -> np.ndarray:
+        """The scan's information (3, 3) over the pose in the local frame: J^T W J / sigma^2 of the
+        match, sigma^2 from its residuals."""
+        sigma2 = max(fit.weighted_sq / max(fit.weight_sum - 3, 1.0), self.config.min_sigma_xy**2)
+        return fit.h / sigma2
 
-        Computed for the pose in the local frame, then expressed in the
-        previous base frame (the frame of the delta).
-        """
+    def _information(self, fit: Fit) -> np.ndarray:
+        """Information (3, 3) of the delta: the scan's (+ odometry prior), bounded; expressed in the
+        previous base frame (the frame of the delta)."""
         cfg = self.config
-        sigma2 = max(fit.weighted_sq / max(fit.weight_sum - 3, 1.0), cfg.min_sigma_xy**2)
-        info = fit.h / sigma2 + (self._odom_information if cfg.odom_prior and cfg.method == "point_to_line" else 0.0)
-        return bound_information(local_information(info, self.pose[2]), *self._sigma_bounds)
+        prior = self._odom_information if cfg.odom_prior and cfg.method == "point_to_line" else 0.0
+        return bound_information(local_information(self._scan_information(fit) + prior, self.pose[2]),
+                                 *self._sigma_bounds)
+
+    def _remap(self, pose, start, fit: Fit) -> np.ndarray:
+        """``pose`` with the directions the scan does not constrain taken from ``start`` (see
+        ``degeneracy``); counted under DEGENERATE_EVENT."""
+        ratio = self.config.degeneracy_ratio
+        if ratio <= 0:
+            return pose
+        information = local_information(self._scan_information(fit), self.pose[2])
+        pose, free = remap(self.pose, start, pose, information, self._odom_information, ratio)
+        if free:
+            self.events[DEGENERATE_EVENT] += 1
+        return pose
 
     def _diverged(self, pose, guess) -> str | None:
         """Reason the result is implausibly far from the odometry prediction, else None."""

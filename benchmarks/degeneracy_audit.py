@@ -1,0 +1,147 @@
+"""Which scans leave directions unconstrained, and whether odometry or the scan matcher is right there.
+
+Usage: .venv/bin/python benchmarks/degeneracy_audit.py [intel aces fr079 fr-clinic csail]
+       [--ratios 10 100 300 1000] [--results LOG=FOLDER ...]
+
+Runs the ICP frontend alone (the one default, no pose graph) over each log and records, per
+registered scan, the scan's information on the delta (``IcpFrontend._scan_information`` in the
+delta's frame) and the odometry and frontend deltas. It prints:
+
+- the share of scans with a degenerate direction: a generalised eigenvalue of the scan's
+  information against the odometry's (``odom_sigma_*``) below each ratio (the frontend's
+  ``degeneracy_ratio`` test);
+- the relations error (m) by relation duration of chained deltas: odometry alone, the
+  frontend, odometry's translation with the frontend's heading, and the frontend's deltas
+  remapped offline at each ratio (the correction to odometry kept only in the directions above
+  it; the map is not rebuilt, so this approximates running the frontend at that ratio);
+- with ``--results``, the same for a SLAM trajectory (a results folder of that log).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from itertools import pairwise
+from pathlib import Path
+
+import numpy as np
+
+from slam2d import geometry
+from slam2d.config import load as load_config
+from slam2d.datasets.registry import open_dataset
+from slam2d.evaluation.relations import read_relations, relation_errors, relations_frame
+from slam2d.frontends import create_frontend
+from slam2d.frontends.common import local_information
+from slam2d.frontends.icp.degeneracy import constrained_projector
+from slam2d.frontends.odometry import odometry_information
+from slam2d.paths import resolve_data_path
+
+BINS = (0.0, 3.0, 10.0, 30.0, np.inf)  # s: relation durations
+
+
+def record(log: str) -> dict:
+    """Per scan of ``log``: stamp, odometry pose, laser mount, odometry delta, frontend delta and the
+    scan's information on the delta (NaN where the scan was not registered)."""
+    cfg = load_config(f"experiments/{log}.yaml")
+    fe = create_frontend("icp", cfg.frontend.options)
+    seen: list[np.ndarray] = []
+    scan_information = fe._scan_information
+
+    def spy(fit):  # the frontend's pose is still the previous scan's: the delta's frame
+        seen.append(local_information(scan_information(fit), fe.pose[2]))
+        return scan_information(fit)
+
+    fe._scan_information = spy
+    rows, previous = [], None
+    for scan in open_dataset(cfg.dataset):
+        odom = np.zeros(3) if previous is None else geometry.between(previous.odom, scan.odom)
+        seen.clear()
+        delta = fe.process(scan, odom).delta
+        rows.append((scan.stamp, scan.odom, scan.sensor_pose, odom, delta, seen[0] if seen else np.full((3, 3), np.nan)))
+        previous = scan
+    out = {k: np.array([r[i] for r in rows]) for i, k in enumerate(("stamp", "odom", "mount", "od", "delta", "info"))}
+    out["odom_information"] = odometry_information(fe.config.odom_sigma_xy, fe.config.odom_sigma_theta_deg)
+    return out
+
+
+def chain(deltas: np.ndarray) -> np.ndarray:
+    """Poses (N, 3) of chained deltas (N, 3) from the origin (the first delta is skipped)."""
+    poses = np.zeros_like(deltas)
+    for i in range(1, len(deltas)):
+        poses[i] = geometry.compose(poses[i - 1], deltas[i])
+    return poses
+
+
+def remapped(rec: dict, ratio: float) -> tuple[np.ndarray, int]:
+    """The frontend's deltas with their correction to odometry kept only where the scan's information
+    exceeds ``ratio`` x odometry's; and the number of scans changed."""
+    out, changed = rec["delta"].copy(), 0
+    for i in np.flatnonzero(np.isfinite(rec["info"][:, 0, 0])):
+        projector, free = constrained_projector(rec["info"][i], rec["odom_information"], ratio)
+        if free:
+            c = rec["delta"][i] - rec["od"][i]
+            c[2] = geometry.wrap_angle(c[2])
+            out[i], changed = rec["od"][i] + projector @ c, changed + 1
+    return out, changed
+
+
+def by_duration(log: str, rec: dict, poses: np.ndarray) -> list[str]:
+    """Relations error (m) of ``poses`` (one per scan): all, then per duration bin, with counts."""
+    cfg = load_config(f"experiments/{log}.yaml")
+    tol = cfg.evaluation.relation_tolerance
+    relations = read_relations(resolve_data_path(cfg.evaluation.relations, "evaluation.relations"))
+    frame, _ = relations_frame(rec["stamp"], rec["odom"], rec["mount"], relations, tol)
+    if frame == "laser":
+        poses = geometry.compose(poses, rec["mount"])
+    err, _, ok = relation_errors(rec["stamp"], poses, relations, tol)
+    duration = np.abs(relations.t2 - relations.t1)[ok]
+    cells = [f"{err.mean():.4f}"]
+    for lo, hi in pairwise(BINS):
+        m = (duration >= lo) & (duration < hi)
+        cells.append(f"{err[m].mean():.4f} ({m.sum()})" if m.any() else "–")
+    return cells
+
+
+def read_tum(path: Path) -> np.ndarray:
+    """Planar poses (N, 3) of a TUM trajectory file."""
+    t = np.loadtxt(path, ndmin=2)
+    return np.column_stack([t[:, 1], t[:, 2], 2 * np.arctan2(t[:, 6], t[:, 7])])
+
+
+def audit(log: str, ratios: list[float], results: Path | None) -> None:
+    rec = record(log)
+    info = rec["info"][np.isfinite(rec["info"][:, 0, 0])]
+    inv = np.linalg.inv(np.linalg.cholesky(rec["odom_information"]))
+    smallest = np.linalg.eigvalsh(inv @ info @ inv.T)[:, 0]
+    shares = ", ".join(f"< {r:g}: {np.mean(smallest < r):.2%}" for r in ratios)
+    print(f"\n{log}: {len(info)} registered scans; smallest generalised eigenvalue {shares}")
+    print("| deltas | all | " + " | ".join(f"{lo:g}–{hi:g} s" for lo, hi in pairwise(BINS)) + " |")
+    print("|---|" + "---|" * len(BINS))
+    mixed = rec["od"].copy()
+    mixed[:, 2] = rec["delta"][:, 2]
+    rows = [("odometry", rec["od"]), ("frontend (default)", rec["delta"]),
+            ("odometry x, y + frontend heading", mixed)]  # fmt: skip
+    for ratio in ratios:
+        deltas, changed = remapped(rec, ratio)
+        rows.append((f"remapped at ratio {ratio:g} ({changed} scans)", deltas))
+    for name, deltas in rows:
+        print(f"| {name} | " + " | ".join(by_duration(log, rec, chain(deltas))) + " |", flush=True)
+    if results is not None:
+        poses = read_tum(results / "trajectory.tum")
+        if len(poses) == len(rec["stamp"]):
+            print(f"| SLAM {results.name} | " + " | ".join(by_duration(log, rec, poses)) + " |")
+
+
+def main(argv: list[str]) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("logs", nargs="*", default=["intel", "aces", "fr079", "fr-clinic", "csail"])
+    ap.add_argument("--ratios", type=float, nargs="+", default=[10.0, 100.0, 300.0, 1000.0])
+    ap.add_argument("--results", action="append", default=[], help="LOG=FOLDER: a SLAM run of LOG to score too")
+    args = ap.parse_args(argv)
+    results = dict(r.split("=", 1) for r in args.results)
+    for log in args.logs:
+        audit(log, args.ratios, Path(results[log]) if log in results else None)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
