@@ -39,6 +39,7 @@ from slam2d.exploration.gridops import (
     inside_polygon,
     shared_gain,
     straight_reachable,
+    unknown_cells,
     unknown_in_sight,
 )
 from slam2d.exploration.hybrid import FINAL, HybridMap
@@ -94,6 +95,7 @@ class Explorer:
         self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest view counted on
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
+        self._gains_of: tuple = (None, None, None)  # (pocket grid, gains of the places scored on it, its hidden cells)
         self.strategy = EXPLORATION_STRATEGIES.create(cfg.strategy, cfg.strategy_options)
         _warm_up(self)
 
@@ -288,34 +290,47 @@ class Explorer:
         inner = inner[:-2, 1:-1] & inner[2:, 1:-1] & inner[1:-1, :-2] & inner[1:-1, 2:]
         tried = room & ~inner  # the edge of the room: views along walls and furniture
         tried[::k, ::k] = True
-        rows, cols = np.nonzero(tried & room)
-        if len(rows) == 0:
-            return None
-        order = np.argsort(distance.lengths(np.column_stack([rows, cols])))
-        cells = np.column_stack([rows[order], cols[order]])
+        cells = np.argwhere(tried & room)
         xy = view.to_world(cells)
+        keep = np.ones(len(xy), dtype=bool)
         if self.cfg.bounds is not None:
-            xy = xy[inside_polygon(xy, self.cfg.bounds)]
+            keep &= inside_polygon(xy, self.cfg.bounds)
         avoid = self.visited + self.inaccessible
         if avoid:
             from scipy.spatial import cKDTree
 
-            xy = xy[cKDTree(np.array(avoid)).query(xy)[0] >= self.cfg.avoid_radius]
+            keep &= cKDTree(np.array(avoid)).query(xy)[0] >= self.cfg.avoid_radius
         scored = GridView(state, view.resolution, view.origin)
         floor = self.cfg.pocket_gain / view.resolution**2
         if floor > 0:  # a place with no hidden cell within the rays' reach sees none: not scored
-            xy = xy[in_ray_reach(scored, xy, self.cfg.gain_range)]
+            keep[keep] = in_ray_reach(scored, xy[keep], self.cfg.gain_range)
+        cells, xy = cells[keep], xy[keep]
+        order = np.argsort(distance.lengths(cells), kind="stable")  # lengths only of the places scored
+        cells, xy = cells[order], xy[order]
+        gains, unknown = self._pocket_gains(view, state)
+        flat = cells[:, 0] * view.shape[1] + cells[:, 1]
         lo, batch = 0, POCKET_BATCH[0]
         while lo < len(xy):  # nearest first: most decisions score a few places
-            gain = information_gain(scored, xy[lo : lo + batch], self.cfg.gain_range, POCKET_RAYS)
-            ok = np.nonzero(gain >= floor)[0]
+            here = flat[lo : lo + batch]
+            new = np.isnan(gains[here])  # each place scored once a pocket grid (the levels of a decision)
+            if new.any():
+                gains[here[new]] = information_gain(scored, xy[lo : lo + batch][new], self.cfg.gain_range,
+                                                    POCKET_RAYS, unknown)  # fmt: skip
+            ok = np.nonzero(gains[here] >= floor)[0]
             if len(ok):
                 goal = xy[lo + ok[0]]
                 seen = unknown_in_sight(scored, goal, self.cfg.gain_range, POCKET_RAYS)
                 targets = view.to_world(np.column_stack(np.nonzero(seen)))
-                return Goal(goal, "pocket", score=float(gain[ok[0]]), targets=targets)
+                return Goal(goal, "pocket", score=float(gains[here[ok[0]]]), targets=targets)
             lo, batch = lo + batch, min(2 * batch, POCKET_BATCH[1])
         return None
+
+    def _pocket_gains(self, view: GridView, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The gains (H·W,) of the places scored so far on the pocket grid ``state`` (NaN: not yet), and its hidden
+        cells (K, 2): kept while the pocket grid is (one decision's levels)."""
+        if self._gains_of[0] is not state:
+            self._gains_of = state, np.full(state.size, np.nan), unknown_cells(GridView(state, 1.0, (0.0, 0.0)))
+        return self._gains_of[1], self._gains_of[2]
 
     def _candidate_options(self, view, distance) -> tuple[list[Candidate], np.ndarray, np.ndarray, np.ndarray]:
         """The open candidates the robot can reach: candidates, positions (P, 2) m, grid path lengths (P,) m

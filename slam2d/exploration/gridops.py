@@ -210,20 +210,30 @@ def _cast(state, gxy, n_rays, max_t, rounds, unknown, aimed):
     return own, shares, mark
 
 
-def _rays(view: GridView, points, max_range: float, rays: int, rounds: int):
+def unknown_cells(view: GridView) -> np.ndarray:
+    """The UNKNOWN cells (K, 2) (row, col) of ``view``, for :func:`information_gain` called on it many times."""
+    return np.argwhere(view.state == UNKNOWN)
+
+
+def _rays(view: GridView, points, max_range: float, rays: int, rounds: int, unknown=None):
     gxy = np.ascontiguousarray((np.asarray(points, dtype=np.float64).reshape(-1, 2) - np.asarray(view.origin))
                                / view.resolution)  # fmt: skip
     state = np.ascontiguousarray(view.state)
-    unknown = state == UNKNOWN
-    aimed = np.count_nonzero(unknown) < RAYS_AIMED_BELOW
-    cells = np.ascontiguousarray(np.argwhere(unknown) if aimed else np.zeros((0, 2), dtype=np.int64))
+    cells = unknown_cells(view) if unknown is None else unknown
+    aimed = len(cells) < RAYS_AIMED_BELOW
+    if aimed and len(gxy):  # only the cells within the rays' reach of a point can be aimed at
+        reach = float(max_range) / view.resolution + 2.0
+        lo, hi = gxy.min(axis=0)[::-1] - reach, gxy.max(axis=0)[::-1] + reach
+        cells = cells[np.all((cells >= lo) & (cells <= hi), axis=1)]
+    cells = np.ascontiguousarray(cells if aimed else np.zeros((0, 2)), dtype=np.int64)
     return _cast(state, gxy, int(rays), float(max_range) / view.resolution, rounds, cells, aimed)
 
 
-def information_gain(view: GridView, points, max_range: float, rays: int = 180) -> np.ndarray:
+def information_gain(view: GridView, points, max_range: float, rays: int = 180, unknown=None) -> np.ndarray:
     """Unknown cells (P,) visible from each point (P, 2) m within ``max_range`` m: ``rays`` rays cast
-    (Amanatides–Woo) through free and unknown cells until an occupied one."""
-    return _rays(view, points, max_range, rays, 1)[0]
+    (Amanatides–Woo) through free and unknown cells until an occupied one; ``unknown``: the view's
+    ``unknown_cells`` if already known."""
+    return _rays(view, points, max_range, rays, 1, unknown)[0]
 
 
 def shared_gain(view: GridView, points, max_range: float, rays: int = 180) -> tuple[np.ndarray, np.ndarray]:
