@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, inside_polygon
 from slam2d.exploration.paths import as_paths
@@ -212,20 +214,16 @@ def _goal_cell(cells: np.ndarray, reachable: np.ndarray, reach_cells: float):
     if ok.any():
         own = cells[ok]
         return own[np.argmin(np.hypot(*(own - centre).T))]
-    found = near_cells(cells, reach_cells, reachable.shape)
-    found = found[reachable[found[:, 0], found[:, 1]]]
+    k = int(np.ceil(reach_cells))
+    lo = np.maximum(cells.min(axis=0) - k, 0)
+    hi = np.minimum(cells.max(axis=0) + k + 1, reachable.shape)
+    seed = np.zeros(tuple(hi - lo), dtype=bool)
+    seed[cells[:, 0] - lo[0], cells[:, 1] - lo[1]] = True
+    box = ndimage.maximum_filter(seed, size=2 * k + 1, mode="constant")  # within k cells on both axes
+    found = np.argwhere(box & reachable[lo[0] : hi[0], lo[1] : hi[1]]) + lo  # raster order
+    if len(found) == 0:
+        return None
+    found = found[cKDTree(cells).query(found, distance_upper_bound=reach_cells + 1)[0] <= reach_cells]
     if len(found) == 0:
         return None
     return found[np.argmin(np.hypot(*(found - centre).T))]
-
-
-def near_cells(cells: np.ndarray, radius: float, shape) -> np.ndarray:
-    """The cells (K, 2) of a grid of ``shape`` within ``radius`` cells of one of ``cells`` (N, 2) (Euclidean, centre
-    to centre), in raster order."""
-    k = int(np.ceil(radius))
-    dr, dc = np.mgrid[-k : k + 1, -k : k + 1]
-    disc = np.column_stack([dr.ravel(), dc.ravel()])[np.hypot(dr, dc).ravel() <= radius]
-    near = (np.asarray(cells, dtype=np.int64)[:, None, :] + disc[None]).reshape(-1, 2)
-    near = near[(near[:, 0] >= 0) & (near[:, 0] < shape[0]) & (near[:, 1] >= 0) & (near[:, 1] < shape[1])]
-    flat = np.unique(near[:, 0] * shape[1] + near[:, 1])
-    return np.column_stack([flat // shape[1], flat % shape[1]])
