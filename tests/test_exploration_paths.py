@@ -116,3 +116,46 @@ def test_decisions_on_bounded_paths_equal_those_on_full_distances(strategy, monk
     assert goals["bounded"] == goals["full"]
     assert sum(g is not None and g[0] == "pocket" for g in goals["full"]) >= 1
     assert sum(g is not None and g[0] != "pocket" for g in goals["full"]) >= 4
+
+
+def add_pocket(state, rng) -> None:
+    """A 12 × 12-cell pocket of unknown in a ring of wall with a 5-cell gap on one side (no frontier region)."""
+    r, c = rng.integers(8, state.shape[0] - 22), rng.integers(8, state.shape[1] - 22)
+    state[r : r + 14, c : c + 14] = OCCUPIED
+    state[r + 1 : r + 13, c + 1 : c + 13] = UNKNOWN
+    side = rng.integers(4)
+    gap = (slice(r + 5, r + 10), c) if side == 0 else (slice(r + 5, r + 10), c + 13) if side == 1 else (
+        r, slice(c + 5, c + 10)) if side == 2 else (r + 13, slice(c + 5, c + 10))  # fmt: skip
+    state[gap] = UNKNOWN
+
+
+def test_views_of_pockets_kept_between_decisions_equal_those_scored_anew(monkeypatch):
+    """A place keeps its gain from the last decision only while nothing within its rays' reach changed: after
+    local changes to the map, the goal is the one an explorer with nothing kept chooses."""
+    monkeypatch.setattr(explorer_mod, "in_ray_reach", lambda view, xy, r: np.ones(len(xy), dtype=bool))
+    cfg = ExplorationConfig(strategy="nearest_frontier", gain_range=2.0, pocket_gain=0.02)
+    checked = 0
+    for seed in range(8):
+        rng = np.random.default_rng(300 + seed)
+        state = np.full((130, 170), OCCUPIED, dtype=np.int8)
+        state[2:-2, 2:-2] = FREE
+        for _ in range(5):
+            add_pocket(state, rng)
+        pose = random_start(rng, GridView(state, 0.05, (0.0, 0.0)))
+        kept = Explorer(cfg, 0.2, 0.05, 12.0)
+        kept.decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+        for _ in range(4):  # the map changes in one place: a pocket seen, or a new one
+            hidden = np.argwhere(state == UNKNOWN)
+            if len(hidden) and rng.random() < 0.6:
+                r, c = hidden[rng.integers(len(hidden))]
+                state[max(r - 4, 0) : r + 4, max(c - 4, 0) : c + 4] = FREE
+            else:
+                add_pocket(state, rng)
+            goal = kept.decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+            fresh = Explorer(cfg, 0.2, 0.05, 12.0).decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+            assert (goal is None) == (fresh is None)
+            if goal is not None:
+                assert goal.kind == fresh.kind and np.array_equal(goal.position, fresh.position)
+                assert goal.score == fresh.score
+                checked += goal.kind == "pocket"
+    assert checked >= 10

@@ -95,7 +95,7 @@ class Explorer:
         self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest view counted on
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
-        self._gains_of: tuple = (None, None, None)  # (pocket grid, gains of the places scored on it, its hidden cells)
+        self._gains_of: tuple = (None, None, None, None)  # (pocket grid, its places' gains, hidden cells, frame)
         self.strategy = EXPLORATION_STRATEGIES.create(cfg.strategy, cfg.strategy_options)
         _warm_up(self)
 
@@ -326,10 +326,22 @@ class Explorer:
         return None
 
     def _pocket_gains(self, view: GridView, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The gains (H·W,) of the places scored so far on the pocket grid ``state`` (NaN: not yet), and its hidden
-        cells (K, 2): kept while the pocket grid is (one decision's levels)."""
-        if self._gains_of[0] is not state:
-            self._gains_of = state, np.full(state.size, np.nan), unknown_cells(GridView(state, 1.0, (0.0, 0.0)))
+        """The gains (H·W,) of the places scored on the pocket grid ``state`` (NaN: not yet), and its hidden cells
+        (K, 2). A place keeps its gain from the last pocket grid of the same frame unless a cell within the rays'
+        reach of it changed since (a place sees nothing farther): a box round the cells that changed is scored
+        anew, the rest of the building is not."""
+        frame = view.shape, view.resolution, tuple(np.asarray(view.origin, dtype=float))
+        last, gains, _, last_frame = self._gains_of
+        if last is not state:
+            if last is None or last_frame != frame:
+                gains = np.full(state.size, np.nan)
+            else:
+                changed = np.argwhere(last != state)
+                if len(changed):
+                    m = int(np.ceil(self.cfg.gain_range / view.resolution)) + 2
+                    lo, hi = np.maximum(changed.min(axis=0) - m, 0), changed.max(axis=0) + m + 1
+                    gains.reshape(state.shape)[lo[0] : hi[0], lo[1] : hi[1]] = np.nan
+            self._gains_of = state, gains, unknown_cells(GridView(state, 1.0, (0.0, 0.0))), frame
         return self._gains_of[1], self._gains_of[2]
 
     def _candidate_options(self, view, distance) -> tuple[list[Candidate], np.ndarray, np.ndarray, np.ndarray]:
