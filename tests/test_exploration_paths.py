@@ -7,11 +7,13 @@ import pytest
 from scipy import ndimage
 
 from slam2d.exploration import explorer as explorer_mod
+from slam2d.exploration import pockets as pockets_mod
 from slam2d.exploration.config import ExplorationConfig
 from slam2d.exploration.explorer import Explorer
 from slam2d.exploration.frontiers import find_frontiers
 from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, geodesic
 from slam2d.exploration.paths import Paths, _Dense
+from slam2d.exploration.pockets import LocalRefresh, pocket_state
 
 
 def random_map(rng, shape=(90, 110)) -> np.ndarray:
@@ -99,7 +101,7 @@ def test_decisions_on_bounded_paths_equal_those_on_full_distances(strategy, monk
     for mode in ("bounded", "full"):
         if mode == "full":
             monkeypatch.setattr(explorer_mod, "Paths", lambda *a, **k: _Dense(Paths(*a, **k).dense()))
-            monkeypatch.setattr(explorer_mod, "in_ray_reach", lambda view, xy, r: np.ones(len(xy), dtype=bool))
+            monkeypatch.setattr(pockets_mod, "in_ray_reach", lambda view, xy, r: np.ones(len(xy), dtype=bool))
         goals[mode] = []
         for seed in range(12):
             rng = np.random.default_rng(200 + seed)
@@ -132,7 +134,7 @@ def add_pocket(state, rng) -> None:
 def test_views_of_pockets_kept_between_decisions_equal_those_scored_anew(monkeypatch):
     """A place keeps its gain from the last decision only while nothing within its rays' reach changed: after
     local changes to the map, the goal is the one an explorer with nothing kept chooses."""
-    monkeypatch.setattr(explorer_mod, "in_ray_reach", lambda view, xy, r: np.ones(len(xy), dtype=bool))
+    monkeypatch.setattr(pockets_mod, "in_ray_reach", lambda view, xy, r: np.ones(len(xy), dtype=bool))
     cfg = ExplorationConfig(strategy="nearest_frontier", gain_range=2.0, pocket_gain=0.02)
     checked = 0
     for seed in range(8):
@@ -159,3 +161,20 @@ def test_views_of_pockets_kept_between_decisions_equal_those_scored_anew(monkeyp
                 assert goal.score == fresh.score
                 checked += goal.kind == "pocket"
     assert checked >= 10
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_hidden_cells_refreshed_where_the_map_changed_equal_a_full_pass(seed):
+    """The utility's hidden-cell grid (``pocket_state``), kept between views and recomputed round the cells that
+    changed, is the full pass's after every change, near the grid's edge too."""
+    rng = np.random.default_rng(400 + seed)
+    state = random_map(rng)
+    outside = rng.random(state.shape) < 0.05
+    kept = LocalRefresh(lambda st, out: pocket_state(st, 4, out), 2 * 4 + 4)
+    for _ in range(8):
+        r, c = rng.integers(-5, state.shape[0]), rng.integers(-5, state.shape[1])
+        patch = state[max(r, 0) : r + rng.integers(2, 30), max(c, 0) : c + rng.integers(2, 30)]
+        patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.5, 0.2, 0.3])
+        if rng.random() < 0.3:
+            outside[rng.integers(state.shape[0]), :] ^= True
+        assert np.array_equal(kept(state, outside), pocket_state(state, 4, outside))

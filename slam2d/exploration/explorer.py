@@ -34,23 +34,24 @@ from slam2d.exploration.gridops import (
     UNKNOWN,
     GridView,
     cells_inside_polygon,
-    in_ray_reach,
     information_gain,
     inside_polygon,
     shared_gain,
     straight_reachable,
-    unknown_cells,
-    unknown_in_sight,
 )
 from slam2d.exploration.hybrid import FINAL, HybridMap
-from slam2d.exploration.paths import Paths, as_paths, path_lengths
-from slam2d.exploration.pockets import opaque_faces, pocket_state, without_outside
+from slam2d.exploration.paths import Paths, path_lengths
+from slam2d.exploration.pockets import (
+    POCKET_RAYS,
+    LocalRefresh,
+    opaque_faces,
+    pocket_goal,
+    pocket_state,
+    without_outside,
+)
 from slam2d.exploration.regret import tour_regret
 from slam2d.segmentation.observations import raycast_grid
 
-POCKET_SPACING = 0.2  # m between the places tried as views of pockets
-POCKET_RAYS = 360  # rays cast from each of them (one a degree, as the laser's beams)
-POCKET_BATCH = 8, 256  # places scored at a time, nearest first: the first batch, doubling up to the last
 WALL_SPAN = 2.0  # m: a wall's unseen stretch (behind furniture) bridged when telling pockets from the outside
 OPTIONS_KEPT = 10  # a utility decision's best options kept with its goal (goals.json)
 OPTION_TERMS = "gain_m2", "share_m2", "path_m", "L_m", "gamma_rad", "F"
@@ -93,6 +94,7 @@ class Explorer:
         self.decision_cpu_seconds: list[float] = []  # the deciding thread's CPU time (little moved by other jobs)
         self.fallbacks = self.pocket_goals = self.tight_goals = 0
         self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest view counted on
+        self._hidden_grid = None  # the hidden-cell grid, kept between views
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
         self._gains_of: tuple = (None, None, None, None)  # (pocket grid, its places' gains, hidden cells, frame)
@@ -187,7 +189,7 @@ class Explorer:
         distance = Paths(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution, allowed=roomy)
         goal = self.strategy.choose(self, pose, view, distance)
         if goal is None and self.cfg.pockets:
-            goal = self._pocket_goal(pose, view, distance)
+            goal = pocket_goal(self, pose, view, distance)
             self.pocket_goals += goal is not None
         return goal
 
@@ -238,7 +240,12 @@ class Explorer:
         counts as unexplored; rays stopped by gaps between occupied cells narrower than the robot's radius,
         so that the unknown inside furniture or behind a wall seen at a grazing angle keeps no goal open)."""
         if self._hidden_of[0] is not view:
-            state = pocket_state(view.state, int(self.radius / view.resolution), self._outside(view))
+            wall = int(self.radius / view.resolution)
+            if self._hidden_grid is None or self._hidden_grid.wall != wall:  # refreshed where the map changed
+                self._hidden_grid = LocalRefresh(lambda st, *out: pocket_state(st, wall, *out), 2 * wall + 4)
+                self._hidden_grid.wall = wall
+            outside = self._outside(view)
+            state = self._hidden_grid(view.state, *(() if outside is None else (outside,)))
             self._hidden_of = view, GridView(state, view.resolution, view.origin)
         return self._hidden_of[1]
 
@@ -272,77 +279,6 @@ class Explorer:
         scored = pocket_state(view.state, int(self.radius / view.resolution), retired)
         scored = opaque_faces(scored, view.state, depth_cells(self.width, view.resolution))
         return without_outside(scored, int(WALL_SPAN / view.resolution))
-
-    def _pocket_goal(self, pose, view: GridView, distance) -> Goal | None:
-        """When no frontier (or candidate) is left: the nearest reachable place (sampled every
-        POCKET_SPACING m, and every cell along the edge of the space with room for a goal: the views
-        along walls and furniture; away from visited and inaccessible goals) that sees at least
-        ``pocket_gain`` of hidden cells (``pocket_state``) — pockets whose openings are narrower than a
-        frontier region or touch an obstacle (behind furniture, beside a wall), often seen from a few
-        places only."""
-        state = self._pocket_state(view)
-        if not (state == UNKNOWN).any():
-            return None
-        distance = as_paths(distance)
-        k = max(1, round(POCKET_SPACING / view.resolution))
-        room = distance.reach
-        inner = np.pad(room, 1)
-        inner = inner[:-2, 1:-1] & inner[2:, 1:-1] & inner[1:-1, :-2] & inner[1:-1, 2:]
-        tried = room & ~inner  # the edge of the room: views along walls and furniture
-        tried[::k, ::k] = True
-        cells = np.argwhere(tried & room)
-        xy = view.to_world(cells)
-        keep = np.ones(len(xy), dtype=bool)
-        if self.cfg.bounds is not None:
-            keep &= inside_polygon(xy, self.cfg.bounds)
-        avoid = self.visited + self.inaccessible
-        if avoid:
-            from scipy.spatial import cKDTree
-
-            keep &= cKDTree(np.array(avoid)).query(xy)[0] >= self.cfg.avoid_radius
-        scored = GridView(state, view.resolution, view.origin)
-        floor = self.cfg.pocket_gain / view.resolution**2
-        if floor > 0:  # a place with no hidden cell within the rays' reach sees none: not scored
-            keep[keep] = in_ray_reach(scored, xy[keep], self.cfg.gain_range)
-        cells, xy = cells[keep], xy[keep]
-        order = np.argsort(distance.lengths(cells), kind="stable")  # lengths only of the places scored
-        cells, xy = cells[order], xy[order]
-        gains, unknown = self._pocket_gains(view, state)
-        flat = cells[:, 0] * view.shape[1] + cells[:, 1]
-        lo, batch = 0, POCKET_BATCH[0]
-        while lo < len(xy):  # nearest first: most decisions score a few places
-            here = flat[lo : lo + batch]
-            new = np.isnan(gains[here])  # each place scored once a pocket grid (the levels of a decision)
-            if new.any():
-                gains[here[new]] = information_gain(scored, xy[lo : lo + batch][new], self.cfg.gain_range,
-                                                    POCKET_RAYS, unknown)  # fmt: skip
-            ok = np.nonzero(gains[here] >= floor)[0]
-            if len(ok):
-                goal = xy[lo + ok[0]]
-                seen = unknown_in_sight(scored, goal, self.cfg.gain_range, POCKET_RAYS)
-                targets = view.to_world(np.column_stack(np.nonzero(seen)))
-                return Goal(goal, "pocket", score=float(gains[here[ok[0]]]), targets=targets)
-            lo, batch = lo + batch, min(2 * batch, POCKET_BATCH[1])
-        return None
-
-    def _pocket_gains(self, view: GridView, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The gains (H·W,) of the places scored on the pocket grid ``state`` (NaN: not yet), and its hidden cells
-        (K, 2). A place keeps its gain from the last pocket grid of the same frame unless a cell within the rays'
-        reach of it changed since (a place sees nothing farther): a box round the cells that changed is scored
-        anew, the rest of the building is not."""
-        frame = view.shape, view.resolution, tuple(np.asarray(view.origin, dtype=float))
-        last, gains, _, last_frame = self._gains_of
-        if last is not state:
-            if last is None or last_frame != frame:
-                gains = np.full(state.size, np.nan)
-            else:
-                changed = np.argwhere(last != state)
-                if len(changed):
-                    m = int(np.ceil(self.cfg.gain_range / view.resolution)) + 2
-                    lo, hi = np.maximum(changed.min(axis=0) - m, 0), changed.max(axis=0) + m + 1
-                    gains.reshape(state.shape)[lo[0] : hi[0], lo[1] : hi[1]] = np.nan
-            self._gains_of = state, gains, unknown_cells(GridView(state, 1.0, (0.0, 0.0))), frame
-        return self._gains_of[1], self._gains_of[2]
 
     def _candidate_options(self, view, distance) -> tuple[list[Candidate], np.ndarray, np.ndarray, np.ndarray]:
         """The open candidates the robot can reach: candidates, positions (P, 2) m, grid path lengths (P,) m
