@@ -30,6 +30,7 @@ from slam2d.exploration.frontiers import (
     frontier_mask,
 )
 from slam2d.exploration.gridops import (
+    FREE,
     OCCUPIED,
     UNKNOWN,
     GridView,
@@ -416,18 +417,29 @@ _WARM: set = set()  # the strategies whose first decision this process has made
 
 
 def _warm_up(explorer: Explorer) -> None:
-    """One decision of a throwaway explorer of the same strategy on a small room with an opening, the first
-    time a strategy is made in this process: numba's compiled kernels and the strategy's libraries are loaded
-    then, not in the first decision's time."""
+    """Decisions of a throwaway explorer of the same strategy, the first time a strategy is made in this process: on
+    a small room with an opening (a frontier; again once the map changed; the goal checked), then with a pocket
+    behind a wall's gap only: numba's compiled kernels and the strategy's libraries are loaded then, not in the
+    first decisions' time."""
     if explorer.cfg.strategy in _WARM:
         return
     _WARM.add(explorer.cfg.strategy)
     state = np.full((60, 60), UNKNOWN, dtype=np.int8)
-    state[10:50, 10:50] = 0
+    state[10:50, 10:50] = FREE
     state[9, 9:51] = state[50, 9:51] = state[9:51, 9] = state[9:51, 50] = OCCUPIED
-    state[50, 25:35] = 0  # the opening
+    state[50, 20:40] = FREE  # the opening
     throwaway = Explorer(explorer.cfg, explorer.radius, explorer.inflation, explorer.range_max)
-    throwaway.decide(np.array([1.5, 1.5, 0.0]), GridView(state, 0.05, (0.0, 0.0)))
+    pose = np.array([1.5, 1.5, 0.0])
+    for _ in range(2):
+        goal = throwaway.decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+        if goal is not None:
+            throwaway.spent(goal, GridView(state.copy(), 0.05, (0.0, 0.0)))
+        state[51:54, 20:40] = FREE
+    state[50, 20:40] = OCCUPIED
+    state[51:59, 12:48] = OCCUPIED
+    state[52:58, 14:46] = UNKNOWN  # a pocket seen through a gap only
+    state[51, 28:32] = UNKNOWN
+    throwaway.decide(pose, GridView(state, 0.05, (0.0, 0.0)))
 
 
 def _option(goal, candidate: bool, terms) -> dict:
