@@ -93,7 +93,7 @@ def figure(runs: list[dict], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    labels = sorted({r["label"] for r in runs})
+    labels = list(dict.fromkeys(r["label"] for r in runs))  # in the order of the logs
     strategies = sorted({r["metrics"]["strategy"] for r in runs})
     worlds = sorted({r["metrics"]["world"] for r in runs})
     fig, axes = plt.subplots(len(labels), len(strategies), figsize=(4.2 * len(strategies), 3.4 * len(labels)),
