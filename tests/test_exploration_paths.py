@@ -178,3 +178,22 @@ def test_hidden_cells_refreshed_where_the_map_changed_equal_a_full_pass(seed):
         if rng.random() < 0.3:
             outside[rng.integers(state.shape[0]), :] ^= True
         assert np.array_equal(kept(state, outside), pocket_state(state, 4, outside))
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_gains_aimed_at_the_entry_cells_of_unknown_space_count_what_all_rays_count(seed):
+    """Rays aimed only at the unknown cells with a known 4-neighbour (a ray enters unknown space there first) count
+    the same gains and shares as every ray, from points in free and unknown cells and near the grid's edge."""
+    from slam2d.exploration.gridops import _cast, information_gain, shared_gain, unknown_cells
+
+    rng = np.random.default_rng(500 + seed)
+    state = random_map(rng)
+    view = GridView(state, 0.05, (0.0, 0.0))
+    pts = rng.uniform([0.0, 0.0], [state.shape[1] * 0.05, state.shape[0] * 0.05], size=(60, 2))
+    every = _cast(state, pts / 0.05, 120, 60.0, 2, np.zeros((0, 2), dtype=np.int64), False)
+    own, shares = shared_gain(view, pts, 3.0, 120)
+    assert np.array_equal(own, every[0]) and np.array_equal(shares, every[1])
+    free = pts[state[(pts[:, 1] / 0.05).astype(int), (pts[:, 0] / 0.05).astype(int)] == FREE]
+    alone = _cast(state, free / 0.05, 360, 60.0, 1, np.zeros((0, 2), dtype=np.int64), False)[0]
+    assert np.array_equal(information_gain(view, free, 3.0, 360, unknown_cells(view)), alone)
+    assert len(unknown_cells(view)) < (state == UNKNOWN).sum() and alone.max() > 0

@@ -115,7 +115,7 @@ def _ray_start(gx, gy, b, n_rays):
     return int(np.floor(gx)), int(np.floor(gy)), step_c, step_r, inv_x, inv_y, tmx, tmy
 
 
-RAYS_AIMED_BELOW = 8192  # unknown cells: with fewer, each point casts only the rays aimed at one within reach
+RAYS_AIMED_BELOW = 8192  # unknown entry cells: with fewer, each point casts only the rays aimed at one within reach
 
 
 @njit(cache=True)
@@ -211,8 +211,13 @@ def _cast(state, gxy, n_rays, max_t, rounds, unknown, aimed):
 
 
 def unknown_cells(view: GridView) -> np.ndarray:
-    """The UNKNOWN cells (K, 2) (row, col) of ``view``, for :func:`information_gain` called on it many times."""
-    return np.argwhere(view.state == UNKNOWN)
+    """The UNKNOWN cells (K, 2) (row, col) of ``view`` a ray enters unknown space by: those with a 4-neighbour not
+    UNKNOWN (a ray steps from cell to 4-neighbour, so one that reaches an unknown cell from outside the unknown
+    crossed one of these first, nearer); for :func:`information_gain` called on the view many times."""
+    unknown = view.state == UNKNOWN
+    inner = np.pad(unknown, 1, constant_values=True)  # beyond the grid: no entry
+    inner = inner[:-2, 1:-1] & inner[2:, 1:-1] & inner[1:-1, :-2] & inner[1:-1, 2:]
+    return np.argwhere(unknown & ~inner)
 
 
 def _rays(view: GridView, points, max_range: float, rays: int, rounds: int, unknown=None):
@@ -220,7 +225,10 @@ def _rays(view: GridView, points, max_range: float, rays: int, rounds: int, unkn
                                / view.resolution)  # fmt: skip
     state = np.ascontiguousarray(view.state)
     cells = unknown_cells(view) if unknown is None else unknown
-    aimed = len(cells) < RAYS_AIMED_BELOW
+    at = np.floor(gxy).astype(np.int64)[:, ::-1]
+    inside = np.all((at >= 0) & (at < state.shape), axis=1)
+    aimed = len(cells) < RAYS_AIMED_BELOW and not (state[at[inside, 0], at[inside, 1]] == UNKNOWN).any()  # a point
+    # in the unknown sees it through no entry cell: all rays
     if aimed and len(gxy):  # only the cells within the rays' reach of a point can be aimed at
         reach = float(max_range) / view.resolution + 2.0
         lo, hi = gxy.min(axis=0)[::-1] - reach, gxy.max(axis=0)[::-1] + reach
