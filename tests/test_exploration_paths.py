@@ -184,7 +184,12 @@ def test_hidden_cells_refreshed_where_the_map_changed_equal_a_full_pass(seed):
 def test_gains_aimed_at_the_entry_cells_of_unknown_space_count_what_all_rays_count(seed):
     """Rays aimed only at the unknown cells with a known 4-neighbour (a ray enters unknown space there first) count
     the same gains and shares as every ray, from points in free and unknown cells and near the grid's edge."""
-    from slam2d.exploration.gridops import _cast, information_gain, shared_gain, unknown_cells
+    from slam2d.exploration.gridops import (
+        _cast,
+        information_gain,
+        shared_gain,
+        unknown_cells,
+    )
 
     rng = np.random.default_rng(500 + seed)
     state = random_map(rng)
