@@ -30,25 +30,29 @@ from slam2d.exploration.frontiers import (
     frontier_mask,
 )
 from slam2d.exploration.gridops import (
+    FREE,
     OCCUPIED,
     UNKNOWN,
     GridView,
     cells_inside_polygon,
-    geodesic,
     information_gain,
     inside_polygon,
     shared_gain,
     straight_reachable,
-    unknown_in_sight,
 )
 from slam2d.exploration.hybrid import FINAL, HybridMap
-from slam2d.exploration.pockets import opaque_faces, pocket_state, without_outside
+from slam2d.exploration.paths import Paths, path_lengths
+from slam2d.exploration.pockets import (
+    POCKET_RAYS,
+    LocalRefresh,
+    opaque_faces,
+    pocket_goal,
+    pocket_state,
+    without_outside,
+)
 from slam2d.exploration.regret import tour_regret
 from slam2d.segmentation.observations import raycast_grid
 
-POCKET_SPACING = 0.2  # m between the places tried as views of pockets
-POCKET_RAYS = 360  # rays cast from each of them (one a degree, as the laser's beams)
-POCKET_BATCH = 8, 256  # places scored at a time, nearest first: the first batch, doubling up to the last
 WALL_SPAN = 2.0  # m: a wall's unseen stretch (behind furniture) bridged when telling pockets from the outside
 OPTIONS_KEPT = 10  # a utility decision's best options kept with its goal (goals.json)
 OPTION_TERMS = "gain_m2", "share_m2", "path_m", "L_m", "gamma_rad", "F"
@@ -87,10 +91,14 @@ class Explorer:
         self.visited: list[np.ndarray] = []
         self.inaccessible: list[np.ndarray] = []
         self.retired = np.zeros((0, 2))  # (K, 2) m: hidden cells a pocket view reached did not reveal
-        self.decision_seconds: list[float] = []
+        self.decision_seconds: list[float] = []  # wall clock of each decision
+        self.decision_cpu_seconds: list[float] = []  # the deciding thread's CPU time (little moved by other jobs)
         self.fallbacks = self.pocket_goals = self.tight_goals = 0
         self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest view counted on
+        self._hidden_grid = None  # the hidden-cell grid, kept between views
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
+        self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
+        self._gains_of: tuple = (None, None, None, None)  # (pocket grid, its places' gains, hidden cells, frame)
         self.strategy = EXPLORATION_STRATEGIES.create(cfg.strategy, cfg.strategy_options)
         _warm_up(self)
 
@@ -161,7 +169,7 @@ class Explorer:
         so, the radius + the safety margin; then the radius alone, and the goal is ``tight`` (the navigator takes a
         gap that tight as a last resort: the robot may have come in through one, or the map draws a door narrower
         than it is)."""
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         pose = np.asarray(pose, dtype=np.float64)
         keep = self.radius + self.cfg.safety_margin
         goal = self._decide(pose, view, keep + self.inflation)
@@ -173,28 +181,30 @@ class Explorer:
                 goal.tight = True
         self.tight_goals += goal is not None and goal.tight
         self.decision_seconds.append(time.perf_counter() - t0)
+        self.decision_cpu_seconds.append(time.thread_time() - c0)
         return goal
 
     def _decide(self, pose, view: GridView, clearance: float) -> Goal | None:
         """The next goal over paths keeping ``clearance`` m from obstacles."""
-        distance = geodesic(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution)
-        roomy = view.traversable(self.radius + self.cfg.goal_clearance)
-        distance[~roomy] = np.inf  # goals only where the robot has room
+        roomy = view.traversable(self.radius + self.cfg.goal_clearance)  # goals only where the robot has room
+        distance = Paths(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution, allowed=roomy)
         goal = self.strategy.choose(self, pose, view, distance)
         if goal is None and self.cfg.pockets:
-            goal = self._pocket_goal(pose, view, distance)
+            goal = pocket_goal(self, pose, view, distance)
             self.pocket_goals += goal is not None
         return goal
 
-    def frontiers(self, pose, view, distance) -> list:
-        """The frontier regions the robot can reach (``find_frontiers``), away from visited and inaccessible goals."""
+    def frontiers(self, pose, view, distance, nearest: bool = False) -> list:
+        """The frontier regions the robot can reach (``find_frontiers``), away from visited and inaccessible goals;
+        with ``nearest`` only the nearest one's ``path`` is exact (the others' a lower bound above it)."""
         avoid = self.visited + self.inaccessible
         return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
-                              self.cfg.avoid_radius, self.width)  # fmt: skip
+                              self.cfg.avoid_radius, self.width, nearest)  # fmt: skip
 
     def frontier_goal(self, pose, view, distance, cost=None) -> Goal | None:
-        """The goal of the frontier region of lowest ``cost`` (a function of a region; default its path length)."""
-        found = self.frontiers(pose, view, distance)
+        """The goal of the frontier region of lowest ``cost`` (a function of a region; default its path length, and
+        then the path search stops at the nearest region)."""
+        found = self.frontiers(pose, view, distance, nearest=cost is None)
         if not found:
             return None
         cost = [cost(f) for f in found] if cost is not None else [f.path for f in found]
@@ -231,7 +241,12 @@ class Explorer:
         counts as unexplored; rays stopped by gaps between occupied cells narrower than the robot's radius,
         so that the unknown inside furniture or behind a wall seen at a grazing angle keeps no goal open)."""
         if self._hidden_of[0] is not view:
-            state = pocket_state(view.state, int(self.radius / view.resolution), self._outside(view))
+            wall = int(self.radius / view.resolution)
+            if self._hidden_grid is None or self._hidden_grid.wall != wall:  # refreshed where the map changed
+                self._hidden_grid = LocalRefresh(lambda st, *out: pocket_state(st, wall, *out), 2 * wall + 4)
+                self._hidden_grid.wall = wall
+            outside = self._outside(view)
+            state = self._hidden_grid(view.state, *(() if outside is None else (outside,)))
             self._hidden_of = view, GridView(state, view.resolution, view.origin)
         return self._hidden_of[1]
 
@@ -249,7 +264,13 @@ class Explorer:
         """The grid views of pockets are scored on: ``pocket_state`` without the retired targets and the
         cells outside the bounds, then ``opaque_faces`` and ``without_outside``. Stricter than the
         information gain's grid, so that once the frontiers are done the robot neither peels blocks of walls
-        a column at a time nor looks for slivers of the outside."""
+        a column at a time nor looks for slivers of the outside. Kept for the same view (the levels of one
+        decision) until more targets are retired."""
+        if self._pockets_of[0] is not view or self._pockets_of[1] != len(self.retired):
+            self._pockets_of = view, len(self.retired), self._pocket_grid(view)
+        return self._pockets_of[2]
+
+    def _pocket_grid(self, view: GridView) -> np.ndarray:
         retired = self._outside(view)
         retired = np.zeros(view.shape, dtype=bool) if retired is None else retired.copy()
         if len(self.retired):
@@ -260,49 +281,6 @@ class Explorer:
         scored = opaque_faces(scored, view.state, depth_cells(self.width, view.resolution))
         return without_outside(scored, int(WALL_SPAN / view.resolution))
 
-    def _pocket_goal(self, pose, view: GridView, distance) -> Goal | None:
-        """When no frontier (or candidate) is left: the nearest reachable place (sampled every
-        POCKET_SPACING m, and every cell along the edge of the space with room for a goal: the views
-        along walls and furniture; away from visited and inaccessible goals) that sees at least
-        ``pocket_gain`` of hidden cells (``pocket_state``) — pockets whose openings are narrower than a
-        frontier region or touch an obstacle (behind furniture, beside a wall), often seen from a few
-        places only."""
-        state = self._pocket_state(view)
-        if not (state == UNKNOWN).any():
-            return None
-        k = max(1, round(POCKET_SPACING / view.resolution))
-        room = np.isfinite(distance)
-        inner = np.pad(room, 1)
-        inner = inner[:-2, 1:-1] & inner[2:, 1:-1] & inner[1:-1, :-2] & inner[1:-1, 2:]
-        tried = room & ~inner  # the edge of the room: views along walls and furniture
-        tried[::k, ::k] = True
-        rows, cols = np.nonzero(tried & room)
-        if len(rows) == 0:
-            return None
-        order = np.argsort(distance[rows, cols])
-        cells = np.column_stack([rows[order], cols[order]])
-        xy = view.to_world(cells)
-        if self.cfg.bounds is not None:
-            xy = xy[inside_polygon(xy, self.cfg.bounds)]
-        avoid = self.visited + self.inaccessible
-        if avoid:
-            from scipy.spatial import cKDTree
-
-            xy = xy[cKDTree(np.array(avoid)).query(xy)[0] >= self.cfg.avoid_radius]
-        scored = GridView(state, view.resolution, view.origin)
-        floor = self.cfg.pocket_gain / view.resolution**2
-        lo, batch = 0, POCKET_BATCH[0]
-        while lo < len(xy):  # nearest first: most decisions score a few places
-            gain = information_gain(scored, xy[lo : lo + batch], self.cfg.gain_range, POCKET_RAYS)
-            ok = np.nonzero(gain >= floor)[0]
-            if len(ok):
-                goal = xy[lo + ok[0]]
-                seen = unknown_in_sight(scored, goal, self.cfg.gain_range, POCKET_RAYS)
-                targets = view.to_world(np.column_stack(np.nonzero(seen)))
-                return Goal(goal, "pocket", score=float(gain[ok[0]]), targets=targets)
-            lo, batch = lo + batch, min(2 * batch, POCKET_BATCH[1])
-        return None
-
     def _candidate_options(self, view, distance) -> tuple[list[Candidate], np.ndarray, np.ndarray, np.ndarray]:
         """The open candidates the robot can reach: candidates, positions (P, 2) m, grid path lengths (P,) m
         and where to drive (P, 2) m."""
@@ -311,7 +289,7 @@ class Explorer:
         if not live:
             return none
         pts = np.array([c.position for c in live])
-        path, target = _path_lengths(view, distance, pts, self.radius + 0.3)
+        path, target = path_lengths(view, distance, pts, self.radius + 0.3)
         ok = np.isfinite(path)
         if self.visited and ok.any():  # a candidate whose goal is where the robot has been is explored
             near = np.hypot(*(target[:, None, :] - np.array(self.visited)[None]).transpose(2, 0, 1)).min(axis=1)
@@ -439,47 +417,32 @@ _WARM: set = set()  # the strategies whose first decision this process has made
 
 
 def _warm_up(explorer: Explorer) -> None:
-    """One decision of a throwaway explorer of the same strategy on a small room with an opening, the first
-    time a strategy is made in this process: numba's compiled kernels and the strategy's libraries are loaded
-    then, not in the first decision's time."""
+    """Decisions of a throwaway explorer of the same strategy, the first time a strategy is made in this process: on
+    a small room with an opening (a frontier; again once the map changed; the goal checked), then with a pocket
+    behind a wall's gap only: numba's compiled kernels and the strategy's libraries are loaded then, not in the
+    first decisions' time."""
     if explorer.cfg.strategy in _WARM:
         return
     _WARM.add(explorer.cfg.strategy)
     state = np.full((60, 60), UNKNOWN, dtype=np.int8)
-    state[10:50, 10:50] = 0
+    state[10:50, 10:50] = FREE
     state[9, 9:51] = state[50, 9:51] = state[9:51, 9] = state[9:51, 50] = OCCUPIED
-    state[50, 25:35] = 0  # the opening
+    state[50, 20:40] = FREE  # the opening
     throwaway = Explorer(explorer.cfg, explorer.radius, explorer.inflation, explorer.range_max)
-    throwaway.decide(np.array([1.5, 1.5, 0.0]), GridView(state, 0.05, (0.0, 0.0)))
+    pose = np.array([1.5, 1.5, 0.0])
+    for _ in range(2):
+        goal = throwaway.decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+        if goal is not None:
+            throwaway.spent(goal, GridView(state.copy(), 0.05, (0.0, 0.0)))
+        state[51:54, 20:40] = FREE
+    state[50, 20:40] = OCCUPIED
+    state[51:59, 12:48] = OCCUPIED
+    state[52:58, 14:46] = UNKNOWN  # a pocket seen through a gap only
+    state[51, 28:32] = UNKNOWN
+    throwaway.decide(pose, GridView(state, 0.05, (0.0, 0.0)))
 
 
 def _option(goal, candidate: bool, terms) -> dict:
     """One option of a utility decision as goals.json keeps it: where (x, y) m, the kind, and ``OPTION_TERMS``."""
     return {"position": np.round(goal, 3).tolist(), "kind": "candidate" if candidate else "frontier",
             **{key: float(f"{v:.4g}") for key, v in zip(OPTION_TERMS, terms)}}
-
-
-def _path_lengths(view: GridView, distance: np.ndarray, points, reach: float) -> tuple[np.ndarray, np.ndarray]:
-    """Path length (P,) m to each point and where to drive (P, 2) m: the point's cell, else the nearest
-    reachable cell within ``reach`` m (the gap added); inf if none."""
-    cells = view.to_cell(points)
-    inside = view.inside(cells)
-    out = np.full(len(points), np.inf)
-    target = np.array(points, dtype=np.float64).reshape(-1, 2)
-    k = int(np.ceil(reach / view.resolution))
-    h, w = view.shape
-    for i in np.nonzero(inside)[0]:
-        r, c = cells[i]
-        if np.isfinite(distance[r, c]):
-            out[i] = distance[r, c]
-            continue
-        r0, r1, c0, c1 = max(r - k, 0), min(r + k + 1, h), max(c - k, 0), min(c + k + 1, w)
-        win = distance[r0:r1, c0:c1]
-        rr, cc = np.nonzero(np.isfinite(win))
-        if len(rr):
-            gap = np.hypot(rr + r0 - r, cc + c0 - c) * view.resolution
-            j = int(np.argmin(gap))
-            if gap[j] <= reach:
-                out[i] = win[rr[j], cc[j]] + gap[j]
-                target[i] = view.to_world(np.array([rr[j] + r0, cc[j] + c0]))
-    return out, target

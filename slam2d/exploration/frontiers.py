@@ -15,8 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, inside_polygon
+from slam2d.exploration.paths import as_paths
 
 WALL_GAP = 2  # cells: frontier cells this close to an occupied cell are left out
 
@@ -164,16 +166,18 @@ def _label8(mask):
     return cells, label, n
 
 
-def find_frontiers(view: GridView, robot_xy, distance: np.ndarray, min_size: float, reach: float,
-                   polygon=None, avoid=(), avoid_radius: float = 0.5, depth: float = 0.0) -> list[Frontier]:  # fmt: skip
+def find_frontiers(view: GridView, robot_xy, distance, min_size: float, reach: float, polygon=None, avoid=(),
+                   avoid_radius: float = 0.5, depth: float = 0.0, nearest: bool = False) -> list[Frontier]:
     """Reachable frontier regions of ``view``.
 
-    ``distance`` (H, W) m: path length from the robot over traversable cells (inf: unreachable);
-    ``min_size`` m: shortest region (cells × resolution); ``reach`` m: how far from the region a
-    goal cell may lie; ``polygon`` (K, 2) m: frontier cells outside are ignored; goals within
-    ``avoid_radius`` of an ``avoid`` point (visited, inaccessible) are left out; ``depth`` m: how deep
-    the unknown must run on from a frontier cell (``frontier_mask``).
+    ``distance``: path lengths from the robot over traversable cells, a :class:`~slam2d.exploration.paths.Paths`
+    or an (H, W) array m (inf: unreachable); ``min_size`` m: shortest region (cells × resolution); ``reach`` m:
+    how far from the region a goal cell may lie; ``polygon`` (K, 2) m: frontier cells outside are ignored; goals
+    within ``avoid_radius`` of an ``avoid`` point (visited, inaccessible) are left out; ``depth`` m: how deep
+    the unknown must run on from a frontier cell (``frontier_mask``); ``nearest``: only the nearest region's
+    ``path`` need be exact (the others' may be a lower bound above it: the search stops there).
     """
+    paths = as_paths(distance)
     mask = frontier_mask(view.state, depth=depth_cells(depth, view.resolution))
     if polygon is not None:
         rows, cols = np.nonzero(mask)
@@ -182,39 +186,44 @@ def find_frontiers(view: GridView, robot_xy, distance: np.ndarray, min_size: flo
     min_cells = max(1, int(np.ceil(min_size / view.resolution)))
     avoid = np.asarray(avoid, dtype=np.float64).reshape(-1, 2)
     robot_xy = np.asarray(robot_xy, dtype=np.float64)[:2]
-    out = []
+    kept = []
     for cells in frontier_regions(mask, min_cells):
-        goal_cell = _goal_cell(cells, distance, reach / view.resolution)
+        goal_cell = _goal_cell(cells, paths.reach, reach / view.resolution)
         if goal_cell is None:
             continue
         goal = view.to_world(goal_cell)
         if len(avoid) and np.hypot(*(avoid - goal).T).min() < avoid_radius:
             continue
+        kept.append((cells, goal_cell, goal))
+    if not kept:
+        return []
+    path = paths.lengths(np.array([g for _, g, _ in kept]), nearest=nearest)
+    out = []
+    for (cells, _, goal), p in zip(kept, path):
         xy = view.to_world(cells)
-        out.append(Frontier(cells, xy.mean(axis=0), goal, len(cells), float(distance[goal_cell[0], goal_cell[1]]),
+        out.append(Frontier(cells, xy.mean(axis=0), goal, len(cells), float(p),
                             float(np.hypot(*(xy - robot_xy).T).min())))  # fmt: skip
     return out
 
 
-def _goal_cell(cells: np.ndarray, distance: np.ndarray, reach_cells: float):
-    """The reachable cell nearest the region's centre: among its own cells, else among cells
+def _goal_cell(cells: np.ndarray, reachable: np.ndarray, reach_cells: float):
+    """The ``reachable`` (H, W) cell nearest the region's centre: among its own cells, else among cells
     within ``reach_cells`` of them; None if none is reachable."""
     centre = cells.mean(axis=0)
-    d = distance[cells[:, 0], cells[:, 1]]
-    if np.isfinite(d).any():
-        own = cells[np.isfinite(d)]
+    ok = reachable[cells[:, 0], cells[:, 1]]
+    if ok.any():
+        own = cells[ok]
         return own[np.argmin(np.hypot(*(own - centre).T))]
     k = int(np.ceil(reach_cells))
     lo = np.maximum(cells.min(axis=0) - k, 0)
-    hi = np.minimum(cells.max(axis=0) + k + 1, distance.shape)
-    window = np.isfinite(distance[lo[0] : hi[0], lo[1] : hi[1]])
-    if not window.any():
-        return None
-    seed = np.zeros(window.shape, dtype=bool)
+    hi = np.minimum(cells.max(axis=0) + k + 1, reachable.shape)
+    seed = np.zeros(tuple(hi - lo), dtype=bool)
     seed[cells[:, 0] - lo[0], cells[:, 1] - lo[1]] = True
-    near = ndimage.distance_transform_edt(~seed) <= reach_cells
-    rows, cols = np.nonzero(window & near)
-    if len(rows) == 0:
+    box = ndimage.maximum_filter(seed, size=2 * k + 1, mode="constant")  # within k cells on both axes
+    found = np.argwhere(box & reachable[lo[0] : hi[0], lo[1] : hi[1]]) + lo  # raster order
+    if len(found) == 0:
         return None
-    found = np.column_stack([rows, cols]) + lo
+    found = found[cKDTree(cells).query(found, distance_upper_bound=reach_cells + 1)[0] <= reach_cells]
+    if len(found) == 0:
+        return None
     return found[np.argmin(np.hypot(*(found - centre).T))]

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from slam2d.exploration.paths import Paths
 from slam2d.planning.grid import PlanningGrid, refresh_clearance
 from slam2d.segmentation.observations import dda_start, dda_step, raycast_grid
 
@@ -95,75 +96,12 @@ class LiveClearance:
 # --------------------------------------------------------------------------- geodesic distance
 
 
-@njit(cache=True)
-def _dijkstra(passable, r0, c0, out):
-    """Dijkstra with a bucket queue one cell wide (Dial): every step is at least one cell long, so the cells
-    of a bucket are final when it is reached, in any order; three buckets in turn hold all pending ones."""
-    h, w = passable.shape
-    done = np.zeros(h * w, dtype=np.bool_)
-    queue = np.empty((3, 4096), dtype=np.int64)
-    sizes = np.zeros(3, dtype=np.int64)
-    out[r0, c0] = 0.0
-    queue[0, 0] = r0 * w + c0
-    sizes[0] = 1
-    k = 0
-    while sizes.sum() > 0:
-        b = k % 3
-        for i in range(sizes[b]):
-            v = queue[b, i]
-            if done[v]:
-                continue
-            done[v] = True
-            r, c = v // w, v % w
-            for dr in range(-1, 2):
-                for dc in range(-1, 2):
-                    if dr == 0 and dc == 0:
-                        continue
-                    rr, cc = r + dr, c + dc
-                    if rr < 0 or cc < 0 or rr >= h or cc >= w or not passable[rr, cc]:
-                        continue
-                    if dr != 0 and dc != 0 and not (passable[r + dr, c] and passable[r, c + dc]):
-                        continue
-                    nd = out[r, c] + (1.4142135623730951 if dr != 0 and dc != 0 else 1.0)
-                    if nd < out[rr, cc]:
-                        out[rr, cc] = nd
-                        nb = int(nd) % 3
-                        if sizes[nb] == queue.shape[1]:
-                            grown = np.empty((3, 2 * queue.shape[1]), dtype=np.int64)
-                            grown[:, : queue.shape[1]] = queue
-                            queue = grown
-                        queue[nb, sizes[nb]] = rr * w + cc
-                        sizes[nb] += 1
-        sizes[b] = 0
-        k += 1
-
-
 def geodesic(passable: np.ndarray, start_cell, resolution: float, snap_cells: int = 10) -> np.ndarray:
     """Shortest 8-connected path length (m) from ``start_cell`` to every cell over ``passable`` (H, W)
     (no corner cutting); inf where unreachable. A start outside ``passable`` is moved to the nearest
-    passable cell within ``snap_cells`` (the rest of that distance added)."""
-    passable = np.ascontiguousarray(passable, dtype=np.bool_)
-    out = np.full(passable.shape, np.inf)
-    start = _snap(passable, np.asarray(start_cell, dtype=np.int64), snap_cells)
-    if start is None:
-        return out
-    cell, extra = start
-    _dijkstra(passable, int(cell[0]), int(cell[1]), out)
-    out += extra
-    out *= resolution
-    return out
-
-
-def _snap(passable, cell, within: int):
-    h, w = passable.shape
-    r0, r1 = max(cell[0] - within, 0), min(cell[0] + within + 1, h)
-    c0, c1 = max(cell[1] - within, 0), min(cell[1] + within + 1, w)
-    rows, cols = np.nonzero(passable[r0:r1, c0:c1])
-    if len(rows) == 0:
-        return None
-    d = np.hypot(rows + r0 - cell[0], cols + c0 - cell[1])
-    k = int(np.argmin(d))
-    return np.array([rows[k] + r0, cols[k] + c0]), float(d[k])
+    passable cell within ``snap_cells`` (the rest of that distance added). :class:`~slam2d.exploration.paths.Paths`
+    computes only as far as asked."""
+    return Paths(passable, start_cell, resolution, snap_cells).dense()
 
 
 # --------------------------------------------------------------------------- information gain
@@ -177,7 +115,7 @@ def _ray_start(gx, gy, b, n_rays):
     return int(np.floor(gx)), int(np.floor(gy)), step_c, step_r, inv_x, inv_y, tmx, tmy
 
 
-RAYS_AIMED_BELOW = 8192  # unknown cells: with fewer, each point casts only the rays aimed at one within reach
+RAYS_AIMED_BELOW = 8192  # unknown entry cells: with fewer, each point casts only the rays aimed at one within reach
 
 
 @njit(cache=True)
@@ -272,20 +210,38 @@ def _cast(state, gxy, n_rays, max_t, rounds, unknown, aimed):
     return own, shares, mark
 
 
-def _rays(view: GridView, points, max_range: float, rays: int, rounds: int):
+def unknown_cells(view: GridView) -> np.ndarray:
+    """The UNKNOWN cells (K, 2) (row, col) of ``view`` a ray enters unknown space by: those with a 4-neighbour not
+    UNKNOWN (a ray steps from cell to 4-neighbour, so one that reaches an unknown cell from outside the unknown
+    crossed one of these first, nearer); for :func:`information_gain` called on the view many times."""
+    unknown = view.state == UNKNOWN
+    inner = np.pad(unknown, 1, constant_values=True)  # beyond the grid: no entry
+    inner = inner[:-2, 1:-1] & inner[2:, 1:-1] & inner[1:-1, :-2] & inner[1:-1, 2:]
+    return np.argwhere(unknown & ~inner)
+
+
+def _rays(view: GridView, points, max_range: float, rays: int, rounds: int, unknown=None):
     gxy = np.ascontiguousarray((np.asarray(points, dtype=np.float64).reshape(-1, 2) - np.asarray(view.origin))
                                / view.resolution)  # fmt: skip
     state = np.ascontiguousarray(view.state)
-    unknown = state == UNKNOWN
-    aimed = np.count_nonzero(unknown) < RAYS_AIMED_BELOW
-    cells = np.ascontiguousarray(np.argwhere(unknown) if aimed else np.zeros((0, 2), dtype=np.int64))
+    cells = unknown_cells(view) if unknown is None else unknown
+    at = np.floor(gxy).astype(np.int64)[:, ::-1]
+    inside = np.all((at >= 0) & (at < state.shape), axis=1)
+    aimed = len(cells) < RAYS_AIMED_BELOW and not (state[at[inside, 0], at[inside, 1]] == UNKNOWN).any()  # a point
+    # in the unknown sees it through no entry cell: all rays
+    if aimed and len(gxy):  # only the cells within the rays' reach of a point can be aimed at
+        reach = float(max_range) / view.resolution + 2.0
+        lo, hi = gxy.min(axis=0)[::-1] - reach, gxy.max(axis=0)[::-1] + reach
+        cells = cells[np.all((cells >= lo) & (cells <= hi), axis=1)]
+    cells = np.ascontiguousarray(cells if aimed else np.zeros((0, 2)), dtype=np.int64)
     return _cast(state, gxy, int(rays), float(max_range) / view.resolution, rounds, cells, aimed)
 
 
-def information_gain(view: GridView, points, max_range: float, rays: int = 180) -> np.ndarray:
+def information_gain(view: GridView, points, max_range: float, rays: int = 180, unknown=None) -> np.ndarray:
     """Unknown cells (P,) visible from each point (P, 2) m within ``max_range`` m: ``rays`` rays cast
-    (Amanatides–Woo) through free and unknown cells until an occupied one."""
-    return _rays(view, points, max_range, rays, 1)[0]
+    (Amanatides–Woo) through free and unknown cells until an occupied one; ``unknown``: the view's
+    ``unknown_cells`` if already known."""
+    return _rays(view, points, max_range, rays, 1, unknown)[0]
 
 
 def shared_gain(view: GridView, points, max_range: float, rays: int = 180) -> tuple[np.ndarray, np.ndarray]:
@@ -298,6 +254,22 @@ def shared_gain(view: GridView, points, max_range: float, rays: int = 180) -> tu
 def unknown_in_sight(view: GridView, point, max_range: float, rays: int = 180) -> np.ndarray:
     """The unknown cells (H, W) bool that :func:`information_gain` counts for one point (x, y) m."""
     return _rays(view, point, max_range, rays, 1)[2] == 1
+
+
+def in_ray_reach(view: GridView, xy, max_range: float) -> np.ndarray:
+    """Which points (P, 2) m have an UNKNOWN cell of ``view`` or the grid's edge (beyond it counts as unknown)
+    within ``max_range`` m and a cell and a half, all that a ray cast from there may count (P,) bool."""
+    from scipy.spatial import cKDTree
+
+    g = (np.asarray(xy, dtype=np.float64).reshape(-1, 2) - np.asarray(view.origin)) / view.resolution  # (col, row)
+    bound = max_range / view.resolution + 1.5
+    h, w = view.shape
+    out = (g.min(axis=1) < bound) | (g[:, 0] > w - bound) | (g[:, 1] > h - bound)
+    unknown = np.argwhere(view.state == UNKNOWN)[:, ::-1] + 0.5  # cell centres (col, row)
+    if len(unknown) and not out.all():
+        d, _ = cKDTree(unknown).query(g[~out], distance_upper_bound=bound)
+        out[~out] = np.isfinite(d)
+    return out
 
 
 # --------------------------------------------------------------------------- straight-line reachability

@@ -332,6 +332,7 @@ def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, colli
     t90, d90 = at_coverage(curve, 0.90)
     t99, d99 = at_coverage(curve, 0.99)
     dec = np.array(ex.decision_seconds) * 1000 if ex.decision_seconds else np.array([np.nan])
+    cpu = np.array(ex.decision_cpu_seconds) * 1000 if ex.decision_cpu_seconds else np.array([np.nan])
     sim_time = float(curve[-1, 0])
     outcomes = [g["outcome"] for g in run.goals]
     return {
@@ -350,7 +351,8 @@ def _metrics(run: ExplorationRun, loop: _Loop, cover: Coverage, stop: str, colli
         "ate_rmse": ate(run.estimate, run.truth, align=False)["rmse"],
         **_pose_error(run),
         "decisions": len(ex.decision_seconds), "decision_ms_median": float(np.median(dec)),
-        "decision_ms_p95": float(np.percentile(dec, 95)),
+        "decision_ms_p95": float(np.percentile(dec, 95)), "decision_cpu_ms_median": float(np.median(cpu)),
+        "decision_cpu_ms_p95": float(np.percentile(cpu, 95)),
         **ex.hybrid.counts(),
         "reachable_area_m2": float(loop.reachable.sum() * loop.truth_frame.resolution**2),
         "wall_s": wall, "real_time_factor": sim_time / wall if wall > 0 else float("nan"),

@@ -9,9 +9,24 @@ import numpy as np
 from numba import njit
 
 from slam2d.exploration.frontiers import shallow_entries
-from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN
+from slam2d.exploration.gridops import (
+    FREE,
+    OCCUPIED,
+    UNKNOWN,
+    GridView,
+    in_ray_reach,
+    information_gain,
+    inside_polygon,
+    unknown_cells,
+    unknown_in_sight,
+)
+from slam2d.exploration.paths import as_paths
 
-__all__ = ["pocket_state", "without_outside", "opaque_faces"]
+__all__ = ["LocalRefresh", "opaque_faces", "pocket_goal", "pocket_state", "without_outside"]
+
+POCKET_SPACING = 0.2  # m between the places tried as views of pockets
+POCKET_RAYS = 360  # rays cast from each of them (one a degree, as the laser's beams)
+POCKET_BATCH = 8, 256  # places scored at a time, nearest first: the first batch, doubling up to the last
 
 
 def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None = None) -> np.ndarray:
@@ -116,3 +131,109 @@ def _window_any(mask, before, after, outside, axis):
             if c + after + 1 < w:
                 count += mask[r, c + after + 1]
     return out
+
+
+class LocalRefresh:
+    """``fn`` of (H, W) grids whose every output cell depends only on the inputs within ``radius`` cells of it (and
+    on the grid's edge), kept between calls: where the inputs changed since the last call (of the same shape), it is
+    recomputed in a box round the changes only, on a window reaching ``radius`` beyond it; the same result as
+    ``fn`` on the whole grid."""
+
+    def __init__(self, fn, radius: int):
+        self.fn, self.radius = fn, int(radius)
+        self._inputs = self._out = None
+
+    def __call__(self, *grids) -> np.ndarray:
+        grids = tuple(np.asarray(g) for g in grids)
+        last = self._inputs
+        if last is None or any(a.shape != b.shape for a, b in zip(last, grids)):
+            self._out = self.fn(*grids)
+        else:
+            changed = np.zeros(grids[0].shape, dtype=bool)
+            for a, b in zip(last, grids):
+                changed |= a != b
+            if changed.any():
+                rows, cols = np.nonzero(changed.any(axis=1))[0], np.nonzero(changed.any(axis=0))[0]
+                lo, hi = np.array([rows[0], cols[0]]), np.array([rows[-1], cols[-1]]) + 1
+                shape = np.array(changed.shape)
+                inner_lo, inner_hi = np.maximum(lo - self.radius, 0), np.minimum(hi + self.radius, shape)
+                win_lo, win_hi = np.maximum(lo - 2 * self.radius, 0), np.minimum(hi + 2 * self.radius, shape)
+                part = self.fn(*(g[win_lo[0] : win_hi[0], win_lo[1] : win_hi[1]] for g in grids))
+                a, b = inner_lo - win_lo, inner_hi - win_lo
+                self._out[inner_lo[0] : inner_hi[0], inner_lo[1] : inner_hi[1]] = part[a[0] : b[0], a[1] : b[1]]
+        self._inputs = tuple(g.copy() for g in grids)
+        return self._out.copy()
+
+
+def pocket_goal(explorer, pose, view: GridView, distance):
+    """When no frontier (or candidate) is left: the nearest reachable place (sampled every
+    POCKET_SPACING m, and every cell along the edge of the space with room for a goal: the views
+    along walls and furniture; away from visited and inaccessible goals) that sees at least
+    ``pocket_gain`` of hidden cells (``pocket_state``) — pockets whose openings are narrower than a
+    frontier region or touch an obstacle (behind furniture, beside a wall), often seen from a few
+    places only."""
+    state = explorer._pocket_state(view)
+    if not (state == UNKNOWN).any():
+        return None
+    distance = as_paths(distance)
+    k = max(1, round(POCKET_SPACING / view.resolution))
+    room = distance.reach
+    inner = np.pad(room, 1)
+    inner = inner[:-2, 1:-1] & inner[2:, 1:-1] & inner[1:-1, :-2] & inner[1:-1, 2:]
+    tried = room & ~inner  # the edge of the room: views along walls and furniture
+    tried[::k, ::k] = True
+    cells = np.argwhere(tried & room)
+    xy = view.to_world(cells)
+    keep = np.ones(len(xy), dtype=bool)
+    if explorer.cfg.bounds is not None:
+        keep &= inside_polygon(xy, explorer.cfg.bounds)
+    avoid = explorer.visited + explorer.inaccessible
+    if avoid:
+        from scipy.spatial import cKDTree
+
+        keep &= cKDTree(np.array(avoid)).query(xy)[0] >= explorer.cfg.avoid_radius
+    scored = GridView(state, view.resolution, view.origin)
+    floor = explorer.cfg.pocket_gain / view.resolution**2
+    if floor > 0:  # a place with no hidden cell within the rays' reach sees none: not scored
+        keep[keep] = in_ray_reach(scored, xy[keep], explorer.cfg.gain_range)
+    cells, xy = cells[keep], xy[keep]
+    order = np.argsort(distance.lengths(cells), kind="stable")  # lengths only of the places scored
+    cells, xy = cells[order], xy[order]
+    gains, unknown = _gains(explorer, view, state)
+    flat = cells[:, 0] * view.shape[1] + cells[:, 1]
+    lo, batch = 0, POCKET_BATCH[0]
+    while lo < len(xy):  # nearest first: most decisions score a few places
+        here = flat[lo : lo + batch]
+        new = np.isnan(gains[here])  # each place scored once a pocket grid (the levels of a decision)
+        if new.any():
+            gains[here[new]] = information_gain(scored, xy[lo : lo + batch][new], explorer.cfg.gain_range,
+                                                POCKET_RAYS, unknown)  # fmt: skip
+        ok = np.nonzero(gains[here] >= floor)[0]
+        if len(ok):
+            goal = xy[lo + ok[0]]
+            seen = unknown_in_sight(scored, goal, explorer.cfg.gain_range, POCKET_RAYS)
+            targets = view.to_world(np.column_stack(np.nonzero(seen)))
+            from slam2d.exploration.explorer import Goal
+
+            return Goal(goal, "pocket", score=float(gains[here[ok[0]]]), targets=targets)
+        lo, batch = lo + batch, min(2 * batch, POCKET_BATCH[1])
+    return None
+
+def _gains(explorer, view: GridView, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The gains (H·W,) of the places scored on the pocket grid ``state`` (NaN: not yet), and its hidden cells
+    (K, 2). A place keeps its gain from the last pocket grid of the same frame unless a cell within the rays'
+    reach of it changed since (a place sees nothing farther): a box round the cells that changed is scored
+    anew, the rest of the building is not."""
+    frame = view.shape, view.resolution, tuple(np.asarray(view.origin, dtype=float))
+    last, gains, _, last_frame = explorer._gains_of
+    if last is not state:
+        if last is None or last_frame != frame:
+            gains = np.full(state.size, np.nan)
+        else:
+            changed = np.argwhere(last != state)
+            if len(changed):
+                m = int(np.ceil(explorer.cfg.gain_range / view.resolution)) + 2
+                lo, hi = np.maximum(changed.min(axis=0) - m, 0), changed.max(axis=0) + m + 1
+                gains.reshape(state.shape)[lo[0] : hi[0], lo[1] : hi[1]] = np.nan
+        explorer._gains_of = state, gains, unknown_cells(GridView(state, 1.0, (0.0, 0.0))), frame
+    return explorer._gains_of[1], explorer._gains_of[2]

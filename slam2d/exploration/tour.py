@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from slam2d.exploration.gridops import FREE, geodesic
+from slam2d.exploration.paths import as_paths
 
 SCALE = 100  # the solver's integer costs: cm
 COARSE = 0.2  # m: cell of the coarse grid the travel costs between subspaces are measured on
@@ -257,8 +258,8 @@ class TourPlanner:
         step = max(1, round(cfg.spacing / res))
         lo = np.maximum(cells.min(axis=0) - int(reach), 0)
         hi = np.minimum(cells.max(axis=0) + int(reach) + 1, view.shape)
-        win = distance[lo[0] : hi[0] : step, lo[1] : hi[1] : step]
-        rows, cols = np.nonzero(np.isfinite(win))
+        distance = as_paths(distance)
+        rows, cols = np.nonzero(distance.reach[lo[0] : hi[0] : step, lo[1] : hi[1] : step])
         if len(rows) == 0:
             return None, None
         cand = np.column_stack([rows, cols]) * step + lo
@@ -270,7 +271,7 @@ class TourPlanner:
         if len(cand) == 0:
             return None, None
         sees = coverage_matrix(view.state, cand, cells, reach)
-        path = distance[cand[:, 0], cand[:, 1]]
+        path = distance.lengths(cand)
         chosen = greedy_cover(sees, path, int(np.ceil(cfg.min_cover / res)))
         if not chosen:
             return None, None
@@ -295,16 +296,20 @@ def _subspaces(view, found, cell: float, distance: np.ndarray):
     ij = np.floor(view.to_world(cells) / cell).astype(np.int64)
     keys, inv = np.unique(ij, axis=0, return_inverse=True)
     inv = inv.ravel()
-    goals, paths, members = np.empty((len(keys), 2)), np.empty(len(keys)), []
+    distance = as_paths(distance)
+    goals, paths, members, ends = np.empty((len(keys), 2)), np.empty(len(keys)), [], []
     for k in range(len(keys)):
         mine = cells[inv == k]
-        d = distance[mine[:, 0], mine[:, 1]]
-        if np.isfinite(d).any():
-            own = mine[np.isfinite(d)]
+        ok = distance.reach[mine[:, 0], mine[:, 1]]
+        if ok.any():
+            own = mine[ok]
             best = own[np.argmin(np.hypot(*(own - mine.mean(axis=0)).T))]
-            goals[k], paths[k] = view.to_world(best), distance[best[0], best[1]]
+            goals[k] = view.to_world(best)
+            ends.append((k, best))
         else:
             f = found[int(np.argmax(np.bincount(region[inv == k], minlength=len(found))))]
             goals[k], paths[k] = f.goal, f.path
         members.append(mine)
+    if ends:
+        paths[[k for k, _ in ends]] = distance.lengths(np.array([b for _, b in ends]))
     return [tuple(int(v) for v in key) for key in keys], goals, paths, members

@@ -1,0 +1,237 @@
+"""Geodesic distances from the robot, settled only as far as a decision asks (:class:`Paths`).
+
+Which cells the robot can reach is one breadth-first pass over its 4-connected component (a diagonal step
+never cuts a corner, so the 8-connected paths reach the same cells). The distances are Dijkstra's with a
+bucket queue one cell wide (Dial): every step is at least one cell long, so once the buckets below k are
+done every cell nearer than k cells is final. The search is resumed, not restarted, when more is asked:
+the nearest of some cells needs the buckets up to the nearest one's only; all of them, up to the farthest;
+the whole grid only for :meth:`Paths.dense`. The values are those of a full search to the last bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["Paths", "as_paths", "path_lengths"]
+
+RUN_ALL, RUN_UNTIL_ALL, RUN_UNTIL_ANY = 0, 1, 2  # how far :func:`_dial` runs
+
+
+@njit(cache=True)
+def _reach(flat, h, w, start, out):
+    """Mark ``out`` (H·W,) the cells 4-connected to ``start`` over ``flat`` (H·W,) bool (breadth first)."""
+    queue = np.empty(h * w, dtype=np.int32)
+    out[start] = True
+    queue[0], head, tail = start, 0, 1
+    while head < tail:
+        v = queue[head]
+        head += 1
+        r, c = v // w, v % w
+        if r > 0 and flat[v - w] and not out[v - w]:
+            out[v - w], queue[tail], tail = True, v - w, tail + 1
+        if r < h - 1 and flat[v + w] and not out[v + w]:
+            out[v + w], queue[tail], tail = True, v + w, tail + 1
+        if c > 0 and flat[v - 1] and not out[v - 1]:
+            out[v - 1], queue[tail], tail = True, v - 1, tail + 1
+        if c < w - 1 and flat[v + 1] and not out[v + 1]:
+            out[v + 1], queue[tail], tail = True, v + 1, tail + 1
+
+
+@njit(cache=True)
+def _dial(flat, h, w, dist, queue, sizes, k, target, left, mode):
+    """Process buckets from ``k`` (cells nearer than k are final) of the search held in ``dist`` (H·W,) cells,
+    ``queue`` (3, cap) of three buckets in turn with their ``sizes`` (a cell is queued in the bucket of
+    its tentative length). ``target`` (H·W,) bool marks cells asked for, ``left`` of them not yet final. ``mode``: to the end
+    (RUN_ALL), until no target is left (RUN_UNTIL_ALL) or one is final (RUN_UNTIL_ANY); a bucket is always
+    finished. Returns (k, left)."""
+    diag = 1.4142135623730951
+    start_left = left
+    while sizes[0] + sizes[1] + sizes[2] > 0:
+        if (mode == RUN_UNTIL_ALL and left == 0) or (mode == RUN_UNTIL_ANY and left < start_left):
+            break
+        b = k % 3
+        for i in range(sizes[b]):
+            v = queue[b, i]
+            d = dist[v]
+            if int(d) != k:  # queued before a shorter way put it in a lower bucket: done already
+                continue
+            if target[v]:
+                left -= 1
+            r, c = v // w, v % w
+            up, dn = r > 0 and flat[v - w], r < h - 1 and flat[v + w]
+            lf, rt = c > 0 and flat[v - 1], c < w - 1 and flat[v + 1]
+            for j in range(8):
+                if j == 0:
+                    ok, u, nd = up, v - w, d + 1.0
+                elif j == 1:
+                    ok, u, nd = dn, v + w, d + 1.0
+                elif j == 2:
+                    ok, u, nd = lf, v - 1, d + 1.0
+                elif j == 3:
+                    ok, u, nd = rt, v + 1, d + 1.0
+                elif j == 4:
+                    ok, u, nd = up and lf and flat[v - w - 1], v - w - 1, d + diag
+                elif j == 5:
+                    ok, u, nd = up and rt and flat[v - w + 1], v - w + 1, d + diag
+                elif j == 6:
+                    ok, u, nd = dn and lf and flat[v + w - 1], v + w - 1, d + diag
+                else:
+                    ok, u, nd = dn and rt and flat[v + w + 1], v + w + 1, d + diag
+                if ok and nd < dist[u]:
+                    old, dist[u] = dist[u], nd
+                    nb = int(nd)
+                    if old == np.inf or int(old) != nb:  # else queued in that bucket already: each cell once a bucket
+                        queue[nb % 3, sizes[nb % 3]] = u
+                        sizes[nb % 3] += 1
+        sizes[b] = 0
+        k += 1
+    return k, left
+
+
+class Paths:
+    """Shortest 8-connected path lengths (m) from ``start_cell`` over ``passable`` (H, W) bool, no corner
+    cutting, computed as far as asked. A start outside ``passable`` is moved to the nearest passable cell
+    within ``snap_cells`` (the rest of that distance added). ``allowed`` (H, W) bool: the cells a length is
+    reported for (others inf, as unreachable), e.g. those with room for a goal; paths still cross the rest.
+
+    ``reach`` (H, W) bool: the allowed cells the robot can reach. ``lengths(cells)``: their lengths, settled
+    to the farthest (or with ``nearest``, to the nearest one: the others then a lower bound). ``dense()``: the
+    whole (H, W) array (also what ``np.asarray`` and indexing give)."""
+
+    def __init__(self, passable, start_cell, resolution: float, snap_cells: int = 10, allowed=None):
+        self._flat = np.ascontiguousarray(passable, dtype=np.bool_).ravel()
+        self.shape = np.shape(passable)
+        self.resolution = float(resolution)
+        h, w = self.shape
+        self._dist = np.full(h * w, np.inf)
+        seen = np.zeros(h * w, dtype=np.bool_)
+        start = _snap(self._flat.reshape(self.shape), np.asarray(start_cell, dtype=np.int64), snap_cells)
+        self._extra, self._k, self._left = 0.0, 0, 0
+        self._sizes = np.zeros(3, dtype=np.int64)
+        if start is not None:
+            cell, self._extra = start
+            s = int(cell[0]) * w + int(cell[1])
+            _reach(self._flat, h, w, s, seen)
+            self._dist[s] = 0.0
+            self._queue = np.empty((3, int(np.count_nonzero(seen)) + 1), dtype=np.int32)
+            self._queue[0, 0], self._sizes[0] = s, 1
+        seen = seen.reshape(self.shape)
+        self.reach = seen if allowed is None else seen & np.asarray(allowed, dtype=bool)
+        self._target = np.zeros(h * w, dtype=np.bool_)
+
+    def _run(self, mode: int) -> None:
+        if self._sizes.sum():
+            h, w = self.shape
+            self._k, self._left = _dial(self._flat, h, w, self._dist, self._queue, self._sizes, self._k,
+                                        self._target, self._left, mode)  # fmt: skip
+
+    def _metres(self, cells_dist) -> np.ndarray:
+        out = np.asarray(cells_dist, dtype=np.float64) + self._extra  # as a full search: (cells + snap) · resolution
+        out *= self.resolution
+        return out
+
+    def lengths(self, cells, nearest: bool = False) -> np.ndarray:
+        """Path lengths (K,) m to ``cells`` (K, 2) (row, col); inf where out of ``reach``. With ``nearest``, the
+        search stops once the nearest of them is final: every cell no farther than it is exact, the others
+        hold a lower bound (larger than the nearest's length)."""
+        cells = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+        h, w = self.shape
+        ok = (cells[:, 0] >= 0) & (cells[:, 0] < h) & (cells[:, 1] >= 0) & (cells[:, 1] < w)
+        ok[ok] = self.reach[cells[ok, 0], cells[ok, 1]]
+        flat = cells[ok, 0] * w + cells[ok, 1]
+        out = np.full(len(cells), np.inf)
+        pending = flat[self._dist[flat] >= self._k]  # not final yet
+        if len(pending):
+            self._target[:] = False
+            self._target[pending] = True
+            self._left = int(np.count_nonzero(self._target))
+            self._run(RUN_UNTIL_ANY if nearest else RUN_UNTIL_ALL)
+        d = self._dist[flat]
+        out[ok] = self._metres(np.where(d < self._k, d, self._k))  # beyond the buckets done: the lower bound
+        return out
+
+    def dense(self) -> np.ndarray:
+        """The path length (H, W) m to every cell, inf out of ``reach``."""
+        self._target[:] = False
+        self._left = 0
+        self._run(RUN_ALL)
+        out = self._metres(self._dist).reshape(self.shape)
+        out[~self.reach] = np.inf
+        return out
+
+    def __array__(self, dtype=None, copy=None):
+        out = self.dense()
+        return out if dtype is None else out.astype(dtype)
+
+    def __getitem__(self, index):
+        return self.dense()[index]
+
+
+class _Dense:
+    """:class:`Paths`' interface over an array of path lengths (H, W) m computed elsewhere."""
+
+    def __init__(self, distance):
+        self._d = np.asarray(distance, dtype=np.float64)
+        self.shape, self.reach = self._d.shape, np.isfinite(self._d)
+
+    def lengths(self, cells, nearest: bool = False) -> np.ndarray:
+        cells = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+        return self._d[cells[:, 0], cells[:, 1]]
+
+    def dense(self) -> np.ndarray:
+        return self._d
+
+    def __array__(self, dtype=None, copy=None):
+        return self._d if dtype is None else self._d.astype(dtype)
+
+    def __getitem__(self, index):
+        return self._d[index]
+
+
+def as_paths(distance):
+    """``distance`` as :class:`Paths` (a Paths is returned as it is; an (H, W) array of lengths is wrapped)."""
+    return distance if isinstance(distance, (Paths, _Dense)) else _Dense(distance)
+
+
+def path_lengths(view, distance, points, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """Path length (P,) m to each point and where to drive (P, 2) m: the point's cell, else the nearest
+    reachable cell within ``reach`` m (the gap added); inf if none. ``distance``: a Paths or an (H, W) array m."""
+    distance = as_paths(distance)
+    cells = view.to_cell(points)
+    inside = view.inside(cells)
+    target = np.array(points, dtype=np.float64).reshape(-1, 2)
+    k = int(np.ceil(reach / view.resolution))
+    h, w = view.shape
+    ends, gaps, which = [], [], []  # the cell driven to, the gap to it (m), for which point
+    for i in np.nonzero(inside)[0]:
+        r, c = cells[i]
+        if distance.reach[r, c]:
+            ends.append((r, c)), gaps.append(None), which.append(i)
+            continue
+        r0, r1, c0, c1 = max(r - k, 0), min(r + k + 1, h), max(c - k, 0), min(c + k + 1, w)
+        rr, cc = np.nonzero(distance.reach[r0:r1, c0:c1])
+        if len(rr):
+            gap = np.hypot(rr + r0 - r, cc + c0 - c) * view.resolution
+            j = int(np.argmin(gap))
+            if gap[j] <= reach:
+                ends.append((rr[j] + r0, cc[j] + c0)), gaps.append(gap[j]), which.append(i)
+                target[i] = view.to_world(np.array(ends[-1]))
+    out = np.full(len(points), np.inf)
+    if ends:
+        lengths = distance.lengths(np.array(ends))
+        out[which] = [d if g is None else d + g for d, g in zip(lengths, gaps)]
+    return out, target
+
+
+def _snap(passable, cell, within: int):
+    """The passable cell nearest ``cell`` within ``within`` cells and its distance (cells); None if none."""
+    h, w = passable.shape
+    r0, r1 = max(cell[0] - within, 0), min(cell[0] + within + 1, h)
+    c0, c1 = max(cell[1] - within, 0), min(cell[1] + within + 1, w)
+    rows, cols = np.nonzero(passable[r0:r1, c0:c1])
+    if len(rows) == 0:
+        return None
+    d = np.hypot(rows + r0 - cell[0], cols + c0 - cell[1])
+    k = int(np.argmin(d))
+    return np.array([rows[k] + r0, cols[k] + c0]), float(d[k])

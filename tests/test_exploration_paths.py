@@ -1,0 +1,204 @@
+"""Bounded path searches and pruned views of pockets give what the full computation gives, on random maps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from slam2d.exploration import explorer as explorer_mod
+from slam2d.exploration import pockets as pockets_mod
+from slam2d.exploration.config import ExplorationConfig
+from slam2d.exploration.explorer import Explorer
+from slam2d.exploration.frontiers import find_frontiers
+from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, geodesic
+from slam2d.exploration.paths import Paths, _Dense
+from slam2d.exploration.pockets import LocalRefresh, pocket_state
+
+
+def random_map(rng, shape=(90, 110)) -> np.ndarray:
+    """Rooms of free space (some walled, some open onto the unknown) and wall segments inside them."""
+    state = np.full(shape, UNKNOWN, dtype=np.int8)
+    h, w = shape
+    for _ in range(rng.integers(3, 7)):
+        r0, c0 = rng.integers(0, h - 20), rng.integers(0, w - 20)
+        r1, c1 = r0 + rng.integers(12, 40), c0 + rng.integers(12, 40)
+        state[r0:r1, c0:c1] = FREE
+        if rng.random() < 0.6:
+            walls = np.zeros(shape, dtype=bool)
+            walls[r0:r1, c0:c1] = True
+            ring = walls & ~ndimage.binary_erosion(walls)
+            ring[r0 + 3 : r0 + 10, c0] = False  # a door
+            state[ring] = OCCUPIED
+    for _ in range(rng.integers(2, 6)):
+        r, c = rng.integers(0, h), rng.integers(0, w)
+        if rng.random() < 0.5:
+            state[r, c : c + rng.integers(5, 25)] = OCCUPIED
+        else:
+            state[r : r + rng.integers(5, 25), c] = OCCUPIED
+    return state
+
+
+def random_start(rng, view: GridView) -> np.ndarray:
+    rows, cols = np.nonzero(view.traversable(0.4))
+    k = rng.integers(len(rows))
+    return np.array([*view.to_world(np.array([rows[k], cols[k]])), rng.uniform(-np.pi, np.pi)])
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_paths_settled_as_far_as_asked_equal_a_full_search(seed):
+    rng = np.random.default_rng(seed)
+    passable = ndimage.binary_opening(rng.random((60, 80)) > 0.2) & (rng.random((60, 80)) > 0.02)
+    allowed = rng.random(passable.shape) > 0.3
+    rows, cols = np.nonzero(passable)
+    start = np.array([rows[len(rows) // 3], cols[len(rows) // 3]]) + rng.integers(-2, 3, 2)  # may need snapping
+    full = geodesic(passable, start, 0.05)
+    full[~allowed] = np.inf
+    cells = np.column_stack([rng.integers(-2, 62, 30), rng.integers(-2, 82, 30)])
+    inside = (cells[:, 0] >= 0) & (cells[:, 0] < 60) & (cells[:, 1] >= 0) & (cells[:, 1] < 80)
+    expected = np.full(len(cells), np.inf)
+    expected[inside] = full[cells[inside, 0], cells[inside, 1]]
+
+    paths = Paths(passable, start, 0.05, allowed=allowed)
+    assert np.array_equal(paths.reach, np.isfinite(full))
+    near = paths.lengths(cells, nearest=True)
+    if np.isfinite(expected).any():
+        k = int(np.argmin(expected))
+        assert int(np.argmin(near)) == k and near[k] == expected[k]  # the nearest, to the last bit
+        exact = near == expected
+        assert np.all(exact | (near > expected.min()))  # the rest exact or a lower bound above the nearest
+        assert np.all(near[np.isfinite(expected)] <= expected[np.isfinite(expected)])
+    assert np.array_equal(paths.lengths(cells), expected)  # resumed to the farthest
+    assert np.array_equal(paths.dense(), full)
+
+
+@pytest.mark.parametrize("seed", range(25))
+def test_frontiers_on_bounded_paths_equal_those_on_full_distances(seed):
+    rng = np.random.default_rng(100 + seed)
+    view = GridView(random_map(rng), 0.05, (0.0, 0.0))
+    pose = random_start(rng, view)
+    roomy = view.traversable(0.45)
+    full = geodesic(view.traversable(0.4), view.to_cell(pose[:2]), 0.05)
+    full[~roomy] = np.inf
+    expected = find_frontiers(view, pose[:2], full, 0.4, 0.55, depth=0.4)
+    for nearest in (False, True):
+        paths = Paths(view.traversable(0.4), view.to_cell(pose[:2]), 0.05, allowed=roomy)
+        got = find_frontiers(view, pose[:2], paths, 0.4, 0.55, depth=0.4, nearest=nearest)
+        assert [tuple(f.goal) for f in got] == [tuple(f.goal) for f in expected]
+        p, q = np.array([f.path for f in got]), np.array([f.path for f in expected])
+        if nearest and len(q):
+            assert np.argmin(p) == np.argmin(q) and p.min() == q.min()
+        else:
+            assert np.array_equal(p, q)
+
+
+@pytest.mark.parametrize("strategy", ["nearest_frontier", "utility", "tour"])
+def test_decisions_on_bounded_paths_equal_those_on_full_distances(strategy, monkeypatch):
+    """Each strategy's goal, and the views of pockets once no frontier is left, are those of the full
+    computation: distances over the whole grid and every place scored."""
+    cfg = ExplorationConfig(strategy=strategy)
+    goals = {}
+    for mode in ("bounded", "full"):
+        if mode == "full":
+            monkeypatch.setattr(explorer_mod, "Paths", lambda *a, **k: _Dense(Paths(*a, **k).dense()))
+            monkeypatch.setattr(pockets_mod, "in_ray_reach", lambda view, xy, r: np.ones(len(xy), dtype=bool))
+        goals[mode] = []
+        for seed in range(12):
+            rng = np.random.default_rng(200 + seed)
+            state = random_map(rng)
+            if seed % 3 == 0:  # no frontier: only pockets (small unknown patches inside the free space) are left
+                state[state == UNKNOWN] = OCCUPIED
+                for _ in range(4):
+                    r, c = rng.integers(5, 80), rng.integers(5, 100)
+                    state[r : r + 4, c : c + 4] = UNKNOWN
+            view = GridView(state, 0.05, (0.0, 0.0))
+            ex = Explorer(cfg, 0.2, 0.05, 12.0)
+            goal = ex.decide(random_start(rng, view), view)
+            goals[mode].append(None if goal is None else (goal.kind, tuple(np.round(goal.position, 9)), goal.score))
+    assert goals["bounded"] == goals["full"]
+    assert sum(g is not None and g[0] == "pocket" for g in goals["full"]) >= 1
+    assert sum(g is not None and g[0] != "pocket" for g in goals["full"]) >= 4
+
+
+def add_pocket(state, rng) -> None:
+    """A 12 × 12-cell pocket of unknown in a ring of wall with a 5-cell gap on one side (no frontier region)."""
+    r, c = rng.integers(8, state.shape[0] - 22), rng.integers(8, state.shape[1] - 22)
+    state[r : r + 14, c : c + 14] = OCCUPIED
+    state[r + 1 : r + 13, c + 1 : c + 13] = UNKNOWN
+    side = rng.integers(4)
+    gap = (slice(r + 5, r + 10), c) if side == 0 else (slice(r + 5, r + 10), c + 13) if side == 1 else (
+        r, slice(c + 5, c + 10)) if side == 2 else (r + 13, slice(c + 5, c + 10))  # fmt: skip
+    state[gap] = UNKNOWN
+
+
+def test_views_of_pockets_kept_between_decisions_equal_those_scored_anew(monkeypatch):
+    """A place keeps its gain from the last decision only while nothing within its rays' reach changed: after
+    local changes to the map, the goal is the one an explorer with nothing kept chooses."""
+    monkeypatch.setattr(pockets_mod, "in_ray_reach", lambda view, xy, r: np.ones(len(xy), dtype=bool))
+    cfg = ExplorationConfig(strategy="nearest_frontier", gain_range=2.0, pocket_gain=0.02)
+    checked = 0
+    for seed in range(8):
+        rng = np.random.default_rng(300 + seed)
+        state = np.full((130, 170), OCCUPIED, dtype=np.int8)
+        state[2:-2, 2:-2] = FREE
+        for _ in range(5):
+            add_pocket(state, rng)
+        pose = random_start(rng, GridView(state, 0.05, (0.0, 0.0)))
+        kept = Explorer(cfg, 0.2, 0.05, 12.0)
+        kept.decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+        for _ in range(4):  # the map changes in one place: a pocket seen, or a new one
+            hidden = np.argwhere(state == UNKNOWN)
+            if len(hidden) and rng.random() < 0.6:
+                r, c = hidden[rng.integers(len(hidden))]
+                state[max(r - 4, 0) : r + 4, max(c - 4, 0) : c + 4] = FREE
+            else:
+                add_pocket(state, rng)
+            goal = kept.decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+            fresh = Explorer(cfg, 0.2, 0.05, 12.0).decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+            assert (goal is None) == (fresh is None)
+            if goal is not None:
+                assert goal.kind == fresh.kind and np.array_equal(goal.position, fresh.position)
+                assert goal.score == fresh.score
+                checked += goal.kind == "pocket"
+    assert checked >= 10
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_hidden_cells_refreshed_where_the_map_changed_equal_a_full_pass(seed):
+    """The utility's hidden-cell grid (``pocket_state``), kept between views and recomputed round the cells that
+    changed, is the full pass's after every change, near the grid's edge too."""
+    rng = np.random.default_rng(400 + seed)
+    state = random_map(rng)
+    outside = rng.random(state.shape) < 0.05
+    kept = LocalRefresh(lambda st, out: pocket_state(st, 4, out), 2 * 4 + 4)
+    for _ in range(8):
+        r, c = rng.integers(-5, state.shape[0]), rng.integers(-5, state.shape[1])
+        patch = state[max(r, 0) : r + rng.integers(2, 30), max(c, 0) : c + rng.integers(2, 30)]
+        patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.5, 0.2, 0.3])
+        if rng.random() < 0.3:
+            outside[rng.integers(state.shape[0]), :] ^= True
+        assert np.array_equal(kept(state, outside), pocket_state(state, 4, outside))
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_gains_aimed_at_the_entry_cells_of_unknown_space_count_what_all_rays_count(seed):
+    """Rays aimed only at the unknown cells with a known 4-neighbour (a ray enters unknown space there first) count
+    the same gains and shares as every ray, from points in free and unknown cells and near the grid's edge."""
+    from slam2d.exploration.gridops import (
+        _cast,
+        information_gain,
+        shared_gain,
+        unknown_cells,
+    )
+
+    rng = np.random.default_rng(500 + seed)
+    state = random_map(rng)
+    view = GridView(state, 0.05, (0.0, 0.0))
+    pts = rng.uniform([0.0, 0.0], [state.shape[1] * 0.05, state.shape[0] * 0.05], size=(60, 2))
+    every = _cast(state, pts / 0.05, 120, 60.0, 2, np.zeros((0, 2), dtype=np.int64), False)
+    own, shares = shared_gain(view, pts, 3.0, 120)
+    assert np.array_equal(own, every[0]) and np.array_equal(shares, every[1])
+    free = pts[state[(pts[:, 1] / 0.05).astype(int), (pts[:, 0] / 0.05).astype(int)] == FREE]
+    alone = _cast(state, free / 0.05, 360, 60.0, 1, np.zeros((0, 2), dtype=np.int64), False)[0]
+    assert np.array_equal(information_gain(view, free, 3.0, 360, unknown_cells(view)), alone)
+    assert len(unknown_cells(view)) < (state == UNKNOWN).sum() and alone.max() > 0
