@@ -8,7 +8,13 @@ import math
 import numpy as np
 
 from slam2d.localization import KnownMap, MclConfig, ParticleFilter
-from slam2d.localization.scenario import PERIOD, active_run, converged_at, replay, wander
+from slam2d.localization.scenario import (
+    PERIOD,
+    active_run,
+    converged_at,
+    replay,
+    wander,
+)
 from slam2d.sim import World
 
 
