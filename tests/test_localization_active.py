@@ -56,3 +56,18 @@ def test_active_moves_after_a_kidnap_recover_where_the_wandering_robot_stays_amb
         outcomes[name] = None if c is None else (c - k) * PERIOD
     assert outcomes["passive"] is None or outcomes["passive"] > 15.0
     assert outcomes["active"] is not None and outcomes["active"] <= 15.0
+
+
+def test_the_way_to_a_goal_does_not_lead_through_a_gap_the_robot_does_not_fit():
+    """A gap narrower than the lane the robot keeps clear is no way (lab_b's kidnap seed 4 turned in front
+    of one for 15 s, the way leading into it and the laser refusing it); a wider one is."""
+    from slam2d.localization.active import way_to
+
+    for gap, passable in ((0.5, False), (1.0, True)):
+        occupied = np.zeros((60, 100), dtype=bool)
+        occupied[[0, -1], :] = occupied[:, [0, -1]] = True
+        occupied[:, 50] = True
+        occupied[20:20 + round(gap / 0.05), 50] = False  # the only gap in the wall, from y = 1 m
+        known = KnownMap(occupied, ~occupied, 0.05, (0.0, 0.0))
+        field = way_to(known, np.array([4.0, 1.5]))
+        assert np.isfinite(field[30, 20]) == passable, gap  # from (1.0, 1.5) on the other side

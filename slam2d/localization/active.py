@@ -142,6 +142,7 @@ JUMP = 1.0  # m the estimate moves between two scans: another hypothesis leads, 
 RETRY = 2.0  # s after finding no goal before looking again
 _LOOKAHEAD = 0.7  # m, the point on the way to the goal steered at
 _WALL_COST = 0.4  # m: cells closer to walls cost 20 x (the way keeps off walls, starts near them still lead out)
+_NARROW = 0.3  # m: cells closer to walls are no way (a gap the robot's lane does not fit through)
 
 
 def way_to(known, goal: np.ndarray) -> np.ndarray:
@@ -149,8 +150,9 @@ def way_to(known, goal: np.ndarray) -> np.ndarray:
     avoided (inf where unreachable)."""
     from skimage.graph import MCP_Geometric
 
-    cost = np.where(known.distance() < _WALL_COST, 20.0, 1.0)
-    cost[~known.free] = np.inf
+    dist = known.distance()
+    cost = np.where(dist < _WALL_COST, 20.0, 1.0)
+    cost[~known.free | (dist < _NARROW)] = np.inf
     cell = known.world_to_cell(np.asarray(goal[:2], dtype=np.float64)[None])[0]
     if not known.in_bounds(cell[None])[0] or not known.free[cell[0], cell[1]]:
         return np.full(known.shape, np.inf)
