@@ -2,7 +2,7 @@
 on the office and the room plans, global localisation, kidnapping and tracking.
 
 Usage: nice .venv/bin/python benchmarks/localization.py [--worlds office rooms ring wings] [--runs N] [--first-seed 0]
-       [--workers 2] [--scenarios global active kidnap tracking] [--filters slam2d amcl amcl_recovery]
+       [--workers 2] [--scenarios global active kidnap active_kidnap tracking] [--filters slam2d amcl amcl_recovery]
        [--out results/bench-localization]
 
 Every seeded run records one stream of the wandering robot (scans, odometry,
@@ -16,6 +16,8 @@ truth) and replays it through every filter, so that all see the same data:
   (slam2d.localization.active.Looker), so the stream is its own; counted as global;
 - kidnap: tracking from the true pose (sd 0.1 m, 3 deg) for 10 s, then a teleport of
   at least 5 m; recovered = converged again within 15 s of driving;
+- active_kidnap: kidnap (slam2d's filter) with active moves: the same start and teleport, but while
+  the filter is ambiguous after it the robot drives as in active; counted as kidnap;
 - tracking: from the true pose with the rough initial spread (0.5 m, 15 deg), 60 s;
   RMSE and median particle count from convergence on.
 Filters: slam2d (defaults), amcl (ROS 1 defaults, recovery off as shipped),
@@ -38,8 +40,9 @@ from pathlib import Path
 import numpy as np
 
 FILTERS = {"global": ["slam2d", "amcl", "amcl_recovery"], "kidnap": ["slam2d", "amcl", "amcl_recovery"],
-           "tracking": ["slam2d", "amcl"], "active": ["slam2d"]}  # fmt: skip
-SECONDS = {"global": 40.0, "kidnap": 30.0, "tracking": 60.0, "active": 40.0}
+           "tracking": ["slam2d", "amcl"], "active": ["slam2d"], "active_kidnap": ["slam2d"]}  # fmt: skip
+SECONDS = {"global": 40.0, "kidnap": 30.0, "tracking": 60.0, "active": 40.0, "active_kidnap": 30.0}
+ACTIVE = {"active": "global", "active_kidnap": "kidnap"}  # scenarios whose robot drives for the filter: as which counted
 KIDNAP_AT = 10.0  # s
 GLOBAL_TRAVEL = 10.0  # m
 RECOVERY = 15.0  # s
@@ -125,21 +128,22 @@ def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) 
     )
 
     world, known = _load(spec)
-    kidnap = [KIDNAP_AT] if scenario == "kidnap" else []
-    seconds = PERIOD if scenario == "active" else SECONDS[scenario]  # the active robot drives its own stream
+    kind = ACTIVE.get(scenario, scenario)
+    kidnap = [KIDNAP_AT] if kind == "kidnap" else []
+    seconds = PERIOD if scenario in ACTIVE else SECONDS[scenario]  # the active robot drives its own stream
     stream = wander(world, known, seconds, seed, kidnap_at=kidnap)
     rows = []
     for name in [f for f in FILTERS[scenario] if not filters or f in filters]:
         pf = ParticleFilter(known, preset(name), stream.scans[0].range_max, seed=seed)
-        if scenario in ("global", "active"):
+        if kind == "global":
             pf.init_global()
-        elif scenario == "kidnap":
+        elif kind == "kidnap":
             pf.init_pose(stream.truth[0], 0.1, math.radians(3.0))
         else:
             pf.init_pose(stream.truth[0])
         t0 = time.perf_counter()
-        if scenario == "active":
-            stream, track = active_run(world, known, pf, SECONDS[scenario], seed)
+        if scenario in ACTIVE:
+            stream, track = active_run(world, known, pf, SECONDS[scenario], seed, kidnap_at=kidnap)
         else:
             track = replay(pf, stream)
         row = {"world": Path(spec).stem.replace("_furnitures", ""), "scenario": scenario, "filter": name,
@@ -147,12 +151,12 @@ def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) 
                "update_ms": float(np.median(track.update_ms)) if len(track.update_ms) else None,
                "false": bool(false_convergence(track)), "end_state": final_state(track),
                "lookalikes_at_end": None if pf.lookalikes is None else len(pf.lookalikes.at(stream.truth[-1]))}  # fmt: skip
-        if scenario in ("global", "active"):
+        if kind == "global":
             c = converged_at(track)
             row.update(converged=bool(c is not None and stream.travelled[c] <= GLOBAL_TRAVEL),
                        travel=None if c is None else float(stream.travelled[c]),
                        max_particles=int(track.particles.max()))
-        elif scenario == "kidnap":
+        elif kind == "kidnap":
             k = stream.kidnaps[0]
             c = converged_at(track, k)
             row.update(recovered=bool(c is not None and (c - k) * PERIOD <= RECOVERY),
@@ -199,25 +203,25 @@ def table(rows: list[dict]) -> str:
     worlds = sorted({r["world"] for r in rows})
     lines = [("| world | filter | global converged ≤ 10 m | global end tracking / ambiguous / lost | with active moves "
               "converged ≤ 10 m | active end t / a / l | active median travel (m) | false conv. "
-              "global / active / kidnap / tracking | ambiguous at a look-alike | median travel (m) | kidnap recovered ≤ 15 s | kidnap end t / a / l "
-              "| median recovery (s) | tracking RMSE (m) | heading RMSE (°) | particles tracking | ms/update | runs |"),
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+              "global / active / kidnap / active kidnap / tracking | ambiguous at a look-alike | median travel (m) | "
+              "kidnap recovered ≤ 15 s | kidnap end t / a / l | median recovery (s) | active kidnap recovered ≤ 15 s | "
+              "active kidnap end t / a / l | active median recovery (s) | tracking RMSE (m) | heading RMSE (°) | "
+              "particles tracking | ms/update | runs |"),
+             "|" + "---|" * 22]  # fmt: skip
     for world in ["all", *worlds]:
         for name in [n for n in FILTERS["global"] if any(r["filter"] == n for r in rows)]:
             sel = [r for r in rows if r["filter"] == name and world in ("all", r["world"])]
-            g = [r for r in sel if r["scenario"] == "global"]
-            k = [r for r in sel if r["scenario"] == "kidnap"]
-            t = [r for r in sel if r["scenario"] == "tracking"]
-            a = [r for r in sel if r["scenario"] == "active"]
+            g, a, k, ak, t = ([r for r in sel if r["scenario"] == s] for s in
+                              ("global", "active", "kidnap", "active_kidnap", "tracking"))  # fmt: skip
+            false = " / ".join(_count(x, "false") for x in (g, a, k, ak, t))
             lines.append(f"| {world} | {name} | {_rate(g, 'converged')} | {_states(g) if g else '-'} | "
                          f"{_rate(a, 'converged')} | {_states(a) if a else '-'} | {_median(a, 'travel', '{:.1f}')} | "
-                         f"{_count(g, 'false')} / {_count(a, 'false')} / {_count(k, 'false')} / {_count(t, 'false')} | "
-                         f"{_predicted(sel)} | "
-                         f"{_median(g, 'travel', '{:.1f}')} | {_rate(k, 'recovered')} | "
-                         f"{_states(k) if k else '-'} | "
-                         f"{_median(k, 'recovery_s', '{:.1f}')} | {_median(t, 'rmse')} | "
+                         f"{false} | {_predicted(sel)} | {_median(g, 'travel', '{:.1f}')} | "
+                         f"{_rate(k, 'recovered')} | {_states(k) if k else '-'} | {_median(k, 'recovery_s', '{:.1f}')} | "
+                         f"{_rate(ak, 'recovered')} | {_states(ak) if ak else '-'} | "
+                         f"{_median(ak, 'recovery_s', '{:.1f}')} | {_median(t, 'rmse')} | "
                          f"{_median(t, 'heading_rmse_deg', '{:.2f}')} | {_median(t, 'particles', '{:.0f}')} | "
-                         f"{_median(sel, 'update_ms', '{:.1f}')} | {max(len(g), len(a), len(k), len(t))} |")  # fmt: skip
+                         f"{_median(sel, 'update_ms', '{:.1f}')} | {max(len(g), len(a), len(k), len(ak), len(t))} |")  # fmt: skip
     return "\n".join(lines) + "\n"
 
 

@@ -136,9 +136,13 @@ def disambiguating_goal(pf: ParticleFilter, candidates: int = 400, max_distance:
 
 GOAL_REACHED = 0.5  # m from a goal (on the estimate) at which the next one is chosen
 GOAL_PATIENCE = 20.0  # s driving to one goal before choosing another
+STALL = 5.0  # s without PROGRESS along the way to a goal before choosing another
+PROGRESS = 0.5  # m of way to the goal gained (geodesic, wall-free cells) that counts as progress
+JUMP = 1.0  # m the estimate moves between two scans: another hypothesis leads, the way is another
 RETRY = 2.0  # s after finding no goal before looking again
 _LOOKAHEAD = 0.7  # m, the point on the way to the goal steered at
 _WALL_COST = 0.4  # m: cells closer to walls cost 20 x (the way keeps off walls, starts near them still lead out)
+_NARROW = 0.3  # m: cells closer to walls are no way (a gap the robot's lane does not fit through)
 
 
 def way_to(known, goal: np.ndarray) -> np.ndarray:
@@ -146,8 +150,9 @@ def way_to(known, goal: np.ndarray) -> np.ndarray:
     avoided (inf where unreachable)."""
     from skimage.graph import MCP_Geometric
 
-    cost = np.where(known.distance() < _WALL_COST, 20.0, 1.0)
-    cost[~known.free] = np.inf
+    dist = known.distance()
+    cost = np.where(dist < _WALL_COST, 20.0, 1.0)
+    cost[~known.free | (dist < _NARROW)] = np.inf
     cell = known.world_to_cell(np.asarray(goal[:2], dtype=np.float64)[None])[0]
     if not known.in_bounds(cell[None])[0] or not known.free[cell[0], cell[1]]:
         return np.full(known.shape, np.inf)
@@ -171,34 +176,55 @@ def heading_to(known, field: np.ndarray, pose: np.ndarray) -> float | None:
     return float(np.arctan2(d[0], d[1]))  # rows run along y
 
 
+def _way_left(known, field: np.ndarray, pose: np.ndarray) -> float:
+    """The geodesic cost (:func:`way_to`'s units: cells) left from ``pose`` (3,); inf off the way."""
+    cell = known.world_to_cell(pose[None, :2])[0]
+    return float(field[cell[0], cell[1]]) if known.in_bounds(cell[None])[0] else np.inf
+
+
 class Looker:
     """Active localisation for a robot without a navigation stack: while ``pf`` is ambiguous it steers
     (on the best hypothesis's pose) towards the :func:`disambiguating_goal`, the next one once it is
-    within GOAL_REACHED m, after GOAL_PATIENCE s or when the estimate moves away from it (another
-    hypothesis leads); ``goals`` keeps those chosen."""
+    within GOAL_REACHED m, when the estimate jumps JUMP m (another hypothesis leads), when the way left
+    has not shrunk by PROGRESS m for STALL s (the robot turns or is held up where the hypotheses'
+    maps differ), or after GOAL_PATIENCE s; ``goals`` keeps those chosen."""
 
     def __init__(self, pf: ParticleFilter):
         self.pf, self.goals = pf, []
         self._field: np.ndarray | None = None
-        self._since = self._none_at = -np.inf
+        self._since = self._none_at = self._moved_at = -np.inf
+        self._left, self._last = np.inf, None  # the least way left to the goal, the last pose
 
     def heading(self, pose: np.ndarray, scan) -> float | None:
         """Direction (rad, in the map, as the estimate ``pose`` (3,) sees it) to drive in when ``scan``
         comes, or None (no goal: the filter is not ambiguous or no place separates its hypotheses)."""
+        last, self._last = self._last, pose
         if self.pf.state != "ambiguous":
             self._field = None
             return None
         stamp = scan.stamp
-        goal = self.goals[-1].pose if self._field is not None else None
-        away = np.hypot(*(pose[:2] - goal[:2])) if goal is not None else np.inf
-        if goal is None or away < GOAL_REACHED or away > self.goals[-1].distance + 1.0 or \
-                stamp - self._since > GOAL_PATIENCE:
+        if self._field is not None and not self._keep(pose, last, stamp):
+            self._field = None
+        if self._field is None:
             if stamp - self._none_at < RETRY:
                 return None
             chosen = disambiguating_goal(self.pf, seed=len(self.goals), angles=scan.angles)
             if chosen is None:
-                self._field, self._none_at = None, stamp
+                self._none_at = stamp
                 return None
             self.goals.append(chosen)
             self._field, self._since = way_to(self.pf.map, chosen.pose), stamp
+            self._left, self._moved_at = _way_left(self.pf.map, self._field, pose), stamp
         return heading_to(self.pf.map, self._field, pose)
+
+    def _keep(self, pose: np.ndarray, last: np.ndarray | None, stamp: float) -> bool:
+        """Whether to keep driving to the last goal (not reached, no jump, progress, patience left)."""
+        known = self.pf.map
+        if np.hypot(*(pose[:2] - self.goals[-1].pose[:2])) < GOAL_REACHED or stamp - self._since > GOAL_PATIENCE:
+            return False
+        if last is not None and np.hypot(*(pose[:2] - last[:2])) > JUMP:
+            return False
+        left = _way_left(known, self._field, pose)
+        if left < self._left - PROGRESS / known.resolution:
+            self._left, self._moved_at = left, stamp
+        return stamp - self._moved_at <= STALL

@@ -90,18 +90,29 @@ def wander(world, known: KnownMap, seconds: float, seed: int, kidnap_at=(), min_
     scans, truth, kidnaps, turning = [step.scan], [step.pose], [], 0.0
     pending = sorted(kidnap_at)
     for k in range(1, round(seconds / PERIOD) + 1):
-        if pending and k * PERIOD >= pending[0]:
-            pending.pop(0)
-            robot.pose = random_free_pose(world, known, rng, robot.pose, min_jump)
-            robot.velocity = np.zeros(2)
-            kidnaps.append(k)
+        _kidnap_due(robot, world, known, rng, pending, k, kidnaps, min_jump)
         v, w, turning = wander_command(step.scan, turning)
         step = robot.step(v, w, PERIOD)
         scans.append(step.scan)
         truth.append(step.pose)
+    return _stream(scans, truth, kidnaps)
+
+
+def _kidnap_due(robot, world, known: KnownMap, rng, pending: list, k: int, kidnaps: list, min_jump: float) -> None:
+    """Before scan ``k``: if the first time in ``pending`` (s, sorted) has come, teleport ``robot`` to a
+    random free pose at least ``min_jump`` m away and note ``k`` in ``kidnaps``."""
+    if pending and k * PERIOD >= pending[0]:
+        pending.pop(0)
+        robot.pose = random_free_pose(world, known, rng, robot.pose, min_jump)
+        robot.velocity = np.zeros(2)
+        kidnaps.append(k)
+
+
+def _stream(scans: list, truth: list, kidnaps: list) -> Stream:
+    """The stream of ``scans`` with true poses ``truth``; a teleport is no travel."""
     truth = np.array(truth)
     moved = np.hypot(*np.diff(truth[:, :2], axis=0).T)
-    moved[np.array(kidnaps, dtype=np.int64) - 1] = 0.0  # a teleport is no travel
+    moved[np.array(kidnaps, dtype=np.int64) - 1] = 0.0
     return Stream(scans, truth, np.concatenate([[0.0], np.cumsum(moved)]), kidnaps)
 
 
@@ -177,11 +188,14 @@ def replay(pf: ParticleFilter, stream: Stream, snapshot_at=(), view=None, progre
     return rec.track(stream.truth, snaps)
 
 
-def active_run(world, known: KnownMap, pf: ParticleFilter, seconds: float, seed: int) -> tuple[Stream, Track]:
-    """Global localisation with active moves: the robot of :func:`wander` (same start and noise for the
-    same ``seed``), but while ``pf`` (initialised) is ambiguous it drives towards the places that tell its
-    hypotheses apart (:class:`slam2d.localization.active.Looker`, on the estimate), keeping off what its
-    laser sees ahead; otherwise it wanders. The stream it drove and the filter's track."""
+def active_run(world, known: KnownMap, pf: ParticleFilter, seconds: float, seed: int, kidnap_at=(),
+               min_jump: float = 5.0) -> tuple[Stream, Track]:  # fmt: skip
+    """Localisation with active moves: the robot of :func:`wander` (same start, noise and kidnappings
+    for the same ``seed``, ``kidnap_at`` s and ``min_jump`` m), but while ``pf`` (initialised) is
+    ambiguous it drives towards the places that tell its hypotheses apart
+    (:class:`slam2d.localization.active.Looker`, on the estimate), keeping off what its laser sees
+    ahead; otherwise it wanders. Until the first kidnapping, or while the filter tracks, the stream is
+    :func:`wander`'s. The stream it drove and the filter's track."""
     from slam2d.localization.active import Looker
     from slam2d.sim import Robot
 
@@ -189,9 +203,11 @@ def active_run(world, known: KnownMap, pf: ParticleFilter, seconds: float, seed:
     robot = Robot(world, random_free_pose(world, known, rng), seed=seed)
     looker, rec = Looker(pf), _Recorder()
     step = robot.step(0.0, 0.0, 0.0)
-    scans, truth, turning = [step.scan], [step.pose], 0.0
+    scans, truth, kidnaps, turning = [step.scan], [step.pose], [], 0.0
+    pending = sorted(kidnap_at)
     pose = rec.add(pf, step.scan)
-    for _ in range(round(seconds / PERIOD)):
+    for k in range(1, round(seconds / PERIOD) + 1):
+        _kidnap_due(robot, world, known, rng, pending, k, kidnaps, min_jump)
         heading = looker.heading(pose, step.scan)
         toward = None if heading is None else _towards(step.scan, float(geometry.wrap_angle(heading - pose[2])))
         if toward is not None:
@@ -202,9 +218,8 @@ def active_run(world, known: KnownMap, pf: ParticleFilter, seconds: float, seed:
         scans.append(step.scan)
         truth.append(step.pose)
         pose = rec.add(pf, step.scan)
-    truth = np.array(truth)
-    travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(truth[:, :2], axis=0).T))])
-    return Stream(scans, truth, travelled), rec.track(truth)
+    stream = _stream(scans, truth, kidnaps)
+    return stream, rec.track(stream.truth)
 
 
 def _towards(scan: Scan, bearing: float) -> tuple[float, float] | None:
