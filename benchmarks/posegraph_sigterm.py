@@ -22,19 +22,9 @@ import tempfile
 import time
 from pathlib import Path
 
+import psutil
+
 DATA = Path(os.environ.get("SLAM2D_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets"))
-
-
-def children(pid: int) -> list[int]:
-    """The processes whose parent is ``pid`` (Linux /proc)."""
-    found = []
-    for entry in Path("/proc").iterdir():
-        try:
-            if entry.name.isdigit() and int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
-                found.append(int(entry.name))
-        except (OSError, IndexError):
-            pass
-    return found
 
 
 def one(graph: Path, outliers: int, delay: float, root: Path) -> tuple[float, int, bool, bool]:
@@ -48,7 +38,7 @@ def one(graph: Path, outliers: int, delay: float, root: Path) -> tuple[float, in
     time.sleep(delay)
     if proc.poll() is not None:
         raise RuntimeError(f"the command ended within {delay} s: pick shorter delays")
-    worker = bool(children(proc.pid))
+    worker = bool(psutil.Process(proc.pid).children())
     proc.send_signal(signal.SIGTERM)
     sent = time.monotonic()
     proc.wait()

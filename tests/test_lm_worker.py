@@ -3,14 +3,13 @@ a signal ends the wait at once and leaves no worker behind."""
 
 from __future__ import annotations
 
-import os
 import signal
 import threading
 import time
-from pathlib import Path
 
 import gtsam
 import numpy as np
+import psutil
 import pytest
 from test_pose_graph_global import manhattan
 
@@ -48,14 +47,7 @@ def test_an_error_in_the_worker_is_raised_here():
 
 
 def _children() -> set[int]:
-    me, found = os.getpid(), set()
-    for entry in os.listdir("/proc"):
-        try:
-            if entry.isdigit() and int(Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()[1]) == me:
-                found.add(int(entry))
-        except (OSError, IndexError):
-            pass
-    return found
+    return {child.pid for child in psutil.Process().children()}
 
 
 @pytest.mark.skipif(not hasattr(signal, "pthread_kill"), reason="needs pthread_kill")
