@@ -61,7 +61,7 @@ class IcpConfig(Section):
     odom_prior: bool = Field(True, description="regularise the match with the odometry delta (point_to_line)")
     degeneracy_ratio: float = Field(
         0.0, ge=0, description="a direction where the scan's information is below this x the odometry's "
-        "(odom_sigma_*) is taken from the prediction, not the match (0: never; 10 suits corridors)"
+        "(odom_sigma_*) is taken from the prediction, not the match (0: never; no Radish log gains from it)"
     )
     point_sigma: float = Field(0.03, gt=0, description="m; std of one point residual: prior weight vs points")
     inlier_distance: float = Field(0.1, gt=0, description="m; residual of a point counted as matched")
