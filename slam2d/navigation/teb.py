@@ -5,8 +5,9 @@ x_0 the robot, fixed) and the time intervals dt_i (s) between them. Its factors:
 
 - start: x_0 at the robot; end: x_{n-1} at the local goal (the point ``horizon`` m along the path,
   facing along it; the final goal once within reach);
-- via-points: the path (smoothed along its length by ``path_smoothing``) every ``via_spacing`` m, each
-  pulling the band pose nearest to it once that pose is more than ``via_tube`` m from it;
+- via-points: the path every ``via_spacing`` m, each pulling the band pose nearest to it once that pose
+  is more than ``via_tube`` m from it (a replanned grid path leaves the robot on a 45 degree staircase
+  to the line it prefers: pulled onto each, the band wove);
 - obstacles: every pose against the nearest laser point on its left and on its right (robot
   frame, found again at each evaluation): a steep cost inside radius + ``margin``, a soft
   one within ``inflation`` beyond; points the map does not explain (people) may move, so their
@@ -20,8 +21,7 @@ x_0 the robot, fixed) and the time intervals dt_i (s) between them. Its factors:
 - total time: every dt_i pulled to 0, which makes the band time-optimal.
 
 Every call re-solves the band (Levenberg-Marquardt, ``iterations``) warm-started from the last one,
-moved into the new robot frame (after a replan, a band along the new path too, the cheaper kept), with
-poses inserted or removed so that each dt stays near
+moved into the new robot frame, with poses inserted or removed so that each dt stays near
 ``dt_ref``; the command is the first segment's (v, w), clipped to what the robot reaches in one
 period and slowed on its arc until the robot, braking at full deceleration after the period,
 stops short of every point (a point that may move with its margin grown, as the DWA's arcs).
@@ -90,8 +90,6 @@ class TebConfig(Section):
     via_spacing: float = Field(0.3, gt=0, description="m between via-points along the path")
     via_tube: float = Field(0.2, ge=0, description="m from a via-point within which the band is free (the "
                             "time term then straightens it); beyond, it is pulled back")
-    path_smoothing: float = Field(0.25, ge=0, description="m, standard deviation of the Gaussian (along the path) "
-                                  "that smooths the path the band follows; 0 for the grid path itself")
     obstacle_speed: float = Field(0.8, ge=0, description="m/s assumed for points the map does not explain")
     obstacle_reach: float = Field(0.5, ge=0, description="m, the most such a point's margin grows along the band")
     check_time: float = Field(1.0, ge=0, description="s of band checked for contact before its command goes out")
@@ -120,14 +118,10 @@ class TimedElasticBand:
         self.band: tuple[np.ndarray, np.ndarray] | None = None  # world poses (n, 3), dts (n - 1,) s
         self.cost = np.nan  # the kept band's graph error
         self.turning = False  # turning on the spot to the path
-        self.replanned = False  # a new path since the last call: a band along it competes with the kept one
 
     def reset(self) -> None:
-        """A new path (a replan or a recovery): the band is kept as a warm start, and the next call also
-        optimises one along the new path and keeps the cheaper (teb_local_planner keeps its band across
-        global plans too). Dropping the band at every replan (with SLAM in the loop, several a second) made
-        the robot weave: a band started afresh commands a first segment far from the one before."""
-        self.replanned = True
+        """Forget the band: the next call starts a new one along the path."""
+        self.band, self.turning = None, False
 
     def command(self, pose, velocity, points, path, unmapped=None) -> Command:
         """(v, w) of the optimised band's first segment; ``blocked`` when the band would touch a point."""
@@ -135,7 +129,7 @@ class TimedElasticBand:
         velocity = np.asarray(velocity, dtype=np.float64)
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         moving = np.zeros(len(points), bool) if unmapped is None else np.asarray(unmapped, bool).reshape(-1)
-        local = _smooth(in_robot_frame(pose, path_ahead(path, pose)), self.cfg.path_smoothing)
+        local = in_robot_frame(pose, path_ahead(path, pose))
         goal, final = self._local_goal(local)
         ahead = point_along(local, min(0.5, _length(local)))
         bearing = math.atan2(ahead[1], ahead[0])
@@ -143,11 +137,8 @@ class TimedElasticBand:
         if self.turning:  # an arc to a path far off the heading would lengthen the way
             self.band = None
             return self._turn(velocity, bearing)
-        starts = [self._warm(pose, goal, local)] if self.band is not None else []
-        if self.band is None or self.replanned:
-            starts.append(self._along(goal, local))
-        self.replanned = False
-        best = self._best(starts, velocity, points, moving, local, final)
+        start = self._warm(pose, goal, local) if self.band is not None else self._along(goal, local)
+        best = self._best([start], velocity, points, moving, local, final)
         if best is None and self.band is not None:  # the warm band is stuck: one along the path (no detours)
             best = self._best([self._along(goal, local)], velocity, points, moving, local, final, detours=False)
         if best is None:
@@ -414,25 +405,6 @@ def _arc_length_at(path: np.ndarray, xy) -> float:
     k = int(np.argmin(gap))
     cum = np.concatenate([[0.0], np.cumsum(np.sqrt(seg))])
     return float(cum[k] + u[k] * math.sqrt(seg[k]))
-
-
-def _smooth(path: np.ndarray, sigma: float, step: float = 0.05) -> np.ndarray:
-    """``path`` (L, 2) resampled every ``step`` m and smoothed by a Gaussian of ``sigma`` m along it, its ends
-    kept (each end's point reflection extends it, so a straight stretch stays straight). A replanned grid
-    path leaves the robot on a 45 degree staircase to the line it prefers (8-connected A* among cells of
-    equal cost); via-points on it steered the band, and the robot, into a weave."""
-    length = _length(path)
-    if sigma <= 0 or len(path) < 3 or length < 2 * step:
-        return path
-    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
-    s = np.linspace(0.0, length, math.ceil(length / step) + 1)
-    keep = np.concatenate([[True], np.diff(cum) > 1e-9])
-    xy = np.column_stack([np.interp(s, cum[keep], path[keep, k]) for k in (0, 1)])
-    half = min(math.ceil(3 * sigma / (s[1] - s[0])), len(xy) - 1)
-    kernel = np.exp(-0.5 * (np.arange(-half, half + 1) * (s[1] - s[0]) / sigma) ** 2)
-    kernel /= kernel.sum()
-    ext = np.vstack([2 * xy[0] - xy[half:0:-1], xy, 2 * xy[-1] - xy[-2 : -half - 2 : -1]])
-    return np.column_stack([np.convolve(ext[:, k], kernel, mode="valid") for k in (0, 1)])
 
 
 def _densify(xy: np.ndarray, step: float, with_index: bool = False):
