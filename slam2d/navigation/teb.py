@@ -5,7 +5,9 @@ x_0 the robot, fixed) and the time intervals dt_i (s) between them. Its factors:
 
 - start: x_0 at the robot; end: x_{n-1} at the local goal (the point ``horizon`` m along the path,
   facing along it; the final goal once within reach);
-- via-points: the path every ``via_spacing`` m, each pulling the band pose nearest to it;
+- via-points: the path every ``via_spacing`` m, each pulling the band pose nearest to it once that pose
+  is more than ``via_tube`` m from it (a replanned grid path leaves the robot on a 45 degree staircase
+  to the line it prefers: pulled onto each, the band wove);
 - obstacles: every pose against the nearest laser point on its left and on its right (robot
   frame, found again at each evaluation): a steep cost inside radius + ``margin``, a soft
   one within ``inflation`` beyond; points the map does not explain (people) may move, so their
@@ -86,6 +88,8 @@ class TebConfig(Section):
     max_speed_back: float = Field(0.2, ge=0, description="m/s, fastest backwards")
     epsilon: float = Field(0.02, ge=0, lt=1, description="fraction of each limit kept in reserve by the band")
     via_spacing: float = Field(0.3, gt=0, description="m between via-points along the path")
+    via_tube: float = Field(0.2, ge=0, description="m from a via-point within which the band is free (the "
+                            "time term then straightens it); beyond, it is pulled back")
     obstacle_speed: float = Field(0.8, ge=0, description="m/s assumed for points the map does not explain")
     obstacle_reach: float = Field(0.5, ge=0, description="m, the most such a point's margin grows along the band")
     check_time: float = Field(1.0, ge=0, description="s of band checked for contact before its command goes out")
@@ -284,7 +288,7 @@ class TimedElasticBand:
         kinds = [(time_residual, np.full(n - 1, c.time_weight))]  # (residual, weights (E,)): stacked into one
         # factor, so that an evaluation of the graph is one Python callback
         if (vias := self._vias(poses, local)) is not None:
-            kinds.append((partial(via_residual, index=vias[0], vias=vias[1]), np.full(2 * len(vias[0]), c.via_weight)))
+            kinds.append((partial(via_residual, index=vias[0], vias=vias[1], tube=c.via_tube), np.full(2 * len(vias[0]), c.via_weight)))
         if len(points):
             at = np.concatenate([[0.0], np.cumsum(dts)])  # s, when the band reaches each pose
             grown = np.minimum(c.obstacle_speed * at, c.obstacle_reach)[:, None] * moving[None, :]

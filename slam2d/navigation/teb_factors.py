@@ -63,15 +63,21 @@ def _spread(dP, ddt, row, i, g, scale):
 
 
 @njit(cache=True, nogil=True)
-def via_residual(P, dts, index, vias):
-    """Pulls the positions of poses ``index`` (V,) to the via-points ``vias`` (V, 2) m: error (2 V,) m, the x
-    offsets, then the y offsets."""
+def via_residual(P, dts, index, vias, tube):
+    """Pulls the positions of poses ``index`` (V,) to within ``tube`` m of the via-points ``vias`` (V, 2) m: error
+    (2 V,) m, the x offsets, then the y offsets, each shortened by ``tube`` along the offset (0 inside it)."""
     q = len(index)
     e, dP, ddt = np.zeros(2 * q), np.zeros((2 * q, len(P), 3)), np.zeros((2 * q, len(dts)))
     for k in range(q):
+        r = np.array([P[index[k], 0] - vias[k, 0], P[index[k], 1] - vias[k, 1]])
+        d = math.hypot(r[0], r[1])
+        if d <= tube:
+            continue
+        f = 1.0 - tube / d
         for a in range(2):
-            e[a * q + k] = P[index[k], a] - vias[k, a]
-            dP[a * q + k, index[k], a] = 1.0
+            e[a * q + k] = f * r[a]
+            for b in range(2):
+                dP[a * q + k, index[k], b] = (f if a == b else 0.0) + tube * r[a] * r[b] / d**3
     return e, dP, ddt
 
 
