@@ -6,7 +6,8 @@ tight prior; each later keyframe a between factor from its predecessor (odometry
 scan matching, no robust kernel); loop closures are between factors with the configured
 robust kernel; landmark observations are bearing-range factors. iSAM2 keeps the incremental
 estimate (keyframes joined by odometry alone wait for the next loop or landmark, see
-``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors.
+``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors, in a
+worker process that a signal ends at once (``lm.in_worker``; iSAM2's updates stay in this process).
 
 Poses are numpy ``(x, y, theta)`` (m, m, rad); information matrices are 3x3
 inverse covariances in the frame of the measurement (GTSAM's tangent space,
