@@ -3,6 +3,7 @@ a signal ends the wait at once and leaves no worker behind."""
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 import time
@@ -13,9 +14,13 @@ import psutil
 import pytest
 from test_pose_graph_global import manhattan
 
-from slam2d.backend import batch, lm
-from slam2d.backend.factors import g2o_factors, g2o_values
+from slam2d.backend import admission, batch, consistency, lm, outliers
+from slam2d.backend import initialization as ini
+from slam2d.backend.factors import g2o_factor_list, g2o_factors, g2o_values
 from slam2d.backend.initialization import spanning_tree
+from slam2d.backend.replay import replay_g2o
+from slam2d.config import BackendConfig
+from slam2d.datasets.g2o import inject_outliers
 from slam2d.processes import call_forked
 
 
@@ -64,3 +69,48 @@ def test_an_interrupt_while_waiting_kills_the_worker_at_once():
         call_forked(time.sleep, 30)
     assert time.monotonic() - t0 < 5
     assert _children() == before  # killed and reaped
+
+
+def _in_this_process(fn, *args):
+    return fn(*args)
+
+
+@pytest.mark.parametrize("gnc", [False, True], ids=["LM", "GNC"])
+def test_the_slam_back_ends_batch_runs_in_a_worker_with_the_same_values(monkeypatch, gnc):
+    """``PoseGraph.optimize_batch`` (``slam2d run``'s final batch) solves in a worker process, and its values
+    come back bit for bit as a solve in this process gives them (the pickled gtsam.Values included)."""
+    graph, _ = inject_outliers(manhattan(300, seed=3), 10, "random", seed=1)
+    cfg = BackendConfig(name="pose_graph", gnc=gnc)
+    forks = []
+    real = lm.call_forked
+    monkeypatch.setattr(lm, "call_forked", lambda fn, *args: forks.append(fn) or real(fn, *args))
+    there = replay_g2o(graph, cfg)
+    there_poses = there.optimize_batch()
+    assert forks, "no worker process"
+    monkeypatch.setattr(lm, "call_forked", _in_this_process)
+    here = replay_g2o(graph, cfg)
+    assert np.array_equal(here.optimize_batch(), there_poses)
+    assert here.rejected_inconsistent == there.rejected_inconsistent > 0  # the false loops' removal as well
+
+
+def _not_in(parent: int, fn):
+    def wrapped(*args, **kwargs):
+        assert os.getpid() != parent, f"{fn.__name__} ran in the command's process"
+        return fn(*args, **kwargs)
+
+    return wrapped
+
+
+def test_every_step_of_pc_dcs_runs_in_a_worker(monkeypatch):
+    """pc_dcs's pairwise screen, its starts and the admission's factorisations run in a worker process, as the
+    solves do, so that a signal in any phase ends the command at once; the result is unchanged."""
+    graph, injected = inject_outliers(manhattan(300, seed=3), 100, "random", seed=1)
+    here = outliers.pc_dcs(graph, g2o_factor_list(graph), init="spanning_tree,chordal_screened")
+    parent = os.getpid()
+    monkeypatch.setattr(consistency, "pairwise_support", _not_in(parent, consistency.pairwise_support))
+    monkeypatch.setattr(ini, "chordal", _not_in(parent, ini.chordal))
+    monkeypatch.setattr(ini, "spanning_tree", _not_in(parent, ini.spanning_tree))
+    monkeypatch.setattr(admission, "innovations", _not_in(parent, admission.innovations))
+    there = outliers.pc_dcs(graph, g2o_factor_list(graph), init="spanning_tree,chordal_screened")
+    assert np.array_equal(there.poses, here.poses) and np.array_equal(there.inlier, here.inlier)
+    assert not there.inlier[injected].any()

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from slam2d.backend.factors import factor_graph, g2o_values, pose_key, prior_factor
+from slam2d.backend.lm import in_worker
 from slam2d.datasets import g2o
 
 ADMIT_MAX_ROUNDS = 20  # loops admitted at most (each round one factorisation and one least-squares solve; MIT
@@ -75,7 +76,7 @@ def admit_consistent(graph: g2o.PoseGraphFile, plain: list, keep, poses, gate: f
         rejected = np.flatnonzero(~keep)
         if not len(rejected) or len(rejected) > ADMIT_MAX_REJECTED:
             break
-        d2 = innovations(graph, plain, keep, poses, rejected)
+        d2 = in_worker(innovations, graph, plain, keep, poses, rejected)
         best = int(np.argmin(d2))
         if not d2[best] <= gate:
             break

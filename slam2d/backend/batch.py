@@ -28,11 +28,10 @@ from slam2d.backend.factors import (
     pose_key,
     prior_factor,
 )
-from slam2d.backend.lm import levenberg_marquardt
+from slam2d.backend.lm import in_worker, levenberg_marquardt
 from slam2d.datasets import g2o
 from slam2d.errors import InputError
 from slam2d.evaluation.trajectory import ate
-from slam2d.processes import call_forked
 
 log = logging.getLogger(__name__)
 
@@ -125,18 +124,9 @@ class _Run:
     start_seconds: float = 0.0
 
 
-def _in_worker(fn, *args):
-    """``fn(*args)`` in a worker process that SIGINT / SIGTERM kills at once (``processes.call_forked``): a sparse
-    factorisation over false loops' fill-in holds the interpreter for seconds. scipy is imported here first, so
-    that no worker imports it anew."""
-    import scipy.sparse.linalg  # noqa: F401
-
-    return call_forked(fn, *args)
-
-
 def _start(graph: g2o.PoseGraphFile, name: str) -> np.ndarray:
     """The start ``name`` ("chordal_isotropic": chordal with unit weights), computed in a worker process."""
-    return _in_worker(_start_here, graph, name)
+    return in_worker(_start_here, graph, name)
 
 
 def _start_here(graph: g2o.PoseGraphFile, name: str) -> np.ndarray:
@@ -145,7 +135,7 @@ def _start_here(graph: g2o.PoseGraphFile, name: str) -> np.ndarray:
 
 def _certified(graph: g2o.PoseGraphFile, poses) -> bool:
     """Whether SE-Sync's certificate holds at ``poses`` (``certificate.certify``, in a worker process)."""
-    return _in_worker(lambda: certificate.certify(graph, poses).certified)
+    return in_worker(lambda: certificate.certify(graph, poses).certified)
 
 
 def _run(graph: g2o.PoseGraphFile, fg, name: str) -> _Run:
@@ -211,7 +201,7 @@ def _solve_outliers(graph: g2o.PoseGraphFile, robust: str, robust_param: float, 
         timings.update(more)
     phi = sol.phi if method == "pc_dcs" else robust_param
     cost = lambda p: outliers.robust_cost(graph, p, method, phi, sol.scale)
-    start = ini.spanning_tree(graph) if sol.init in ("pc_dcs", "chordal_screened") else _start(graph, sol.init)
+    start = _start(graph, "spanning_tree" if sol.init in ("pc_dcs", "chordal_screened") else sol.init)
     kept_error = g2o_error(consistency.subgraph(graph, sol.inlier), sol.poses)
     out = BatchResult(sol.poses, cost(graph.poses), cost(sol.poses), sol.iterations, seconds, sol.init, cost(start),
                       verified, sol.inlier, certified, kept_error, sol.steps, sol.scale, timings)

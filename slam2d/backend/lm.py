@@ -1,4 +1,4 @@
-"""Levenberg-Marquardt in a worker process, so that a signal stops a long solve at once.
+"""Levenberg-Marquardt (and any other long step of a solve) in a worker process, so that a signal stops it at once.
 
 GTSAM's solve runs in C++, where Python's signal handlers do not run: a SIGTERM would wait for
 the solve to end (M3500 with 1000 false loops: one iteration takes 1-4 s). ``levenberg_marquardt``
@@ -6,7 +6,9 @@ runs it in a forked child (``processes.call_forked``) that the command kills as 
 SIGTERM arrives, and returns a summary of the result computed there. The child iterates with
 GTSAM's own stopping rule (``checkConvergence`` on the relative and absolute error decrease, the
 iteration limit): the same values, bit for bit, as GTSAM's ``optimize()`` and as a solve in this
-process.
+process. ``in_worker`` runs any other step there (starts, the pairwise screen, the admission's
+factorisations, the certificate): a sparse factorisation over false loops' fill-in, or numpy over a
+million loop pairs, holds the interpreter for seconds too.
 """
 
 from __future__ import annotations
@@ -22,6 +24,15 @@ def levenberg_marquardt(fg, initial, summary, params=None):
     ``initial`` (``params``: GTSAM's LevenbergMarquardtParams, default ``factors.lm_params()``), computed
     in a worker process."""
     return call_forked(_solve, fg, initial, summary, params)
+
+
+def in_worker(fn, *args):
+    """``fn(*args)`` (picklable result) in a worker process that SIGINT / SIGTERM kills at once
+    (``processes.call_forked``). scipy's sparse solvers are imported here first, so that no worker imports
+    them anew."""
+    import scipy.sparse.linalg  # noqa: F401
+
+    return call_forked(fn, *args)
 
 
 def _solve(fg, initial, summary, params):

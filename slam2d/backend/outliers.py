@@ -41,7 +41,7 @@ from slam2d.backend.factors import (
     pose_key,
     prior_factor,
 )
-from slam2d.backend.lm import levenberg_marquardt
+from slam2d.backend.lm import in_worker, levenberg_marquardt
 from slam2d.datasets import g2o
 
 READMIT_NOISE_CHI2 = 1000 * CHI2_3DOF_99  # pc_dcs: loops whose squared whitened residual after the screened
@@ -128,18 +128,17 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
        gate (``admission.admit_consistent``: the loops the screen could not support, as on MIT)."""
     t0 = time.perf_counter()
     odometry = g2o.odometry_mask(graph)
-    screened = consistency.pairwise_support(graph)
+    screened = in_worker(consistency.pairwise_support, graph)
     seconds = {"screen": time.perf_counter() - t0}
     t0 = time.perf_counter()
     robust = g2o_factor_list(graph, "dcs", phi, plain_odometry=True)
-    starts = {"spanning_tree": lambda: ini.spanning_tree(graph),
-              "chordal_screened": lambda: ini.chordal(subgraph(graph, screened))}
+    starts = {"chordal_screened": lambda: in_worker(ini.chordal, subgraph(graph, screened))}
     names = init.split(",") if init else [PC_DCS_START, SECOND_START]
     best, iterations = None, 0
     for name in names:
         if best is not None and not init and best[3] <= 1.0:
             break  # residuals within the information's noise: DCS did not stop short
-        start = starts[name]() if name in starts else ini.initial_poses(graph, name)
+        start = starts[name]() if name in starts else in_worker(ini.initial_poses, graph, name)
         poses, n = _solve(graph, _pick(robust, screened), start)
         iterations += n
         cost = factor_graph(robust, screened).error(g2o_values(graph.ids, poses))

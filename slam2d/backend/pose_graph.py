@@ -6,7 +6,8 @@ tight prior; each later keyframe a between factor from its predecessor (odometry
 scan matching, no robust kernel); loop closures are between factors with the configured
 robust kernel; landmark observations are bearing-range factors. iSAM2 keeps the incremental
 estimate (keyframes joined by odometry alone wait for the next loop or landmark, see
-``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors.
+``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors, in a
+worker process that a signal ends at once (``lm.in_worker``; iSAM2's updates stay in this process).
 
 Poses are numpy ``(x, y, theta)`` (m, m, rad); information matrices are 3x3
 inverse covariances in the frame of the measurement (GTSAM's tangent space,
@@ -37,6 +38,7 @@ from slam2d.backend.factors import (
     pose_key,
     prior_factor,
 )
+from slam2d.backend.lm import in_worker, levenberg_marquardt
 from slam2d.config import BackendConfig
 from slam2d.datasets import g2o
 from slam2d.errors import InputError
@@ -58,6 +60,20 @@ def _pose3(p, where: str) -> np.ndarray:
     if a.shape != (3,) or not np.all(np.isfinite(a)):
         raise InputError(where, f"expected a finite pose (x, y, theta), got {p!r}")
     return a
+
+
+def _lm(graph, initial):
+    """(gtsam.Values, iterations) of Levenberg-Marquardt (``lm_params``) over ``graph`` from ``initial``, in a
+    worker process that a signal ends at once (``lm``: the same values as GTSAM's ``optimize()``)."""
+    return levenberg_marquardt(graph, initial, lambda values, iterations: (values, iterations))
+
+
+def _gnc(graph, initial, inliers):
+    """(gtsam.Values, weights (M,)) of GTSAM's GNC (``robust.gnc_params``, ``inliers``: known inlier factors)."""
+    import gtsam
+
+    opt = gtsam.GncLMOptimizer(graph, initial, rb.gnc_params(inliers, lm_params=lm_params()))
+    return opt.optimize(), np.asarray(opt.getWeights()).ravel()
 
 
 @dataclass(frozen=True)
@@ -278,24 +294,20 @@ class PoseGraph:
         runs once more. With ``cfg.gnc``, GNC instead, rejecting loops it weighs as
         outliers. The result replaces the estimate and restarts iSAM2 from it.
         Returns the poses (K, 3)."""
-        import gtsam
-
         graph, index = self._batch_graph()
         initial = self._isam.calculateEstimate()
         initial.insert(self._new_values)
         t0 = time.perf_counter()
         if self.cfg.gnc:
             inliers = [g for g, f in enumerate(index) if self._factors[f].kind != "loop"]
-            opt = gtsam.GncLMOptimizer(graph, initial, rb.gnc_params(inliers, lm_params=lm_params()))
-            result = opt.optimize()
-            self._reject_outliers(index, np.asarray(opt.getWeights()).ravel())
+            result, weights = in_worker(_gnc, graph, initial, inliers)
+            self._reject_outliers(index, weights)
         else:
-            opt = gtsam.LevenbergMarquardtOptimizer(graph, initial, lm_params())
-            result = opt.optimize()
-            log.info("batch LM: %d iterations", opt.iterations())
+            result, iterations = _lm(graph, initial)
+            log.info("batch LM: %d iterations", iterations)
             if self._reject_inconsistent(result):
                 graph, index = self._batch_graph()
-                result = gtsam.LevenbergMarquardtOptimizer(graph, result, lm_params()).optimize()
+                result, _ = _lm(graph, result)
         log.info(
             "batch %s: error %.6g -> %.6g in %.3f s",
             "GNC" if self.cfg.gnc else "LM",
@@ -321,8 +333,7 @@ class PoseGraph:
             graph.add(between_factor(self._check_key(i), self._check_key(j), d, model))
         initial = self._isam.calculateEstimate()
         initial.insert(self._new_values)
-        result = gtsam.LevenbergMarquardtOptimizer(graph, initial, lm_params()).optimize()
-        return self._restart_at(result)
+        return self._restart_at(_lm(graph, initial)[0])
 
     def _restart_at(self, values) -> np.ndarray:
         """Restart iSAM2 at gtsam.Values ``values`` (a batch solution) over the active factors
