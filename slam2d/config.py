@@ -169,6 +169,13 @@ class LoopClosureConfig(Section):
         0.5, ge=0, description="m; reject a match with a rival this far from it or farther (0: no check) ..."
     )
     ambiguity_ratio: float = Field(0.9, gt=0, le=1, description="... scoring at least this fraction of its score")
+    innovation_gate: float = Field(
+        100.0,
+        ge=0,
+        description="a verified loop is not added when its squared Mahalanobis distance from the graph's estimate "
+        "(iSAM2's joint marginal plus the loop's own covariance) exceeds this (0: no gate); far above the 99 % "
+        "chi-square quantile (11.3) because the marginals are overconfident after long drift",
+    )
 
 
 class RefineConfig(Section):

@@ -101,7 +101,7 @@ def test_decisions_on_bounded_paths_equal_those_on_full_distances(strategy, monk
     for mode in ("bounded", "full"):
         if mode == "full":
             monkeypatch.setattr(explorer_mod, "Paths", lambda *a, **k: _Dense(Paths(*a, **k).dense()))
-            monkeypatch.setattr(pockets_mod, "in_ray_reach", lambda view, xy, r: np.ones(len(xy), dtype=bool))
+            monkeypatch.setattr(pockets_mod, "unknown_within_reach", lambda view, xy, r, table: np.full(len(xy), np.inf))
         goals[mode] = []
         for seed in range(12):
             rng = np.random.default_rng(200 + seed)
@@ -134,7 +134,7 @@ def add_pocket(state, rng) -> None:
 def test_views_of_pockets_kept_between_decisions_equal_those_scored_anew(monkeypatch):
     """A place keeps its gain from the last decision only while nothing within its rays' reach changed: after
     local changes to the map, the goal is the one an explorer with nothing kept chooses."""
-    monkeypatch.setattr(pockets_mod, "in_ray_reach", lambda view, xy, r: np.ones(len(xy), dtype=bool))
+    monkeypatch.setattr(pockets_mod, "unknown_within_reach", lambda view, xy, r, table: np.full(len(xy), np.inf))
     cfg = ExplorationConfig(strategy="nearest_frontier", gain_range=2.0, pocket_gain=0.02)
     checked = 0
     for seed in range(8):
@@ -202,3 +202,34 @@ def test_gains_aimed_at_the_entry_cells_of_unknown_space_count_what_all_rays_cou
     alone = _cast(state, free / 0.05, 360, 60.0, 1, np.zeros((0, 2), dtype=np.int64), False)[0]
     assert np.array_equal(information_gain(view, free, 3.0, 360, unknown_cells(view)), alone)
     assert len(unknown_cells(view)) < (state == UNKNOWN).sum() and alone.max() > 0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_hidden_cells_within_reach_bound_every_gain(seed):
+    """The count of unknown cells in the rays' square (infinite near the grid's edge) is never below the gain a
+    point's rays count, and it rules out the places far from a pocket, or near one walled in, without a ray."""
+    from slam2d.exploration.gridops import information_gain, unknown_within_reach
+
+    rng = np.random.default_rng(700 + seed)
+    state = random_map(rng, shape=(160, 190))
+    view = GridView(state, 0.05, (0.0, 0.0))
+    pts = rng.uniform([0.0, 0.0], [state.shape[1] * 0.05, state.shape[0] * 0.05], size=(3000, 2))
+    pts = pts[state[(pts[:, 1] / 0.05).astype(int), (pts[:, 0] / 0.05).astype(int)] != UNKNOWN]
+    for reach in (0.6, 1.5):
+        bound, gain = unknown_within_reach(view, pts, reach), information_gain(view, pts, reach, 360)
+        assert np.all(bound >= gain) and np.isfinite(bound).sum() > 20
+    assert unknown_within_reach(view, [[0.02, 4.0]], 0.6)[0] == np.inf  # beyond the edge: unknown
+    room = np.full((130, 170), OCCUPIED, dtype=np.int8)
+    room[2:-2, 2:-2] = FREE
+    add_pocket(room, rng)
+    view = GridView(room, 0.05, (0.0, 0.0))
+    free = np.argwhere(room == FREE)[:: 37][:, ::-1] * 0.05 + 0.025
+    bound, gain = unknown_within_reach(view, free, 0.5), information_gain(view, free, 0.5, 360)
+    assert np.all(bound >= gain) and (gain > 0).any()
+    assert (bound == 0).sum() > len(free) // 2  # most places are ruled out without a ray
+    hidden = np.argwhere(room == UNKNOWN)
+    lo, hi = hidden.min(axis=0), hidden.max(axis=0)
+    room[lo[0] - 1 : hi[0] + 2, lo[1] - 1 : hi[1] + 2] = OCCUPIED
+    room[lo[0] + 1 : hi[0], lo[1] + 1 : hi[1]] = UNKNOWN  # the pocket walled in: no ray enters it
+    bound = unknown_within_reach(GridView(room, 0.05, (0.0, 0.0)), free, 0.5)
+    assert np.isfinite(bound).sum() > len(free) // 2 and not bound[np.isfinite(bound)].any()

@@ -352,3 +352,32 @@ def test_a_sided_submap_does_not_pair_the_two_faces_of_a_thick_wall(seed):
     sided = match(ProbabilityGrid(np.vstack(sub), 0.05, views=views), scan, guess, 1.0, WINDOW_THETA)
     assert pose_error(blind.pose, truth)[0] > 0.2  # a wall's thickness off
     assert pose_error(sided.pose, truth)[0] < 0.03 and sided.score > CFG.min_score
+
+
+def test_a_verified_loop_far_from_where_the_graph_puts_it_is_not_added():
+    """Two loops verified for the same pair of a well-constrained corridor: the one agreeing with the graph is
+    added; the one 4.35 m off (a look-alike office along a corridor) exceeds the innovation gate and is counted as
+    gated, not added. Without the gate both go in."""
+    from types import SimpleNamespace
+
+    from slam2d.backend.slam import GraphSlamBackend
+    from slam2d.config import BackendConfig
+
+    odometry = np.diag([1 / 0.02**2, 1 / 0.02**2, 1 / 0.01**2])
+    loop_info = np.diag([1 / 0.05**2, 1 / 0.05**2, 1 / 0.02**2])
+    true = np.array([14.5, 0.0, 0.0])  # keyframe 29 seen from keyframe 0
+    closures = [LoopClosure(0, 29, true + [0.03, -0.02, 0.005], loop_info, 0.9),
+                LoopClosure(0, 29, true + [0.0, 4.35, 0.0], loop_info, 0.9)]  # fmt: skip
+    added = {}
+    for gate in (100.0, 0.0):
+        cfg = BackendConfig(name="pose_graph")
+        cfg.loop_closure.innovation_gate = gate
+        backend = GraphSlamBackend(cfg)
+        for k in range(30):
+            backend.graph.add_keyframe([0.5 * k, 0.0, 0.0], None if k == 0 else [0.5, 0.0, 0.0],
+                                       None if k == 0 else odometry)  # fmt: skip
+        backend.graph.update()
+        backend.loops = SimpleNamespace(candidates=lambda key, estimate: closures,
+                                        verify=lambda key, cand, estimate: cand)  # fmt: skip
+        added[gate] = backend._close_loops(29), backend.stats["loop closures gated"]
+    assert added == {100.0: (1, 1), 0.0: (2, 0)}

@@ -135,12 +135,16 @@ class GraphSlamBackend:
         every = self.cfg.loop_closure.wide_every
         if every and self._searches % every == 0:
             closures.append(self.loops.wide_search(key, estimate))
-        added = 0
+        added, gate = 0, self.cfg.loop_closure.innovation_gate
         for closure in closures:
-            if closure is not None:
-                self.graph.add_loop(closure.i, closure.j, closure.delta, closure.information)
-                self.stats["loop closures added"] += 1
-                added += 1
+            if closure is None:
+                continue
+            if gate and self.graph.loop_consistency(closure.i, closure.j, closure.delta, closure.information) > gate:
+                self.stats["loop closures gated"] += 1  # far from where the graph, with its uncertainty, puts it
+                continue
+            self.graph.add_loop(closure.i, closure.j, closure.delta, closure.information)
+            self.stats["loop closures added"] += 1
+            added += 1
         return added
 
     # ------------------------------------------------------------ sessions
@@ -258,7 +262,7 @@ class GraphSlamBackend:
         """Counts of keyframes and loop-closure outcomes (matcher and graph checks).
 
         ``loop closures kept``: added and not removed by the final check;
-        ``loop closures rejected``: by the matcher (score, points) or removed.
+        ``loop closures rejected``: by the matcher (score, points), the innovation gate, or removed.
         """
         out = dict(self.stats)
         removed = self.graph.rejected_inconsistent
@@ -267,5 +271,5 @@ class GraphSlamBackend:
             out.update({f"loop matcher {k}": v for k, v in self.loops.stats.items()})
             matcher = sum(v for k, v in self.loops.stats.items() if k.startswith("rejected"))
             out["loop closures kept"] = self.stats["loop closures added"] - removed
-            out["loop closures rejected"] = matcher + removed
+            out["loop closures rejected"] = matcher + self.stats["loop closures gated"] + removed
         return out

@@ -98,7 +98,7 @@ class Explorer:
         self._hidden_grid = None  # the hidden-cell grid, kept between views
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
-        self._gains_of: tuple = (None, None, None, None)  # (pocket grid, its places' gains, hidden cells, frame)
+        self._gains_of: tuple = (None,) * 5  # (pocket grid, its places' gains, hidden cells, reach table, frame)
         self.strategy = EXPLORATION_STRATEGIES.create(cfg.strategy, cfg.strategy_options)
         _warm_up(self)
 
@@ -424,6 +424,8 @@ def _warm_up(explorer: Explorer) -> None:
     if explorer.cfg.strategy in _WARM:
         return
     _WARM.add(explorer.cfg.strategy)
+    import networkx  # noqa: F401  (the hybrid map's routes: 0.7 s to import)
+
     state = np.full((60, 60), UNKNOWN, dtype=np.int8)
     state[10:50, 10:50] = FREE
     state[9, 9:51] = state[50, 9:51] = state[9:51, 9] = state[9:51, 50] = OCCUPIED

@@ -256,20 +256,40 @@ def unknown_in_sight(view: GridView, point, max_range: float, rays: int = 180) -
     return _rays(view, point, max_range, rays, 1)[2] == 1
 
 
-def in_ray_reach(view: GridView, xy, max_range: float) -> np.ndarray:
-    """Which points (P, 2) m have an UNKNOWN cell of ``view`` or the grid's edge (beyond it counts as unknown)
-    within ``max_range`` m and a cell and a half, all that a ray cast from there may count (P,) bool."""
-    from scipy.spatial import cKDTree
+def reach_table(state: np.ndarray) -> np.ndarray:
+    """Summed-area table (H + 1, W + 1) of the UNKNOWN cells of ``state`` (H, W) that a ray cast from outside the
+    unknown can count: those in a 4-connected block of unknown with a FREE 4-neighbour (a ray steps from cell to
+    4-neighbour and stops at an occupied one, so it enters unknown space from a free cell; a block walled in is
+    never seen)."""
+    from scipy import ndimage
 
+    unknown = state == UNKNOWN
+    labels, n = ndimage.label(unknown)
+    free = np.pad(state == FREE, 1)
+    entry = unknown & (free[:-2, 1:-1] | free[2:, 1:-1] | free[1:-1, :-2] | free[1:-1, 2:])
+    seen = np.zeros(n + 1, dtype=bool)
+    seen[labels[entry]] = True
+    seen[0] = False
+    table = np.zeros((state.shape[0] + 1, state.shape[1] + 1), dtype=np.int64)
+    np.cumsum(np.cumsum(seen[labels], axis=0), axis=1, out=table[1:, 1:])
+    return table
+
+
+def unknown_within_reach(view: GridView, xy, max_range: float, table: np.ndarray | None = None) -> np.ndarray:
+    """An upper bound (P,) on the UNKNOWN cells the rays cast from each point (P, 2) m can count: those of
+    ``reach_table`` (``table``, of ``view.state``) in the square of ``max_range`` m and a cell and a half round the
+    point; infinite within that of the grid's edge (beyond it counts as unknown) and from an unknown cell."""
+    table = reach_table(view.state) if table is None else table
     g = (np.asarray(xy, dtype=np.float64).reshape(-1, 2) - np.asarray(view.origin)) / view.resolution  # (col, row)
     bound = max_range / view.resolution + 1.5
     h, w = view.shape
     out = (g.min(axis=1) < bound) | (g[:, 0] > w - bound) | (g[:, 1] > h - bound)
-    unknown = np.argwhere(view.state == UNKNOWN)[:, ::-1] + 0.5  # cell centres (col, row)
-    if len(unknown) and not out.all():
-        d, _ = cKDTree(unknown).query(g[~out], distance_upper_bound=bound)
-        out[~out] = np.isfinite(d)
-    return out
+    at = np.clip(np.floor(g).astype(np.int64), 0, [w - 1, h - 1])
+    out |= view.state[at[:, 1], at[:, 0]] == UNKNOWN
+    lo = np.clip(np.floor(g - bound).astype(np.int64), 0, [w, h])  # (col, row) of the square's first cell ...
+    hi = np.clip(np.floor(g + bound).astype(np.int64) + 1, 0, [w, h])  # ... and one past its last
+    count = table[hi[:, 1], hi[:, 0]] - table[lo[:, 1], hi[:, 0]] - table[hi[:, 1], lo[:, 0]] + table[lo[:, 1], lo[:, 0]]
+    return np.where(out, np.inf, count)
 
 
 # --------------------------------------------------------------------------- straight-line reachability

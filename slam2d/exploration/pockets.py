@@ -14,11 +14,12 @@ from slam2d.exploration.gridops import (
     OCCUPIED,
     UNKNOWN,
     GridView,
-    in_ray_reach,
     information_gain,
     inside_polygon,
+    reach_table,
     unknown_cells,
     unknown_in_sight,
+    unknown_within_reach,
 )
 from slam2d.exploration.paths import as_paths
 
@@ -194,12 +195,12 @@ def pocket_goal(explorer, pose, view: GridView, distance):
         keep &= cKDTree(np.array(avoid)).query(xy)[0] >= explorer.cfg.avoid_radius
     scored = GridView(state, view.resolution, view.origin)
     floor = explorer.cfg.pocket_gain / view.resolution**2
-    if floor > 0:  # a place with no hidden cell within the rays' reach sees none: not scored
-        keep[keep] = in_ray_reach(scored, xy[keep], explorer.cfg.gain_range)
+    gains, unknown, table = _gains(explorer, view, state)
+    if floor > 0:  # a place with fewer hidden cells within the rays' reach than the floor sees too few: not scored
+        keep[keep] = unknown_within_reach(scored, xy[keep], explorer.cfg.gain_range, table) >= floor
     cells, xy = cells[keep], xy[keep]
     order = np.argsort(distance.lengths(cells), kind="stable")  # lengths only of the places scored
     cells, xy = cells[order], xy[order]
-    gains, unknown = _gains(explorer, view, state)
     flat = cells[:, 0] * view.shape[1] + cells[:, 1]
     lo, batch = 0, POCKET_BATCH[0]
     while lo < len(xy):  # nearest first: most decisions score a few places
@@ -219,13 +220,13 @@ def pocket_goal(explorer, pose, view: GridView, distance):
         lo, batch = lo + batch, min(2 * batch, POCKET_BATCH[1])
     return None
 
-def _gains(explorer, view: GridView, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The gains (H·W,) of the places scored on the pocket grid ``state`` (NaN: not yet), and its hidden cells
-    (K, 2). A place keeps its gain from the last pocket grid of the same frame unless a cell within the rays'
-    reach of it changed since (a place sees nothing farther): a box round the cells that changed is scored
-    anew, the rest of the building is not."""
+def _gains(explorer, view: GridView, state: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The gains (H·W,) of the places scored on the pocket grid ``state`` (NaN: not yet), its hidden cells
+    (K, 2) and its ``reach_table``. A place keeps its gain from the last pocket grid of the same frame unless a
+    cell within the rays' reach of it changed since (a place sees nothing farther): a box round the cells that
+    changed is scored anew, the rest of the building is not."""
     frame = view.shape, view.resolution, tuple(np.asarray(view.origin, dtype=float))
-    last, gains, _, last_frame = explorer._gains_of
+    last, gains, _, _, last_frame = explorer._gains_of
     if last is not state:
         if last is None or last_frame != frame:
             gains = np.full(state.size, np.nan)
@@ -235,5 +236,6 @@ def _gains(explorer, view: GridView, state: np.ndarray) -> tuple[np.ndarray, np.
                 m = int(np.ceil(explorer.cfg.gain_range / view.resolution)) + 2
                 lo, hi = np.maximum(changed.min(axis=0) - m, 0), changed.max(axis=0) + m + 1
                 gains.reshape(state.shape)[lo[0] : hi[0], lo[1] : hi[1]] = np.nan
-        explorer._gains_of = state, gains, unknown_cells(GridView(state, 1.0, (0.0, 0.0))), frame
-    return explorer._gains_of[1], explorer._gains_of[2]
+        hidden = unknown_cells(GridView(state, 1.0, (0.0, 0.0)))
+        explorer._gains_of = state, gains, hidden, reach_table(state), frame
+    return explorer._gains_of[1:4]
