@@ -7,7 +7,7 @@ For a sample of each log's relations (durations in ``--durations`` s, lengths ov
 frontend (the one default) registers the relation's second scan directly to its first, starting from
 the odometry delta: no chain, no local map of many scans, no pose graph. It prints, per variant of the
 scans, the matched lengths over the relations' lengths (sum ratio and median of per-pair ratios), the
-same for odometry, and the mean relation error (m) of the match and of odometry. A matcher or a
+same for odometry, and the mean relation error (m) and heading error (deg) of the match and of odometry. A matcher or a
 chain that drifts scan by scan cannot show here; a scale between the scans and the relations can.
 
 It also prints the turn ratios of the pairs that turn more than 10°. Variants: ``--range-scale s``
@@ -92,17 +92,20 @@ def audit(log: str, pairs: int, durations: tuple[float, float], scale: float, sw
             match, odom = (geometry.between(mount_a, geometry.compose(d, mount_b)) for d in (match, odom))
         truth = relations.delta[k]
         err = [np.hypot(*geometry.compose(d, geometry.inverse(truth))[:2]) for d in (match, odom)]
-        rows.append((np.hypot(*match[:2]), np.hypot(*odom[:2]), length[k], *err, match[2], odom[2], truth[2]))
+        turn_err = [abs(geometry.wrap_angle(d[2] - truth[2])) for d in (match, odom)]
+        rows.append((np.hypot(*match[:2]), np.hypot(*odom[:2]), length[k], *err, match[2], odom[2], truth[2],
+                     *turn_err))
     return rows
 
 
 def report(log: str, variant: str, rows: list) -> str:
-    m, o, r, em, eo, ym, yo, yr = np.array(rows).T
+    m, o, r, em, eo, ym, yo, yr, hm, ho = np.array(rows).T
     moved, turned = r > 0.3, np.abs(yr) > np.radians(10)
-    m, o, r, em, eo = m[moved], o[moved], r[moved], em[moved], eo[moved]
+    m, o, r, em, eo, hm, ho = m[moved], o[moved], r[moved], em[moved], eo[moved], hm[moved], ho[moved]
     ym, yo, yr = ym[turned] * np.sign(yr[turned]), yo[turned] * np.sign(yr[turned]), np.abs(yr[turned])
     return (f"| {log} | {variant} | {len(r)} | {m.sum() / r.sum():.4f} | {np.median(m / r):.4f} | "
             f"{o.sum() / r.sum():.4f} | {np.median(o / r):.4f} | {em.mean():.4f} | {eo.mean():.4f} | "
+            f"{np.degrees(hm.mean()):.2f} | {np.degrees(ho.mean()):.2f} | "
             f"{len(yr)} | {ym.sum() / yr.sum():.4f} | {yo.sum() / yr.sum():.4f} |")
 
 
@@ -116,8 +119,9 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--angle-scale", type=float, nargs="+", default=[1.0], help="beam angles multiplied by this")
     args = ap.parse_args(argv)
     print("| log | variant | pairs | match / relations (sum) | (median) | odometry / relations (sum) | (median) "
-          "| match error (m) | odometry error (m) | turns | match / relations turn | odometry / relations turn |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| match error (m) | odometry error (m) | match heading error (deg) | odometry heading error (deg) "
+          "| turns | match / relations turn | odometry / relations turn |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for log in args.logs:
         scans = list(open_dataset(load_config(f"experiments/{log}.yaml").dataset))
         for scale in args.range_scale:
