@@ -15,6 +15,8 @@ delta's frame) and the odometry and frontend deltas. It prints:
   remapped offline at each ratio (the correction to odometry kept only in the directions above
   it; the map is not rebuilt, so this approximates running the frontend at that ratio);
 - with ``--results``, the same for a SLAM trajectory (a results folder of that log);
+- the scan interval, odometry's speed quartiles, and how the frontend's heading increments follow
+  odometry's (a time offset between scans and odometry shows as a lag);
 - the chained lengths over the relations' lengths on the 3-10 s relations (sum ratio, and the median
   per-relation ratio over those longer than 0.5 m), for odometry and the frontend.
 
@@ -99,6 +101,23 @@ def remapped(rec: dict, ratio: float) -> tuple[np.ndarray, int]:
     return out, changed
 
 
+def timing(rec: dict) -> str:
+    """Scan interval and odometry speed quartiles; how the frontend's heading increments follow odometry's
+    (correlation at lags of -1, 0, +1 scans, and the lag in s from a fit over the neighbouring increments)."""
+    dt = np.diff(rec["stamp"])
+    ok = dt > 0
+    speed = np.hypot(rec["od"][1:, 0], rec["od"][1:, 1])[ok] / dt[ok]
+    fe, od = rec["delta"][:, 2], rec["od"][:, 2]
+    i = np.arange(1, len(fe) - 1)
+    i = i[np.isfinite(fe[i])]
+    corr = [np.corrcoef(fe[i], od[i + lag])[0, 1] for lag in (-1, 0, 1)]
+    coef = np.linalg.lstsq(np.column_stack([od[i - 1], od[i], od[i + 1]]), fe[i], rcond=None)[0]
+    lag = (coef[2] - coef[0]) / coef.sum() * np.median(dt)
+    return (f"scan interval {np.median(dt):.3f} s; speed quartiles {' / '.join(f'{q:.3f}' for q in np.percentile(speed, [25, 50, 75]))} m/s; "
+            f"heading increments vs odometry's: correlation {' / '.join(f'{c:.3f}' for c in corr)} at lag -1 / 0 / +1 scan, "
+            f"fitted lag {lag:+.3f} s")
+
+
 def scored(log: str, rec: dict, poses: np.ndarray):
     """(relations, ``poses`` in the relations' frame, errors (m), mask of the relations scored)."""
     cfg = load_config(f"experiments/{log}.yaml")
@@ -162,6 +181,7 @@ def audit(log: str, ratios: list[float], results: Path | None, overrides=(), ran
         rows.append((f"remapped at ratio {ratio:g} ({changed} scans)", deltas))
     for name, deltas in rows:
         print(f"| {name} | " + " | ".join(by_duration(log, rec, chain(deltas))) + " |", flush=True)
+    print(timing(rec))
     print(f"3–10 s lengths / relations': odometry {length_ratio(log, rec, chain(rec['od']))}, "
           f"frontend {length_ratio(log, rec, chain(rec['delta']))}")
     if results is not None:

@@ -98,6 +98,22 @@ def audit(log: str, pairs: int, durations: tuple[float, float], scale: float, sw
     return rows
 
 
+def metadata(log: str) -> str:
+    """The first LaserScan's sweep timing and beam layout of a bag log (CARMEN logs carry none)."""
+    cfg = load_config(f"experiments/{log}.yaml")
+    if cfg.dataset.kind != "rosbag":
+        return f"{log}: {cfg.dataset.kind} log, no sweep timing"
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([resolve_data_path(cfg.dataset.path, "dataset.path")]) as reader:
+        conns = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/LaserScan"]
+        conn, _, raw = next(reader.messages(connections=conns))
+        m = reader.deserialize(raw, conn.msgtype)
+    return (f"{log}: time_increment {m.time_increment} s, scan_time {m.scan_time} s, {len(m.ranges)} beams "
+            f"from {np.degrees(m.angle_min):.2f} deg by {np.degrees(m.angle_increment):.4f} deg, "
+            f"range_max {m.range_max:.2f} m")
+
+
 def report(log: str, variant: str, rows: list) -> str:
     m, o, r, em, eo, ym, yo, yr, hm, ho = np.array(rows).T
     moved, turned = r > 0.3, np.abs(yr) > np.radians(10)
@@ -122,6 +138,8 @@ def main(argv: list[str]) -> None:
           "| match error (m) | odometry error (m) | match heading error (deg) | odometry heading error (deg) "
           "| turns | match / relations turn | odometry / relations turn |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for log in args.logs:
+        print(metadata(log))
     for log in args.logs:
         scans = list(open_dataset(load_config(f"experiments/{log}.yaml").dataset))
         for scale in args.range_scale:
