@@ -14,6 +14,7 @@ It also prints the turn ratios of the pairs that turn more than 10°. Variants: 
 multiplies every range by s, ``--angle-scale a`` every beam angle by a; ``--sweep T`` de-skews each scan as if
 its beams had been taken over T s from its stamp (first beam at the stamp, as ROS LaserScan), moving
 each point by the odometry's velocity (from the neighbouring scans) over its beam's time offset.
+``--slam S`` runs the whole SLAM on each bag log with its ranges x S instead (heavy: minutes).
 """
 
 from __future__ import annotations
@@ -114,6 +115,29 @@ def metadata(log: str) -> str:
             f"range_max {m.range_max:.2f} m")
 
 
+def slam_with_scaled_ranges(log: str, scale: float) -> None:
+    """``slam2d run experiments/LOG.yaml -q`` in this process with every range of the bag x ``scale``; it
+    prints the results folder (its metrics.json holds the relations error)."""
+    from slam2d.cli import main as cli
+    from slam2d.datasets import rosbag
+
+    scans = rosbag.RosbagSource._raw_scans
+
+    def scaled(self):
+        for scan in scans(self):
+            yield dataclasses.replace(scan, ranges=scan.ranges * scale)
+
+    rosbag.RosbagSource._raw_scans = scaled
+    argv, sys.argv = sys.argv, ["slam2d", "run", f"experiments/{log}.yaml", "-q"]
+    try:
+        cli()
+    except SystemExit as done:
+        if done.code:
+            raise
+    finally:
+        rosbag.RosbagSource._raw_scans, sys.argv = scans, argv
+
+
 def report(log: str, variant: str, rows: list) -> str:
     m, o, r, em, eo, ym, yo, yr, hm, ho = np.array(rows).T
     moved, turned = r > 0.3, np.abs(yr) > np.radians(10)
@@ -133,7 +157,12 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--range-scale", type=float, nargs="+", default=[1.0])
     ap.add_argument("--sweep", type=float, nargs="+", default=[0.0], help="s: sweep time de-skewed")
     ap.add_argument("--angle-scale", type=float, nargs="+", default=[1.0], help="beam angles multiplied by this")
+    ap.add_argument("--slam", type=float, metavar="S", help="instead: a full SLAM run of each bag log with ranges x S")
     args = ap.parse_args(argv)
+    if args.slam is not None:
+        for log in args.logs:
+            slam_with_scaled_ranges(log, args.slam)
+        return
     print("| log | variant | pairs | match / relations (sum) | (median) | odometry / relations (sum) | (median) "
           "| match error (m) | odometry error (m) | match heading error (deg) | odometry heading error (deg) "
           "| turns | match / relations turn | odometry / relations turn |")
