@@ -1,7 +1,7 @@
 """Which scans leave directions unconstrained, and whether odometry or the scan matcher is right there.
 
 Usage: .venv/bin/python benchmarks/degeneracy_audit.py [intel aces fr079 fr-clinic csail]
-       [--ratios 10 100 300 1000] [--results LOG=FOLDER ...]
+       [--ratios 10 100 300 1000] [--results LOG=FOLDER ...] [--set KEY=VALUE ...] [--range-scale S]
 
 Runs the ICP frontend alone (the one default, no pose graph) over each log and records, per
 registered scan, the scan's information on the delta (``IcpFrontend._scan_information`` in the
@@ -14,12 +14,20 @@ delta's frame) and the odometry and frontend deltas. It prints:
   frontend, odometry's translation with the frontend's heading, and the frontend's deltas
   remapped offline at each ratio (the correction to odometry kept only in the directions above
   it; the map is not rebuilt, so this approximates running the frontend at that ratio);
-- with ``--results``, the same for a SLAM trajectory (a results folder of that log).
+- with ``--results``, the same for a SLAM trajectory (a results folder of that log);
+- the scan interval, odometry's speed quartiles, and how the frontend's heading increments follow
+  odometry's (a time offset between scans and odometry shows as a lag);
+- the chained lengths over the relations' lengths on the 3-10 s relations (sum ratio, and the median
+  per-relation ratio over those longer than 0.5 m), for odometry and the frontend.
+
+``--set`` overrides config keys (``frontend.options.map_window=3``); ``--range-scale`` multiplies
+every range by S before the frontend sees it.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from itertools import pairwise
 from pathlib import Path
@@ -29,7 +37,12 @@ import numpy as np
 from slam2d import geometry
 from slam2d.config import load as load_config
 from slam2d.datasets.registry import open_dataset
-from slam2d.evaluation.relations import read_relations, relation_errors, relations_frame
+from slam2d.evaluation.relations import (
+    _endpoints,
+    read_relations,
+    relation_errors,
+    relations_frame,
+)
 from slam2d.frontends import create_frontend
 from slam2d.frontends.common import local_information
 from slam2d.frontends.icp.degeneracy import constrained_projector
@@ -39,10 +52,11 @@ from slam2d.paths import resolve_data_path
 BINS = (0.0, 3.0, 10.0, 30.0, np.inf)  # s: relation durations
 
 
-def record(log: str) -> dict:
+def record(log: str, overrides: tuple[str, ...] = (), range_scale: float = 1.0) -> dict:
     """Per scan of ``log``: stamp, odometry pose, laser mount, odometry delta, frontend delta and the
-    scan's information on the delta (NaN where the scan was not registered)."""
-    cfg = load_config(f"experiments/{log}.yaml")
+    scan's information on the delta (NaN where the scan was not registered); config ``overrides``,
+    ranges multiplied by ``range_scale``."""
+    cfg = load_config(f"experiments/{log}.yaml", list(overrides))
     fe = create_frontend("icp", cfg.frontend.options)
     seen: list[np.ndarray] = []
     scan_information = fe._scan_information
@@ -54,6 +68,8 @@ def record(log: str) -> dict:
     fe._scan_information = spy
     rows, previous = [], None
     for scan in open_dataset(cfg.dataset):
+        if range_scale != 1.0:
+            scan = dataclasses.replace(scan, ranges=scan.ranges * range_scale)
         odom = np.zeros(3) if previous is None else geometry.between(previous.odom, scan.odom)
         seen.clear()
         delta = fe.process(scan, odom).delta
@@ -85,8 +101,25 @@ def remapped(rec: dict, ratio: float) -> tuple[np.ndarray, int]:
     return out, changed
 
 
-def by_duration(log: str, rec: dict, poses: np.ndarray) -> list[str]:
-    """Relations error (m) of ``poses`` (one per scan): all, then per duration bin, with counts."""
+def timing(rec: dict) -> str:
+    """Scan interval and odometry speed quartiles; how the frontend's heading increments follow odometry's
+    (correlation at lags of -1, 0, +1 scans, and the lag in s from a fit over the neighbouring increments)."""
+    dt = np.diff(rec["stamp"])
+    ok = dt > 0
+    speed = np.hypot(rec["od"][1:, 0], rec["od"][1:, 1])[ok] / dt[ok]
+    fe, od = rec["delta"][:, 2], rec["od"][:, 2]
+    i = np.arange(1, len(fe) - 1)
+    i = i[np.isfinite(fe[i])]
+    corr = [np.corrcoef(fe[i], od[i + lag])[0, 1] for lag in (-1, 0, 1)]
+    coef = np.linalg.lstsq(np.column_stack([od[i - 1], od[i], od[i + 1]]), fe[i], rcond=None)[0]
+    lag = (coef[2] - coef[0]) / coef.sum() * np.median(dt)
+    return (f"scan interval {np.median(dt):.3f} s; speed quartiles {' / '.join(f'{q:.3f}' for q in np.percentile(speed, [25, 50, 75]))} m/s; "
+            f"heading increments vs odometry's: correlation {' / '.join(f'{c:.3f}' for c in corr)} at lag -1 / 0 / +1 scan, "
+            f"fitted lag {lag:+.3f} s")
+
+
+def scored(log: str, rec: dict, poses: np.ndarray):
+    """(relations, ``poses`` in the relations' frame, errors (m), mask of the relations scored)."""
     cfg = load_config(f"experiments/{log}.yaml")
     tol = cfg.evaluation.relation_tolerance
     relations = read_relations(resolve_data_path(cfg.evaluation.relations, "evaluation.relations"))
@@ -94,6 +127,28 @@ def by_duration(log: str, rec: dict, poses: np.ndarray) -> list[str]:
     if frame == "laser":
         poses = geometry.compose(poses, rec["mount"])
     err, _, ok = relation_errors(rec["stamp"], poses, relations, tol)
+    return relations, poses, err, ok
+
+
+def length_ratio(log: str, rec: dict, poses: np.ndarray, lo: float = 3.0, hi: float = 10.0) -> str:
+    """Chained lengths over the relations' lengths on the ``lo``-``hi`` s relations: sum ratio, and the
+    median per-relation ratio over relations longer than 0.5 m."""
+    relations, poses, _, ok = scored(log, rec, poses)
+    cfg = load_config(f"experiments/{log}.yaml")
+    i1, i2, _ = _endpoints(rec["stamp"], relations, cfg.evaluation.relation_tolerance)
+    d = geometry.between(poses[i1[ok]], poses[i2[ok]])
+    length, truth = np.hypot(d[:, 0], d[:, 1]), np.hypot(relations.delta[ok, 0], relations.delta[ok, 1])
+    duration = np.abs(relations.t2 - relations.t1)[ok]
+    m = (duration >= lo) & (duration < hi)
+    long = m & (truth > 0.5)
+    if not long.any():
+        return "–"
+    return f"{length[m].sum() / truth[m].sum():.4f} (median {np.median(length[long] / truth[long]):.4f})"
+
+
+def by_duration(log: str, rec: dict, poses: np.ndarray) -> list[str]:
+    """Relations error (m) of ``poses`` (one per scan): all, then per duration bin, with counts."""
+    relations, poses, err, ok = scored(log, rec, poses)
     duration = np.abs(relations.t2 - relations.t1)[ok]
     cells = [f"{err.mean():.4f}"]
     for lo, hi in pairwise(BINS):
@@ -108,8 +163,8 @@ def read_tum(path: Path) -> np.ndarray:
     return np.column_stack([t[:, 1], t[:, 2], 2 * np.arctan2(t[:, 6], t[:, 7])])
 
 
-def audit(log: str, ratios: list[float], results: Path | None) -> None:
-    rec = record(log)
+def audit(log: str, ratios: list[float], results: Path | None, overrides=(), range_scale: float = 1.0) -> None:
+    rec = record(log, overrides, range_scale)
     info = rec["info"][np.isfinite(rec["info"][:, 0, 0])]
     inv = np.linalg.inv(np.linalg.cholesky(rec["odom_information"]))
     smallest = np.linalg.eigvalsh(inv @ info @ inv.T)[:, 0]
@@ -126,6 +181,9 @@ def audit(log: str, ratios: list[float], results: Path | None) -> None:
         rows.append((f"remapped at ratio {ratio:g} ({changed} scans)", deltas))
     for name, deltas in rows:
         print(f"| {name} | " + " | ".join(by_duration(log, rec, chain(deltas))) + " |", flush=True)
+    print(timing(rec))
+    print(f"3–10 s lengths / relations': odometry {length_ratio(log, rec, chain(rec['od']))}, "
+          f"frontend {length_ratio(log, rec, chain(rec['delta']))}")
     if results is not None:
         poses = read_tum(results / "trajectory.tum")
         if len(poses) == len(rec["stamp"]):
@@ -137,10 +195,12 @@ def main(argv: list[str]) -> None:
     ap.add_argument("logs", nargs="*", default=["intel", "aces", "fr079", "fr-clinic", "csail"])
     ap.add_argument("--ratios", type=float, nargs="+", default=[10.0, 100.0, 300.0, 1000.0])
     ap.add_argument("--results", action="append", default=[], help="LOG=FOLDER: a SLAM run of LOG to score too")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override")
+    ap.add_argument("--range-scale", type=float, default=1.0, help="every range multiplied by this")
     args = ap.parse_args(argv)
     results = dict(r.split("=", 1) for r in args.results)
     for log in args.logs:
-        audit(log, args.ratios, Path(results[log]) if log in results else None)
+        audit(log, args.ratios, Path(results[log]) if log in results else None, args.set, args.range_scale)
 
 
 if __name__ == "__main__":
