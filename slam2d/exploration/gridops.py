@@ -268,8 +268,7 @@ def reach_table(state: np.ndarray) -> np.ndarray:
     free = np.pad(state == FREE, 1)
     entry = unknown & (free[:-2, 1:-1] | free[2:, 1:-1] | free[1:-1, :-2] | free[1:-1, 2:])
     seen = np.zeros(n + 1, dtype=bool)
-    seen[labels[entry]] = True
-    seen[0] = False
+    seen[labels[entry]] = True  # entry cells are unknown: label 0 (known cells) stays unset
     table = np.zeros((state.shape[0] + 1, state.shape[1] + 1), dtype=np.int64)
     np.cumsum(np.cumsum(seen[labels], axis=0), axis=1, out=table[1:, 1:])
     return table
