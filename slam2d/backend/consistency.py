@@ -154,19 +154,41 @@ def pairwise_support(graph: g2o.PoseGraphFile, window: int = SUPPORT_WINDOW,
     return out
 
 
-def noise_ratio(graph: g2o.PoseGraphFile, poses, loops) -> float:
-    """How much larger the loops' squared whitened residuals at ``poses`` (N, 3) are than the graph's
-    information matrices predict: their median over the ``loops`` (M,) bool mask divided by the
-    chi-square median (3 dof); 1 when no loop is given. Below 1: the information understates the
-    precision (M3500: 0.010); about 1: calibrated; above 1: the information overstates it, or false
-    loops are among the ``loops``: then the lower quartile over the chi-square's speaks for the true
-    ones when it is lower (intel with 1000 grouped false loops among its 760 screened true ones: 2535
-    by the median, 0.017 by the quartile, 0.007 at the outlier-free optimum)."""
-    chi2 = edge_chi2(graph, poses)[np.asarray(loops, bool)]
+def residual_ratio(chi2: np.ndarray) -> float:
+    """How much larger squared whitened residuals ``chi2`` (K,) are than the information matrices predict:
+    their median over the chi-square median (3 dof); 1 when there is none. Above 1 the lower quartile over
+    the chi-square's speaks for the true loops when it is lower (false loops among them)."""
     if not len(chi2):
         return 1.0
     ratio = float(np.median(chi2)) / CHI2_3DOF_MEDIAN
     return min(ratio, float(np.quantile(chi2, 0.25)) / CHI2_3DOF_QUARTILE) if ratio > 1 else ratio
+
+
+REFUTE_P = 0.01  # a noise ratio above 1 is refuted when so many loops lie within the nominal gate that it
+# leaves them less than this chance (the 1 % of the gates' 99 % quantile)
+
+
+def noise_ratio(graph: g2o.PoseGraphFile, poses, loops) -> float:
+    """The noise of the ``loops`` (M,) bool mask at ``poses`` (N, 3) relative to what the graph's information
+    matrices predict (``residual_ratio`` of their squared whitened residuals). Below 1: the information
+    understates the precision (M3500: 0.010); about 1: calibrated; above 1: the information overstates it, or
+    false loops are among the ``loops`` (intel with 1000 grouped false loops among its 760 screened true
+    ones: 2535 by the median, 0.017 by the quartile, 0.007 at the outlier-free optimum). A ratio above 1 is
+    refuted when more loops lie within the nominal chi-square gate than a noise that large leaves a
+    ``REFUTE_P`` chance of (binomial tail): the solution fits those loops as their information states, the
+    rest are false, and the ratio is theirs (CSAIL with 1000 grouped false loops among its 128 true ones:
+    27 160 by the quartile, its 125 fitted loops within 0.4 while a ratio of 27 160 leaves each a chance of
+    2e-6 to lie within the gate; 0.03 from them, 0.04 at the outlier-free optimum)."""
+    from scipy import stats
+
+    chi2 = edge_chi2(graph, poses)[np.asarray(loops, bool)]
+    ratio = residual_ratio(chi2)
+    fitted = chi2 <= CHI2_3DOF_99
+    if ratio <= 1 or not fitted.any():
+        return ratio
+    chance = stats.chi2.cdf(CHI2_3DOF_99 / ratio, 3)  # of one loop at this noise to lie within the gate
+    refuted = stats.binom.sf(fitted.sum() - 1, len(chi2), chance) < REFUTE_P
+    return residual_ratio(chi2[fitted]) if refuted else ratio
 
 
 GATE_NOISE_MAX = 30.0  # a gate is at most this times its quantile of the measured noise (the noise ratio times it)

@@ -31,6 +31,7 @@ from slam2d.backend.consistency import (
     CHI2_3DOF_99,
     edge_chi2,
     noise_ratio,
+    residual_ratio,
     subgraph,
 )
 from slam2d.backend.factors import (
@@ -143,8 +144,9 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
         iterations += n
         cost = factor_graph(robust, screened).error(g2o_values(graph.ids, poses))
         if best is None or cost < best[0]:
-            best = (cost, poses, name, noise_ratio(graph, poses, screened & ~odometry))
-    _, poses, name, ratio = best
+            loops = screened & ~odometry
+            best = (cost, poses, name, residual_ratio(edge_chi2(graph, poses)[loops]), noise_ratio(graph, poses, loops))
+    _, poses, name, _, ratio = best
     scale = consistency.gate_scale(ratio)
     phi_used = max(phi * max(1.0, ratio), DCS_CALIBRATED_PHI * ratio)
     if phi_used != phi:  # DCS again from there with Phi in the graph's own noise units
