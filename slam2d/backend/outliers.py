@@ -61,8 +61,8 @@ PC_DCS_START = "spanning_tree"  # pc_dcs's start: the odometry, which grouped fa
 # loops 42 LM iterations through their fill-in and changed no result once Phi and the readmission gate follow
 # the measured noise); init="chordal_screened" names it
 SECOND_START = "chordal_screened"  # pc_dcs: the chordal start of the screened graph, also run when the screened
-# loops' residuals at the first DCS solution exceed what the information predicts (noise ratio above 1: DCS from
-# the odometry stopped short, as on CSAIL with its information x 10, ratio 9443, or the information overstates the
+# loops' residuals at the first DCS solution exceed what the information predicts (``residual_ratio`` above 1, before
+# the fitted loops can refute it: DCS from the odometry stopped short, as on CSAIL with its information x 10, ratio 9443, or the information overstates the
 # precision); the lower DCS cost is kept
 FINAL_ROUNDS = 4  # least-squares solves at most in the final judgement of the loops
 GNC_MAX_STEPS = 20  # graduation steps at most (each one warm-started weighted least squares)
@@ -116,7 +116,8 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
     units, times the noise scale):
 
     1. DCS over the odometry and the loops of ``pairwise_support`` from ``PC_DCS_START``, and from
-       ``SECOND_START`` when the noise ratio there exceeds 1, the lower DCS cost kept (``init``: the
+       ``SECOND_START`` when the screened loops' ``residual_ratio`` there exceeds 1 (DCS may have stopped
+       short), the lower DCS cost kept (``init``: the
        starts, comma-separated, all run; "chordal_screened" the chordal start of the screened graph);
     2. the noise ratio measured on the screened loops there (``consistency.noise_ratio``); when it
        asks for a wider Phi (at least ``DCS_CALIBRATED_PHI`` times the ratio, ``phi`` times the ratio
@@ -145,7 +146,8 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
         cost = factor_graph(robust, screened).error(g2o_values(graph.ids, poses))
         if best is None or cost < best[0]:
             loops = screened & ~odometry
-            best = (cost, poses, name, residual_ratio(edge_chi2(graph, poses)[loops]), noise_ratio(graph, poses, loops))
+            spread = residual_ratio(edge_chi2(graph, poses)[loops])
+            best = (cost, poses, name, spread, noise_ratio(graph, poses, loops))
     _, poses, name, _, ratio = best
     scale = consistency.gate_scale(ratio)
     phi_used = max(phi * max(1.0, ratio), DCS_CALIBRATED_PHI * ratio)
