@@ -139,15 +139,16 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
     best, iterations = None, 0
     for name in names:
         if best is not None and not init and best[3] <= 1.0:
-            break  # residuals within the information's noise: DCS did not stop short
+            break  # residuals within the information's noise, or refuted by the loops DCS came to fit
         start = starts[name]() if name in starts else in_worker(ini.initial_poses, graph, name)
         poses, n = _solve(graph, _pick(robust, screened), start)
         iterations += n
         cost = factor_graph(robust, screened).error(g2o_values(graph.ids, poses))
         if best is None or cost < best[0]:
             loops = screened & ~odometry
-            spread = residual_ratio(edge_chi2(graph, poses)[loops])
-            best = (cost, poses, name, spread, noise_ratio(graph, poses, loops))
+            moved = loops & (edge_chi2(graph, start) > CHI2_3DOF_99)  # loops the start did not fit
+            short = min(residual_ratio(edge_chi2(graph, poses)[loops]), noise_ratio(graph, poses, moved))
+            best = (cost, poses, name, short, noise_ratio(graph, poses, loops))
     _, poses, name, _, ratio = best
     scale = consistency.gate_scale(ratio)
     phi_used = max(phi * max(1.0, ratio), DCS_CALIBRATED_PHI * ratio)
