@@ -61,9 +61,10 @@ PC_DCS_START = "spanning_tree"  # pc_dcs's start: the odometry, which grouped fa
 # loops 42 LM iterations through their fill-in and changed no result once Phi and the readmission gate follow
 # the measured noise); init="chordal_screened" names it
 SECOND_START = "chordal_screened"  # pc_dcs: the chordal start of the screened graph, also run when the screened
-# loops' residuals at the first DCS solution exceed what the information predicts (``residual_ratio`` above 1, before
-# the fitted loops can refute it: DCS from the odometry stopped short, as on CSAIL with its information x 10, ratio 9443, or the information overstates the
-# precision); the lower DCS cost is kept
+# loops' residuals at the first DCS solution exceed what the information predicts (``residual_ratio`` above 1: DCS
+# from the odometry stopped short, or the information overstates the precision) and the loops the start did not fit
+# do not refute that (``noise_ratio``; CSAIL with 1000 grouped false loops: they do, the unfitted loops are false);
+# the lower DCS cost is kept
 FINAL_ROUNDS = 4  # least-squares solves at most in the final judgement of the loops
 GNC_MAX_STEPS = 20  # graduation steps at most (each one warm-started weighted least squares)
 GNC_MU_STEP = 1.4  # GTSAM's factor between steps; larger when the schedule would need more steps
@@ -116,9 +117,10 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
     units, times the noise scale):
 
     1. DCS over the odometry and the loops of ``pairwise_support`` from ``PC_DCS_START``, and from
-       ``SECOND_START`` when the screened loops' ``residual_ratio`` there exceeds 1 (DCS may have stopped
-       short), the lower DCS cost kept (``init``: the
-       starts, comma-separated, all run; "chordal_screened" the chordal start of the screened graph);
+       ``SECOND_START`` when the screened loops' ``residual_ratio`` there exceeds 1 and the loops the start
+       did not fit do not refute it (``noise_ratio``: DCS may have stopped short), the lower DCS cost kept
+       (``init``: the starts, comma-separated, all run; "chordal_screened" the chordal start of the screened
+       graph);
     2. the noise ratio measured on the screened loops there (``consistency.noise_ratio``); when it
        asks for a wider Phi (at least ``DCS_CALIBRATED_PHI`` times the ratio, ``phi`` times the ratio
        when above 1), DCS over the screened loops again from there;
