@@ -286,13 +286,32 @@ def _first_seeing(state, gxy, n_rays, max_t, unknown, floor, gains):
 
 
 def unknown_cells(view: GridView) -> np.ndarray:
-    """The UNKNOWN cells (K, 2) (row, col) of ``view`` a ray enters unknown space by: those with a FREE 4-neighbour
-    (a ray steps from cell to 4-neighbour and stops at an occupied one, so one that reaches an unknown cell from
-    outside the unknown came from a free cell next to it); for :func:`information_gain` called on the view many
-    times."""
-    free = np.pad(view.state == FREE, 1)  # beyond the grid: no entry
-    entry = (view.state == UNKNOWN) & (free[:-2, 1:-1] | free[2:, 1:-1] | free[1:-1, :-2] | free[1:-1, 2:])
-    return np.argwhere(entry)
+    """The UNKNOWN cells (K, 2) (row, col) of ``view`` a ray enters unknown space by, in raster order: those with a
+    FREE 4-neighbour (a ray steps from cell to 4-neighbour and stops at an occupied one, so one that reaches an
+    unknown cell from outside the unknown came from a free cell next to it); for :func:`information_gain` called
+    on the view many times."""
+    return _entry_cells(np.ascontiguousarray(view.state))
+
+
+@njit(cache=True)
+def _entry_cells(state):
+    h, w = state.shape
+    entry = np.zeros((h, w), dtype=np.bool_)
+    n = 0
+    for r in range(h):
+        for c in range(w):
+            if state[r, c] == 2 and ((r > 0 and state[r - 1, c] == 0) or (r < h - 1 and state[r + 1, c] == 0)
+                                     or (c > 0 and state[r, c - 1] == 0) or (c < w - 1 and state[r, c + 1] == 0)):
+                entry[r, c] = True
+                n += 1
+    out = np.empty((n, 2), dtype=np.int64)
+    k = 0
+    for r in range(h):
+        for c in range(w):
+            if entry[r, c]:
+                out[k, 0], out[k, 1] = r, c
+                k += 1
+    return out
 
 
 def _rays(view: GridView, points, max_range: float, rays: int, rounds: int, unknown=None):
@@ -325,10 +344,11 @@ def information_gain(view: GridView, points, max_range: float, rays: int = 180, 
     return _rays(view, points, max_range, rays, 1, unknown)[0]
 
 
-def shared_gain(view: GridView, points, max_range: float, rays: int = 180) -> tuple[np.ndarray, np.ndarray]:
+def shared_gain(view: GridView, points, max_range: float, rays: int = 180, unknown=None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`information_gain` (P,) of each point, and its share (P,) of the unknown cells: a cell seen from k of
-    the points counts 1/k to each, so the shares add up to the unknown area all the points see together."""
-    own, shares, _ = _rays(view, points, max_range, rays, 2)
+    the points counts 1/k to each, so the shares add up to the unknown area all the points see together;
+    ``unknown``: the view's ``unknown_cells`` if already known."""
+    own, shares, _ = _rays(view, points, max_range, rays, 2, unknown)
     return own, shares
 
 

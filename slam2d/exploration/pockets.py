@@ -197,6 +197,7 @@ def pocket_goal(explorer, pose, view: GridView, distance):
     scored = GridView(state, view.resolution, view.origin)
     floor = explorer.cfg.pocket_gain / view.resolution**2
     gains, unknown, table = _gains(explorer, view, state)
+    keep &= ~(gains[cells[:, 0] * view.shape[1] + cells[:, 1]] < floor)  # counted already and seeing too few
     if floor > 0:  # a place with fewer hidden cells within the rays' reach than the floor sees too few: not scored
         keep[keep] = unknown_within_reach(scored, xy[keep], explorer.cfg.gain_range, table) >= floor
     cells, xy = cells[keep], xy[keep]
