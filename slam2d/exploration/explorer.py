@@ -434,8 +434,8 @@ _WARM: set = set()  # the strategies whose first decision this process has made
 def _warm_up(explorer: Explorer) -> None:
     """Decisions of a throwaway explorer of the same strategy, the first time a strategy is made in this process: on
     a small room with an opening (a frontier; again once the map changed; the goal checked), then with a pocket
-    behind a wall's gap only: numba's compiled kernels and the strategy's libraries are loaded then, not in the
-    first decisions' time."""
+    behind a wall's gap only, and a straight way checked (a candidate's route): numba's compiled kernels and the
+    strategy's libraries are loaded then, not in the first decisions' time."""
     if explorer.cfg.strategy in _WARM:
         return
     _WARM.add(explorer.cfg.strategy)
@@ -457,6 +457,7 @@ def _warm_up(explorer: Explorer) -> None:
     state[52:58, 14:46] = UNKNOWN  # a pocket seen through a gap only
     state[51, 28:32] = UNKNOWN
     throwaway.decide(pose, GridView(state, 0.05, (0.0, 0.0)))
+    straight_reachable(state == OCCUPIED, 0.05, (0.0, 0.0), pose, pose + 1.0, 0.4)  # a way back over the graph
 
 
 def _option(goal, candidate: bool, terms) -> dict:
