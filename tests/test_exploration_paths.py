@@ -275,3 +275,31 @@ def test_no_pocket_search_when_the_robot_reaches_no_cell(monkeypatch):
     monkeypatch.setattr(explorer_mod.Explorer, "_pocket_grid", lambda self, view: made.append(1))
     assert ex.decide(np.array([2.0, 2.0, 0.0]), GridView(state, 0.05, (0.0, 0.0))) is None
     assert not made
+
+
+def test_a_frontier_goal_off_the_region_is_the_reachable_cell_within_reach_nearest_its_centre():
+    """A region with no reachable cell of its own: its goal is, among the reachable cells within the reach
+    (Euclidean, between cell centres) of one of its cells, the one nearest its centre (the first in raster order
+    of equals); none when no reachable cell is that near."""
+    from slam2d.exploration.frontiers import _goal_cell
+
+    rng = np.random.default_rng(900)
+    checked = 0
+    for _ in range(300):
+        h, w = rng.integers(20, 80, 2)
+        reachable = rng.random((h, w)) < rng.uniform(0.01, 0.4)
+        start = rng.integers(0, [h, w])
+        steps = np.cumsum(rng.integers(-1, 2, (rng.integers(1, 25), 2)), axis=0)
+        cells = np.unique(np.clip(start + steps, 0, [h - 1, w - 1]), axis=0)
+        reachable[cells[:, 0], cells[:, 1]] = False
+        reach = float(rng.choice([10.000000000000002, 4.0, rng.uniform(1.0, 9.0)]))
+        every = np.argwhere(reachable)  # raster order
+        gap = np.sqrt(((every[:, None, :] - cells[None]) ** 2).sum(axis=2)).min(axis=1)
+        near = every[gap <= reach]
+        got = _goal_cell(cells, reachable, reach)
+        if len(near) == 0:
+            assert got is None
+            continue
+        assert np.array_equal(got, near[np.argmin(np.hypot(*(near - cells.mean(axis=0)).T))])
+        checked += 1
+    assert checked > 100
