@@ -25,6 +25,7 @@ from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candi
 from slam2d.exploration.config import ExplorationConfig
 from slam2d.exploration.frontiers import (
     WALL_GAP,
+    _goal_cell,
     depth_cells,
     find_frontiers,
     frontier_mask,
@@ -434,8 +435,8 @@ _WARM: set = set()  # the strategies whose first decision this process has made
 def _warm_up(explorer: Explorer) -> None:
     """Decisions of a throwaway explorer of the same strategy, the first time a strategy is made in this process: on
     a small room with an opening (a frontier; again once the map changed; the goal checked), then with a pocket
-    behind a wall's gap only, and a straight way checked (a candidate's route): numba's compiled kernels and the
-    strategy's libraries are loaded then, not in the first decisions' time."""
+    behind a wall's gap only; then a straight way checked (a candidate's route) and a frontier's goal off its own
+    cells: numba's compiled kernels and the strategy's libraries are loaded then, not in the first decisions' time."""
     if explorer.cfg.strategy in _WARM:
         return
     _WARM.add(explorer.cfg.strategy)
@@ -458,6 +459,7 @@ def _warm_up(explorer: Explorer) -> None:
     state[51, 28:32] = UNKNOWN
     throwaway.decide(pose, GridView(state, 0.05, (0.0, 0.0)))
     straight_reachable(state == OCCUPIED, 0.05, (0.0, 0.0), pose, pose + 1.0, 0.4)  # a way back over the graph
+    _goal_cell(np.array([[0, 0]]), ~np.eye(3, dtype=bool), 1.5)  # a frontier's goal off its own cells
 
 
 def _option(goal, candidate: bool, terms) -> dict:
