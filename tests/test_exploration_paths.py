@@ -303,3 +303,22 @@ def test_a_frontier_goal_off_the_region_is_the_reachable_cell_within_reach_neare
         assert np.array_equal(got, near[np.argmin(np.hypot(*(near - cells.mean(axis=0)).T))])
         checked += 1
     assert checked > 100
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_shares_split_each_cell_a_point_sees_among_the_points_seeing_it(seed):
+    """``shared_gain``: each point's gain is the unknown cells in its sight, its share the sum over them of one over
+    the number of points that see each (the shares add up to the cells the points see together)."""
+    from slam2d.exploration.gridops import shared_gain, unknown_in_sight
+
+    rng = np.random.default_rng(1000 + seed)
+    view = GridView(random_map(rng), 0.05, (0.0, 0.0))
+    rows, cols = np.nonzero(view.state[25:-25, 25:-25] == FREE)  # rays of 1 m stay inside the grid
+    pick = rng.choice(len(rows), 30, replace=False)
+    pts = view.to_world(np.column_stack([rows[pick] + 25, cols[pick] + 25]))
+    seen = [unknown_in_sight(view, p, 1.0, 120) for p in pts]
+    seers = np.sum(seen, axis=0)
+    own, shares = shared_gain(view, pts, 1.0, 120)
+    assert np.array_equal(own, [s.sum() for s in seen]) and own.max() > 0
+    assert np.allclose(shares, [(1.0 / seers[s]).sum() for s in seen])
+    assert np.isclose(shares.sum(), np.count_nonzero(seers))

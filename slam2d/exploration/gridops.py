@@ -209,12 +209,15 @@ def _aim_point(state, gx, gy, n_rays, max_t, cells, starts, size, nbc, need):
 
 
 @njit(cache=True)
-def _trace(state, gx, gy, n_rays, max_t, need, mark, token, seers, rnd):
-    """The rays ``need`` marks from (gx, gy), through free and unknown cells until an occupied one. Round 0: the
-    unknown cells not yet marked ``token`` (and steps beyond the map) they meet, counted, marked, and added to
-    ``seers`` (H, W) when it is a grid; round 1: the sum of 1 / seers over them (steps beyond the map: 1)."""
+def _trace(state, gx, gy, n_rays, max_t, need, mark, token, seers, ev, n_ev):
+    """The rays ``need`` marks from (gx, gy), through free and unknown cells until an occupied one: the unknown
+    cells not yet marked ``token`` (and steps beyond the map) they meet, counted and marked, and added to ``seers``
+    (H, W) when it is a grid. When ``ev`` is not empty, each of them is written to it from ``n_ev`` in the order
+    met (the flat index of a cell, -1 for a step beyond the map; ``ev`` has room for ``_steps_at_most``). Returns
+    (count, n_ev)."""
     h, w = state.shape
     shared = seers.shape[0] > 1
+    record = ev.shape[0] > 0
     total = 0.0
     for b in range(n_rays):
         if not need[b]:
@@ -224,46 +227,60 @@ def _trace(state, gx, gy, n_rays, max_t, need, mark, token, seers, rnd):
         while t < max_t:
             if r < 0 or c < 0 or r >= h or c >= w:
                 total += 1.0  # beyond the map: unknown, no other point's
+                if record:
+                    ev[n_ev] = -1
+                    n_ev += 1
             else:
                 s = state[r, c]
                 if s == 1:
                     break
                 if s == 2 and mark[r, c] != token:
                     mark[r, c] = token
-                    if rnd == 0:
-                        total += 1.0
-                        if shared:
-                            seers[r, c] += 1
-                    else:
-                        total += 1.0 / seers[r, c]
+                    total += 1.0
+                    if shared:
+                        seers[r, c] += 1
+                    if record:
+                        ev[n_ev] = r * w + c
+                        n_ev += 1
             t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
-    return total
+    return total, n_ev
 
 
 @njit(cache=True)
 def _cast(state, gxy, n_rays, max_t, rounds, unknown, aimed):
     """Rays from each point (P, 2) grid units through free and unknown cells until an occupied one: ``own`` (P,)
     unknown cells in sight (steps beyond the map counted as unknown), the ``mark`` (H, W) of the last point seeing
-    each cell (1-based), and with ``rounds`` = 2 the ``shares`` (P,): a cell seen from k of the points is 1/k.
-    With ``aimed``, only the rays ``_aim_point`` finds aimed at one of the ``unknown`` cells (K, 2) (at least the
-    entry cells of unknown space) are cast (the same counts)."""
+    each cell (1-based), and with ``rounds`` = 2 the ``shares`` (P,): a cell seen from k of the points is 1/k (summed
+    over what each point's rays met, in the order met). With ``aimed``, only the rays ``_aim_point`` finds aimed at
+    one of the ``unknown`` cells (K, 2) (at least the entry cells of unknown space) are cast (the same counts)."""
     h, w = state.shape
     n = gxy.shape[0]
     mark = np.zeros((h, w), dtype=np.int32)
-    seers = np.zeros((h if rounds > 1 else 1, w if rounds > 1 else 1), dtype=np.int32)  # points seeing each cell
+    shared = rounds > 1
+    seers = np.zeros((h if shared else 1, w if shared else 1), dtype=np.int32)  # points seeing each cell
     own, shares = np.zeros(n), np.zeros(n)
     need = np.ones(n_rays, dtype=np.bool_)
     size = int(np.ceil(max_t + 1.0))
     cells, starts, nbc = _buckets(unknown, state.shape, size)
-    for rnd in range(rounds):  # count the points seeing each cell, then share it among them
+    most = n_rays * (2 * int(np.ceil(max_t)) + 4)  # steps of a point's rays at most (two a cell of length, and one)
+    ev, n_ev = np.empty(most if shared else 0, dtype=np.int64), 0  # what each point's rays met, in order
+    first = np.zeros(n + 1, dtype=np.int64)
+    for p in range(n):
+        if aimed:
+            _aim_point(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, cells, starts, size, nbc, need)
+        if shared and n_ev + most > ev.shape[0]:  # room for this point's steps
+            grown = np.empty(2 * ev.shape[0], dtype=np.int64)
+            grown[:n_ev] = ev[:n_ev]
+            ev = grown
+        own[p], n_ev = _trace(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, need, mark, p + 1, seers, ev, n_ev)
+        first[p + 1] = n_ev
+    if shared:  # each cell a point sees shared among the points seeing it
+        flat = seers.ravel()
         for p in range(n):
-            if aimed:
-                _aim_point(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, cells, starts, size, nbc, need)
-            total = _trace(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, need, mark, rnd * n + p + 1, seers, rnd)
-            if rnd == 0:
-                own[p] = total
-            else:
-                shares[p] = total
+            total = 0.0
+            for k in range(first[p], first[p + 1]):
+                total += 1.0 if ev[k] < 0 else 1.0 / flat[ev[k]]
+            shares[p] = total
     return own, shares, mark
 
 
@@ -272,14 +289,14 @@ def _first_seeing(state, gxy, n_rays, max_t, unknown, floor, gains):
     """The first point (P, 2) grid units in order whose ``_cast`` gain is at least ``floor``, or -1; ``gains`` (P,)
     NaN where not counted yet, filled in for the points counted up to it (always aimed)."""
     mark = np.zeros(state.shape, dtype=np.int32)
-    seers = np.zeros((1, 1), dtype=np.int32)
+    seers, nothing = np.zeros((1, 1), dtype=np.int32), np.empty(0, dtype=np.int64)
     need = np.ones(n_rays, dtype=np.bool_)
     size = int(np.ceil(max_t + 1.0))
     cells, starts, nbc = _buckets(unknown, state.shape, size)
     for p in range(gxy.shape[0]):
         if np.isnan(gains[p]):
             _aim_point(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, cells, starts, size, nbc, need)
-            gains[p] = _trace(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, need, mark, p + 1, seers, 0)
+            gains[p] = _trace(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, need, mark, p + 1, seers, nothing, 0)[0]
         if gains[p] >= floor:
             return p
     return -1
