@@ -306,16 +306,19 @@ def _subspaces(view, found, cell: float, distance: np.ndarray):
     inv = inv.ravel()
     distance = as_paths(distance)
     goals, paths, members, ends = np.empty((len(keys), 2)), np.empty(len(keys)), [], []
+    order = np.argsort(inv, kind="stable")  # each subspace's cells in their order in ``cells``
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(inv, minlength=len(keys)))])
+    reach = distance.reach[cells[:, 0], cells[:, 1]]
     for k in range(len(keys)):
-        mine = cells[inv == k]
-        ok = distance.reach[mine[:, 0], mine[:, 1]]
+        at = order[bounds[k] : bounds[k + 1]]
+        mine, ok = cells[at], reach[at]
         if ok.any():
             own = mine[ok]
             best = own[np.argmin(np.hypot(*(own - mine.mean(axis=0)).T))]
             goals[k] = view.to_world(best)
             ends.append((k, best))
         else:
-            f = found[int(np.argmax(np.bincount(region[inv == k], minlength=len(found))))]
+            f = found[int(np.argmax(np.bincount(region[at], minlength=len(found))))]
             goals[k], paths[k] = f.goal, f.path
         members.append(mine)
     if ends:
