@@ -237,14 +237,15 @@ class TourPlanner:
         frame = view.shape, view.resolution, tuple(np.asarray(view.origin, dtype=float))
         if frame != self._coarse_frame:
             self._rows, self._coarse_frame = {}, frame
-        coarse = coarse_grid(view.traversable(explorer.radius), k)
         at = np.asarray(cells, dtype=np.int64) // k
         out = np.empty((len(at), len(at)))
-        refresh = explorer.cfg.tour.refresh
+        refresh, coarse = explorer.cfg.tour.refresh, None
         for i, cell in enumerate(at):
             key = tuple(cell)
             row = self._rows.get(key)
             if row is None or self.decisions - row[1] >= refresh:
+                if coarse is None:  # made only when a row is measured
+                    coarse = coarse_grid(view.traversable(explorer.radius), k)
                 row = Paths(coarse, cell, view.resolution * k, snap_cells=2), self.decisions
                 self._rows[key] = row
             out[i] = row[0].lengths(at)  # the search resumed only as far as these cells
