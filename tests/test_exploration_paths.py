@@ -233,3 +233,92 @@ def test_hidden_cells_within_reach_bound_every_gain(seed):
     room[lo[0] + 1 : hi[0], lo[1] + 1 : hi[1]] = UNKNOWN  # the pocket walled in: no ray enters it
     bound = unknown_within_reach(GridView(room, 0.05, (0.0, 0.0)), free, 0.5)
     assert np.isfinite(bound).sum() > len(free) // 2 and not bound[np.isfinite(bound)].any()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_first_place_seeing_enough_counted_one_at_a_time_is_the_first_of_all_gains(seed):
+    """The search for the nearest place that sees at least the floor stops at the first place in order whose
+    gain reaches it, with the gains of the places counted up to it (and those known before kept) equal to
+    ``information_gain``; -1 when none does."""
+    from slam2d.exploration.gridops import first_seeing, information_gain, unknown_cells
+
+    rng = np.random.default_rng(800 + seed)
+    view = GridView(random_map(rng, shape=(120, 150)), 0.05, (0.0, 0.0))
+    rows, cols = np.nonzero(view.state != UNKNOWN)
+    pick = rng.choice(len(rows), 300, replace=False)
+    xy = view.to_world(np.column_stack([rows[pick], cols[pick]]))
+    every = information_gain(view, xy, 1.5, 360)
+    for floor in (np.median(every), every.max(), every.max() + 1):
+        gains = np.full(len(xy), np.nan)
+        gains[::7] = every[::7]  # known from an earlier level
+        k = first_seeing(view, xy, 1.5, 360, floor, gains, unknown_cells(view))
+        first = np.nonzero(every >= floor)[0]
+        assert k == (first[0] if len(first) else -1)
+        counted = ~np.isnan(gains)
+        assert np.array_equal(gains[counted], every[counted])
+        last = k if k >= 0 else len(xy) - 1
+        assert counted[: last + 1].all()  # every place up to the first that sees enough
+        beyond = np.arange(last + 1, len(xy))
+        assert np.array_equal(counted[beyond], beyond % 7 == 0)  # no place beyond it counted anew
+
+
+def test_no_pocket_search_when_the_robot_reaches_no_cell(monkeypatch):
+    """With no cell the robot can reach there is no place to try: the decision is None, and the pocket grid is
+    not made."""
+    state = np.full((80, 80), UNKNOWN, dtype=np.int8)
+    state[30:50, 30:50] = OCCUPIED
+    state[38:42, 38:42] = FREE  # the robot's own cells, too narrow for its disc
+    state[60:70, 60:70] = FREE
+    state[64:66, 64:66] = UNKNOWN  # a pocket it could not reach
+    ex = Explorer(ExplorationConfig(strategy="utility"), 0.2, 0.05, 12.0)
+    made = []
+    monkeypatch.setattr(explorer_mod.Explorer, "_pocket_grid", lambda self, view: made.append(1))
+    assert ex.decide(np.array([2.0, 2.0, 0.0]), GridView(state, 0.05, (0.0, 0.0))) is None
+    assert not made
+
+
+def test_a_frontier_goal_off_the_region_is_the_reachable_cell_within_reach_nearest_its_centre():
+    """A region with no reachable cell of its own: its goal is, among the reachable cells within the reach
+    (Euclidean, between cell centres) of one of its cells, the one nearest its centre (the first in raster order
+    of equals); none when no reachable cell is that near."""
+    from slam2d.exploration.frontiers import _goal_cell
+
+    rng = np.random.default_rng(900)
+    checked = 0
+    for _ in range(300):
+        h, w = rng.integers(20, 80, 2)
+        reachable = rng.random((h, w)) < rng.uniform(0.01, 0.4)
+        start = rng.integers(0, [h, w])
+        steps = np.cumsum(rng.integers(-1, 2, (rng.integers(1, 25), 2)), axis=0)
+        cells = np.unique(np.clip(start + steps, 0, [h - 1, w - 1]), axis=0)
+        reachable[cells[:, 0], cells[:, 1]] = False
+        reach = float(rng.choice([10.000000000000002, 4.0, rng.uniform(1.0, 9.0)]))
+        every = np.argwhere(reachable)  # raster order
+        gap = np.sqrt(((every[:, None, :] - cells[None]) ** 2).sum(axis=2)).min(axis=1)
+        near = every[gap <= reach]
+        got = _goal_cell(cells, reachable, reach)
+        if len(near) == 0:
+            assert got is None
+            continue
+        assert np.array_equal(got, near[np.argmin(np.hypot(*(near - cells.mean(axis=0)).T))])
+        checked += 1
+    assert checked > 100
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_shares_split_each_cell_a_point_sees_among_the_points_seeing_it(seed):
+    """``shared_gain``: each point's gain is the unknown cells in its sight, its share the sum over them of one over
+    the number of points that see each (the shares add up to the cells the points see together)."""
+    from slam2d.exploration.gridops import shared_gain, unknown_in_sight
+
+    rng = np.random.default_rng(1000 + seed)
+    view = GridView(random_map(rng), 0.05, (0.0, 0.0))
+    rows, cols = np.nonzero(view.state[25:-25, 25:-25] == FREE)  # rays of 1 m stay inside the grid
+    pick = rng.choice(len(rows), 30, replace=False)
+    pts = view.to_world(np.column_stack([rows[pick] + 25, cols[pick] + 25]))
+    seen = [unknown_in_sight(view, p, 1.0, 120) for p in pts]
+    seers = np.sum(seen, axis=0)
+    own, shares = shared_gain(view, pts, 1.0, 120)
+    assert np.array_equal(own, [s.sum() for s in seen]) and own.max() > 0
+    assert np.allclose(shares, [(1.0 / seers[s]).sum() for s in seen])
+    assert np.isclose(shares.sum(), np.count_nonzero(seers))

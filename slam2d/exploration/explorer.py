@@ -25,6 +25,7 @@ from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candi
 from slam2d.exploration.config import ExplorationConfig
 from slam2d.exploration.frontiers import (
     WALL_GAP,
+    _goal_cell,
     depth_cells,
     find_frontiers,
     frontier_mask,
@@ -39,6 +40,7 @@ from slam2d.exploration.gridops import (
     inside_polygon,
     shared_gain,
     straight_reachable,
+    unknown_cells,
 )
 from slam2d.exploration.hybrid import FINAL, HybridMap
 from slam2d.exploration.paths import Paths, path_lengths
@@ -94,7 +96,8 @@ class Explorer:
         self.decision_seconds: list[float] = []  # wall clock of each decision
         self.decision_cpu_seconds: list[float] = []  # the deciding thread's CPU time (little moved by other jobs)
         self.fallbacks = self.pocket_goals = self.tight_goals = 0
-        self._hidden_of: tuple = (None, None)  # (view, its hidden-cell grid) of the latest view counted on
+        self._hidden_of: tuple = (None, None, None)  # (view, its hidden-cell grid, its entry cells) counted on last
+        self._maintained: tuple = (None, -1, [])  # (view, inaccessible goals, its open candidates) of the last upkeep
         self._hidden_grid = None  # the hidden-cell grid, kept between views
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
@@ -143,12 +146,16 @@ class Explorer:
 
     def maintain(self, view: GridView) -> list[Candidate]:
         """Global dynamic maintenance: candidates whose gain fell below ``min_gain`` (explored space)
-        are closed; the open ones returned with their gain (cells)."""
+        are closed; the open ones returned with their gain (cells). Once a view (its clearance levels ask again):
+        the same candidates are open then, with the same gains."""
+        if self._maintained[:2] == (view, len(self.inaccessible)):
+            return [c for c in self._maintained[2] if c.alive]
         live = self.hybrid.candidates()
         if not live:
             return []
         pts = np.array([c.position for c in live])
-        gain = information_gain(self._hidden(view), pts, self.cfg.gain_range, self.cfg.gain_rays)
+        gain = information_gain(self._hidden(view), pts, self.cfg.gain_range, self.cfg.gain_rays,
+                                self._hidden_entries(view))  # fmt: skip
         floor = self.cfg.min_gain / view.resolution**2
         out = []
         for c, g in zip(live, gain):
@@ -156,6 +163,7 @@ class Explorer:
             c.alive = g >= floor and self._open_goal(c.position)
             if c.alive:
                 out.append(c)
+        self._maintained = view, len(self.inaccessible), out
         return out
 
     def _open_goal(self, xy) -> bool:
@@ -221,7 +229,8 @@ class Explorer:
         fronts = np.array([f.goal for f in found]).reshape(-1, 2)
         points = np.concatenate([pts, fronts])
         goals = np.concatenate([target, fronts])
-        own, shares = shared_gain(self._hidden(view), points, self.cfg.gain_range, self.cfg.gain_rays)
+        own, shares = shared_gain(self._hidden(view), points, self.cfg.gain_range, self.cfg.gain_rays,
+                                  self._hidden_entries(view))  # fmt: skip
         gain = np.concatenate([[c.gain for c in live], own[len(live) :]])
         path = np.concatenate([path, [f.path for f in found]])
         score, length, gamma = self.utility_terms(pose, points, gain, path, goals, shares)
@@ -247,8 +256,15 @@ class Explorer:
                 self._hidden_grid.wall = wall
             outside = self._outside(view)
             state = self._hidden_grid(view.state, *(() if outside is None else (outside,)))
-            self._hidden_of = view, GridView(state, view.resolution, view.origin)
+            self._hidden_of = view, GridView(state, view.resolution, view.origin), None
         return self._hidden_of[1]
+
+    def _hidden_entries(self, view: GridView) -> np.ndarray:
+        """The ``unknown_cells`` (K, 2) of :meth:`_hidden`'s grid, listed once a view."""
+        hidden = self._hidden(view)
+        if self._hidden_of[2] is None:
+            self._hidden_of = view, hidden, unknown_cells(hidden)
+        return self._hidden_of[2]
 
     def _outside(self, view: GridView) -> np.ndarray | None:
         """The view's cells (H, W) bool outside the bounding polygon, which no goal is chosen to see; None
@@ -419,8 +435,8 @@ _WARM: set = set()  # the strategies whose first decision this process has made
 def _warm_up(explorer: Explorer) -> None:
     """Decisions of a throwaway explorer of the same strategy, the first time a strategy is made in this process: on
     a small room with an opening (a frontier; again once the map changed; the goal checked), then with a pocket
-    behind a wall's gap only: numba's compiled kernels and the strategy's libraries are loaded then, not in the
-    first decisions' time."""
+    behind a wall's gap only; then a straight way checked (a candidate's route) and a frontier's goal off its own
+    cells: numba's compiled kernels and the strategy's libraries are loaded then, not in the first decisions' time."""
     if explorer.cfg.strategy in _WARM:
         return
     _WARM.add(explorer.cfg.strategy)
@@ -442,6 +458,8 @@ def _warm_up(explorer: Explorer) -> None:
     state[52:58, 14:46] = UNKNOWN  # a pocket seen through a gap only
     state[51, 28:32] = UNKNOWN
     throwaway.decide(pose, GridView(state, 0.05, (0.0, 0.0)))
+    straight_reachable(state == OCCUPIED, 0.05, (0.0, 0.0), pose, pose + 1.0, 0.4)  # a way back over the graph
+    _goal_cell(np.array([[0, 0]]), ~np.eye(3, dtype=bool), 1.5)  # a frontier's goal off its own cells
 
 
 def _option(goal, candidate: bool, terms) -> dict:

@@ -14,8 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy import ndimage
-from scipy.spatial import cKDTree
 
 from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, inside_polygon
 from slam2d.exploration.paths import as_paths
@@ -217,13 +215,32 @@ def _goal_cell(cells: np.ndarray, reachable: np.ndarray, reach_cells: float):
     k = int(np.ceil(reach_cells))
     lo = np.maximum(cells.min(axis=0) - k, 0)
     hi = np.minimum(cells.max(axis=0) + k + 1, reachable.shape)
-    seed = np.zeros(tuple(hi - lo), dtype=bool)
-    seed[cells[:, 0] - lo[0], cells[:, 1] - lo[1]] = True
-    box = ndimage.maximum_filter(seed, size=2 * k + 1, mode="constant")  # within k cells on both axes
-    found = np.argwhere(box & reachable[lo[0] : hi[0], lo[1] : hi[1]]) + lo  # raster order
-    if len(found) == 0:
-        return None
-    found = found[cKDTree(cells).query(found, distance_upper_bound=reach_cells + 1)[0] <= reach_cells]
+    found = _cells_within(np.ascontiguousarray(cells, dtype=np.int64), reachable[lo[0] : hi[0], lo[1] : hi[1]], lo,
+                          k, float(reach_cells))  # fmt: skip
     if len(found) == 0:
         return None
     return found[np.argmin(np.hypot(*(found - centre).T))]
+
+
+@njit(cache=True)
+def _cells_within(cells, reachable, lo, k, reach):
+    """The ``reachable`` cells (window (h, w) bool whose cell (0, 0) is ``lo``) within ``reach`` cells (Euclidean,
+    between centres) of one of ``cells`` (K, 2) (row, col), in raster order (K', 2); ``k`` = ceil(reach)."""
+    h, w = reachable.shape
+    near = np.zeros((h, w), dtype=np.bool_)
+    n = 0
+    for i in range(cells.shape[0]):
+        cr, cc = cells[i, 0] - lo[0], cells[i, 1] - lo[1]
+        for r in range(max(cr - k, 0), min(cr + k + 1, h)):
+            for c in range(max(cc - k, 0), min(cc + k + 1, w)):
+                if not near[r, c] and reachable[r, c] and np.sqrt(float((r - cr) ** 2 + (c - cc) ** 2)) <= reach:
+                    near[r, c] = True
+                    n += 1
+    out = np.empty((n, 2), dtype=np.int64)
+    j = 0
+    for r in range(h):
+        for c in range(w):
+            if near[r, c]:
+                out[j, 0], out[j, 1] = r + lo[0], c + lo[1]
+                j += 1
+    return out

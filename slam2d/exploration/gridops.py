@@ -115,15 +115,34 @@ def _ray_start(gx, gy, b, n_rays):
     return int(np.floor(gx)), int(np.floor(gy)), step_c, step_r, inv_x, inv_y, tmx, tmy
 
 
-RAYS_AIMED_BELOW = 8192  # unknown entry cells: with fewer, each point casts only the rays aimed at one within reach
+AIM_ALL_ABOVE = 2  # a point with more unknown cells than this many per ray in its buckets casts every ray instead
 
 
 @njit(cache=True)
-def _aim(gx, gy, shape, unknown, max_t, need):
+def _buckets(cells, shape, size):
+    """``cells`` (K, 2) (row, col) sorted by square buckets of ``size`` cells (row-major), with ``starts``
+    (B + 1,): bucket b holds sorted cells starts[b] to starts[b + 1]; and the buckets per row."""
+    nbr, nbc = shape[0] // size + 1, shape[1] // size + 1
+    key = np.empty(cells.shape[0], dtype=np.int64)
+    for k in range(cells.shape[0]):
+        key[k] = min(max(cells[k, 0] // size, 0), nbr - 1) * nbc + min(max(cells[k, 1] // size, 0), nbc - 1)
+    order = np.argsort(key, kind="mergesort")
+    starts = np.zeros(nbr * nbc + 1, dtype=np.int64)
+    for k in range(cells.shape[0]):
+        starts[key[k] + 1] += 1
+    starts = np.cumsum(starts)
+    return cells[order], starts, nbc
+
+
+@njit(cache=True)
+def _aim(gx, gy, shape, cells, starts, size, nbc, max_t, need):
     """Set ``need`` (R,) bool for the rays from (gx, gy) grid units that may count a cell within ``max_t``: those
-    whose angle lies in the angular span of one of the ``unknown`` cells (K, 2) (row, col) within reach (a ray that
-    enters a cell crosses its square), or of a stretch of the grid's edge (of ``shape``) within reach (steps beyond
-    it count); all of them from inside an unknown cell. The others meet only free cells before an occupied one."""
+    whose angle lies in the angular span of one of the unknown ``cells`` (``_buckets`` of ``size``: sorted cells,
+    ``starts``, ``nbc``) within reach (a ray that enters a cell crosses its square; a cell two or more cells away
+    is spanned by the circle round its corners, a little wider), or of a stretch of the grid's edge (of
+    ``shape``) within reach (steps beyond it count); all of them from inside an unknown cell, or when more than
+    AIM_ALL_ABOVE cells a ray lie in the buckets round the point. The others meet only free cells before an
+    occupied one."""
     need[:] = False
     scale = need.shape[0] / (2.0 * np.pi)
     reach = max_t + 1.0
@@ -140,19 +159,35 @@ def _aim(gx, gy, shape, unknown, max_t, need):
             return
         if d < reach:  # the edge's stretch within reach: seen under 2 atan(half its length / d)
             _span(need, mid, -np.arctan2(np.sqrt(reach * reach - d * d), d), scale)
-    for k in range(unknown.shape[0]):
-        cx, cy = unknown[k, 1] + 0.5 - gx, unknown[k, 0] + 0.5 - gy
-        if cx * cx + cy * cy > reach * reach:
-            continue
-        if abs(cx) <= 0.501 and abs(cy) <= 0.501:
-            need[:] = True
-            return
-        mid = np.arctan2(cy, cx)
-        lo = 0.0
-        for corner in range(4):
-            d = np.arctan2(cy + (corner // 2) - 0.5, cx + (corner % 2) - 0.5) - mid
-            lo = min(lo, -abs((d + np.pi) % (2.0 * np.pi) - np.pi))
-        _span(need, mid, lo, scale)
+    nbr = (starts.shape[0] - 1) // nbc
+    r0, r1 = max(int((gy - reach) // size), 0), min(int((gy + reach) // size), nbr - 1)
+    c0, c1 = max(int((gx - reach) // size), 0), min(int((gx + reach) // size), nbc - 1)
+    if c0 > c1:
+        return
+    near = 0
+    for br in range(r0, r1 + 1):
+        near += starts[br * nbc + c1 + 1] - starts[br * nbc + c0]
+    if near > AIM_ALL_ABOVE * need.shape[0]:  # aiming would cost more than casting every ray
+        need[:] = True
+        return
+    for br in range(r0, r1 + 1):
+        for k in range(starts[br * nbc + c0], starts[br * nbc + c1 + 1]):
+            cx, cy = cells[k, 1] + 0.5 - gx, cells[k, 0] + 0.5 - gy
+            d2 = cx * cx + cy * cy
+            if d2 > reach * reach:
+                continue
+            mid = np.arctan2(cy, cx)
+            if d2 >= 2.0:  # tan(asin(r / d)) of the corners' circle (r = 0.7071 cells) bounds its half-angle above
+                _span(need, mid, -0.70711 / np.sqrt(d2 - 0.5), scale)
+                continue
+            if abs(cx) <= 0.501 and abs(cy) <= 0.501:
+                need[:] = True
+                return
+            lo = 0.0
+            for corner in range(4):
+                d = np.arctan2(cy + (corner // 2) - 0.5, cx + (corner % 2) - 0.5) - mid
+                lo = min(lo, -abs((d + np.pi) % (2.0 * np.pi) - np.pi))
+            _span(need, mid, lo, scale)
 
 
 @njit(cache=True)
@@ -164,12 +199,60 @@ def _span(need, mid, lo, scale):
 
 
 @njit(cache=True)
+def _aim_point(state, gx, gy, n_rays, max_t, cells, starts, size, nbc, need):
+    """``need`` for the point (gx, gy): every ray from inside an unknown cell, else ``_aim``'s."""
+    c, r = int(np.floor(gx)), int(np.floor(gy))
+    if 0 <= r < state.shape[0] and 0 <= c < state.shape[1] and state[r, c] == 2:
+        need[:] = True
+    else:
+        _aim(gx, gy, state.shape, cells, starts, size, nbc, max_t, need)
+
+
+@njit(cache=True)
+def _trace(state, gx, gy, n_rays, max_t, need, mark, token, seers, ev, n_ev):
+    """The rays ``need`` marks from (gx, gy), through free and unknown cells until an occupied one: the unknown
+    cells not yet marked ``token`` (and steps beyond the map) they meet, counted and marked, and added to ``seers``
+    (H, W) when it is a grid. When ``ev`` is not empty, each of them is written to it from ``n_ev`` in the order
+    met (the flat index of a cell, -1 for a step beyond the map; ``ev`` has room for ``_steps_at_most``). Returns
+    (count, n_ev)."""
+    h, w = state.shape
+    shared = seers.shape[0] > 1
+    record = ev.shape[0] > 0
+    total = 0.0
+    for b in range(n_rays):
+        if not need[b]:
+            continue
+        c, r, step_c, step_r, inv_x, inv_y, tmx, tmy = _ray_start(gx, gy, b, n_rays)
+        t = 0.0
+        while t < max_t:
+            if r < 0 or c < 0 or r >= h or c >= w:
+                total += 1.0  # beyond the map: unknown, no other point's
+                if record:
+                    ev[n_ev] = -1
+                    n_ev += 1
+            else:
+                s = state[r, c]
+                if s == 1:
+                    break
+                if s == 2 and mark[r, c] != token:
+                    mark[r, c] = token
+                    total += 1.0
+                    if shared:
+                        seers[r, c] += 1
+                    if record:
+                        ev[n_ev] = r * w + c
+                        n_ev += 1
+            t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
+    return total, n_ev
+
+
+@njit(cache=True)
 def _cast(state, gxy, n_rays, max_t, rounds, unknown, aimed):
     """Rays from each point (P, 2) grid units through free and unknown cells until an occupied one: ``own`` (P,)
     unknown cells in sight (steps beyond the map counted as unknown), the ``mark`` (H, W) of the last point seeing
-    each cell (1-based), and with ``rounds`` = 2 the ``shares`` (P,): a cell seen from k of the points is 1/k.
-    With ``aimed``, only the rays ``_aim`` finds aimed at one of the ``unknown`` cells (K, 2) are cast (the same
-    counts)."""
+    each cell (1-based), and with ``rounds`` = 2 the ``shares`` (P,): a cell seen from k of the points is 1/k (summed
+    over what each point's rays met, in the order met). With ``aimed``, only the rays ``_aim_point`` finds aimed at
+    one of the ``unknown`` cells (K, 2) (at least the entry cells of unknown space) are cast (the same counts)."""
     h, w = state.shape
     n = gxy.shape[0]
     mark = np.zeros((h, w), dtype=np.int32)
@@ -177,64 +260,98 @@ def _cast(state, gxy, n_rays, max_t, rounds, unknown, aimed):
     seers = np.zeros((h if shared else 1, w if shared else 1), dtype=np.int32)  # points seeing each cell
     own, shares = np.zeros(n), np.zeros(n)
     need = np.ones(n_rays, dtype=np.bool_)
-    for rnd in range(rounds):  # count the points seeing each cell, then share it among them
+    size = int(np.ceil(max_t + 1.0))
+    cells, starts, nbc = _buckets(unknown, state.shape, size)
+    most = n_rays * (2 * int(np.ceil(max_t)) + 4)  # steps of a point's rays at most (two a cell of length, and one)
+    ev, n_ev = np.empty(most if shared else 0, dtype=np.int64), 0  # what each point's rays met, in order
+    first = np.zeros(n + 1, dtype=np.int64)
+    for p in range(n):
+        if aimed:
+            _aim_point(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, cells, starts, size, nbc, need)
+        if shared and n_ev + most > ev.shape[0]:  # room for this point's steps
+            grown = np.empty(2 * ev.shape[0], dtype=np.int64)
+            grown[:n_ev] = ev[:n_ev]
+            ev = grown
+        own[p], n_ev = _trace(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, need, mark, p + 1, seers, ev, n_ev)
+        first[p + 1] = n_ev
+    if shared:  # each cell a point sees shared among the points seeing it
+        flat = seers.ravel()
         for p in range(n):
-            token = rnd * n + p + 1
-            gx, gy = gxy[p, 0], gxy[p, 1]
-            if aimed:
-                _aim(gx, gy, state.shape, unknown, max_t, need)
-            for b in range(n_rays):
-                if not need[b]:
-                    continue
-                c, r, step_c, step_r, inv_x, inv_y, tmx, tmy = _ray_start(gx, gy, b, n_rays)
-                t = 0.0
-                while t < max_t:
-                    if r < 0 or c < 0 or r >= h or c >= w:
-                        if rnd == 0:  # beyond the map: unknown, no other point's
-                            own[p] += 1
-                        else:
-                            shares[p] += 1
-                    else:
-                        s = state[r, c]
-                        if s == 1:
-                            break
-                        if s == 2 and mark[r, c] != token:
-                            mark[r, c] = token
-                            if rnd == 0:
-                                own[p] += 1
-                                if shared:
-                                    seers[r, c] += 1
-                            else:
-                                shares[p] += 1.0 / seers[r, c]
-                    t, tmx, tmy, c, r = dda_step(tmx, tmy, inv_x, inv_y, c, r, step_c, step_r)
+            total = 0.0
+            for k in range(first[p], first[p + 1]):
+                total += 1.0 if ev[k] < 0 else 1.0 / flat[ev[k]]
+            shares[p] = total
     return own, shares, mark
 
 
+@njit(cache=True)
+def _first_seeing(state, gxy, n_rays, max_t, unknown, floor, gains):
+    """The first point (P, 2) grid units in order whose ``_cast`` gain is at least ``floor``, or -1; ``gains`` (P,)
+    NaN where not counted yet, filled in for the points counted up to it (always aimed)."""
+    mark = np.zeros(state.shape, dtype=np.int32)
+    seers, nothing = np.zeros((1, 1), dtype=np.int32), np.empty(0, dtype=np.int64)
+    need = np.ones(n_rays, dtype=np.bool_)
+    size = int(np.ceil(max_t + 1.0))
+    cells, starts, nbc = _buckets(unknown, state.shape, size)
+    for p in range(gxy.shape[0]):
+        if np.isnan(gains[p]):
+            _aim_point(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, cells, starts, size, nbc, need)
+            gains[p] = _trace(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, need, mark, p + 1, seers, nothing, 0)[0]
+        if gains[p] >= floor:
+            return p
+    return -1
+
+
 def unknown_cells(view: GridView) -> np.ndarray:
-    """The UNKNOWN cells (K, 2) (row, col) of ``view`` a ray enters unknown space by: those with a 4-neighbour not
-    UNKNOWN (a ray steps from cell to 4-neighbour, so one that reaches an unknown cell from outside the unknown
-    crossed one of these first, nearer); for :func:`information_gain` called on the view many times."""
-    unknown = view.state == UNKNOWN
-    inner = np.pad(unknown, 1, constant_values=True)  # beyond the grid: no entry
-    inner = inner[:-2, 1:-1] & inner[2:, 1:-1] & inner[1:-1, :-2] & inner[1:-1, 2:]
-    return np.argwhere(unknown & ~inner)
+    """The UNKNOWN cells (K, 2) (row, col) of ``view`` a ray enters unknown space by, in raster order: those with a
+    FREE 4-neighbour (a ray steps from cell to 4-neighbour and stops at an occupied one, so one that reaches an
+    unknown cell from outside the unknown came from a free cell next to it); for :func:`information_gain` called
+    on the view many times."""
+    return _entry_cells(np.ascontiguousarray(view.state))
+
+
+@njit(cache=True)
+def _entry_cells(state):
+    h, w = state.shape
+    entry = np.zeros((h, w), dtype=np.bool_)
+    n = 0
+    for r in range(h):
+        for c in range(w):
+            if state[r, c] == 2 and ((r > 0 and state[r - 1, c] == 0) or (r < h - 1 and state[r + 1, c] == 0)
+                                     or (c > 0 and state[r, c - 1] == 0) or (c < w - 1 and state[r, c + 1] == 0)):
+                entry[r, c] = True
+                n += 1
+    out = np.empty((n, 2), dtype=np.int64)
+    k = 0
+    for r in range(h):
+        for c in range(w):
+            if entry[r, c]:
+                out[k, 0], out[k, 1] = r, c
+                k += 1
+    return out
 
 
 def _rays(view: GridView, points, max_range: float, rays: int, rounds: int, unknown=None):
-    gxy = np.ascontiguousarray((np.asarray(points, dtype=np.float64).reshape(-1, 2) - np.asarray(view.origin))
-                               / view.resolution)  # fmt: skip
-    state = np.ascontiguousarray(view.state)
+    gxy = _grid_units(view, points)
+    return _cast(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution, rounds,
+                 _cells_near(view, gxy, max_range, unknown), True)  # fmt: skip
+
+
+def _grid_units(view: GridView, points) -> np.ndarray:
+    """Points (P, 2) m as (x, y) grid units of ``view``."""
+    xy = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    return np.ascontiguousarray((xy - np.asarray(view.origin)) / view.resolution)
+
+
+def _cells_near(view: GridView, gxy, max_range: float, unknown=None) -> np.ndarray:
+    """The ``unknown_cells`` (``unknown`` if known) within the rays' reach of the box round the points (P, 2)
+    grid units: the only ones rays can be aimed at."""
     cells = unknown_cells(view) if unknown is None else unknown
-    at = np.floor(gxy).astype(np.int64)[:, ::-1]
-    inside = np.all((at >= 0) & (at < state.shape), axis=1)
-    aimed = len(cells) < RAYS_AIMED_BELOW and not (state[at[inside, 0], at[inside, 1]] == UNKNOWN).any()  # a point
-    # in the unknown sees it through no entry cell: all rays
-    if aimed and len(gxy):  # only the cells within the rays' reach of a point can be aimed at
+    if len(gxy):
         reach = float(max_range) / view.resolution + 2.0
         lo, hi = gxy.min(axis=0)[::-1] - reach, gxy.max(axis=0)[::-1] + reach
         cells = cells[np.all((cells >= lo) & (cells <= hi), axis=1)]
-    cells = np.ascontiguousarray(cells if aimed else np.zeros((0, 2)), dtype=np.int64)
-    return _cast(state, gxy, int(rays), float(max_range) / view.resolution, rounds, cells, aimed)
+    return np.ascontiguousarray(cells, dtype=np.int64).reshape(-1, 2)
 
 
 def information_gain(view: GridView, points, max_range: float, rays: int = 180, unknown=None) -> np.ndarray:
@@ -244,16 +361,27 @@ def information_gain(view: GridView, points, max_range: float, rays: int = 180, 
     return _rays(view, points, max_range, rays, 1, unknown)[0]
 
 
-def shared_gain(view: GridView, points, max_range: float, rays: int = 180) -> tuple[np.ndarray, np.ndarray]:
+def shared_gain(view: GridView, points, max_range: float, rays: int = 180, unknown=None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`information_gain` (P,) of each point, and its share (P,) of the unknown cells: a cell seen from k of
-    the points counts 1/k to each, so the shares add up to the unknown area all the points see together."""
-    own, shares, _ = _rays(view, points, max_range, rays, 2)
+    the points counts 1/k to each, so the shares add up to the unknown area all the points see together;
+    ``unknown``: the view's ``unknown_cells`` if already known."""
+    own, shares, _ = _rays(view, points, max_range, rays, 2, unknown)
     return own, shares
 
 
 def unknown_in_sight(view: GridView, point, max_range: float, rays: int = 180) -> np.ndarray:
     """The unknown cells (H, W) bool that :func:`information_gain` counts for one point (x, y) m."""
     return _rays(view, point, max_range, rays, 1)[2] == 1
+
+
+def first_seeing(view: GridView, points, max_range: float, rays: int, floor: float, gains: np.ndarray,
+                 unknown=None) -> int:
+    """The index of the first of ``points`` (P, 2) m, in their order, whose :func:`information_gain` is at least
+    ``floor`` cells, or -1; ``gains`` (P,) NaN where not counted yet, filled in for the points counted (in order,
+    up to that one): a search for the nearest place that sees enough counts no place beyond it."""
+    gxy = _grid_units(view, points)
+    return int(_first_seeing(np.ascontiguousarray(view.state), gxy, int(rays), float(max_range) / view.resolution,
+                             _cells_near(view, gxy, max_range, unknown), float(floor), gains))  # fmt: skip
 
 
 def reach_table(state: np.ndarray) -> np.ndarray:

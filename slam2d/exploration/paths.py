@@ -227,6 +227,8 @@ def path_lengths(view, distance, points, reach: float) -> tuple[np.ndarray, np.n
 def _snap(passable, cell, within: int):
     """The passable cell nearest ``cell`` within ``within`` cells and its distance (cells); None if none."""
     h, w = passable.shape
+    if 0 <= cell[0] < h and 0 <= cell[1] < w and passable[cell[0], cell[1]]:  # the cell itself, at 0
+        return np.array([cell[0], cell[1]]), 0.0
     r0, r1 = max(cell[0] - within, 0), min(cell[0] + within + 1, h)
     c0, c1 = max(cell[1] - within, 0), min(cell[1] + within + 1, w)
     rows, cols = np.nonzero(passable[r0:r1, c0:c1])

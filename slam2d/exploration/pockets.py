@@ -14,7 +14,7 @@ from slam2d.exploration.gridops import (
     OCCUPIED,
     UNKNOWN,
     GridView,
-    information_gain,
+    first_seeing,
     inside_polygon,
     reach_table,
     unknown_cells,
@@ -27,7 +27,6 @@ __all__ = ["LocalRefresh", "opaque_faces", "pocket_goal", "pocket_state", "witho
 
 POCKET_SPACING = 0.2  # m between the places tried as views of pockets
 POCKET_RAYS = 360  # rays cast from each of them (one a degree, as the laser's beams)
-POCKET_BATCH = 8, 256  # places scored at a time, nearest first: the first batch, doubling up to the last
 
 
 def pocket_state(state: np.ndarray, wall_cells: int, retired: np.ndarray | None = None) -> np.ndarray:
@@ -173,10 +172,12 @@ def pocket_goal(explorer, pose, view: GridView, distance):
     ``pocket_gain`` of hidden cells (``pocket_state``) — pockets whose openings are narrower than a
     frontier region or touch an obstacle (behind furniture, beside a wall), often seen from a few
     places only."""
+    distance = as_paths(distance)
+    if not distance.reach.any():  # no place to try
+        return None
     state = explorer._pocket_state(view)
     if not (state == UNKNOWN).any():
         return None
-    distance = as_paths(distance)
     k = max(1, round(POCKET_SPACING / view.resolution))
     room = distance.reach
     inner = np.pad(room, 1)
@@ -196,29 +197,24 @@ def pocket_goal(explorer, pose, view: GridView, distance):
     scored = GridView(state, view.resolution, view.origin)
     floor = explorer.cfg.pocket_gain / view.resolution**2
     gains, unknown, table = _gains(explorer, view, state)
+    keep &= ~(gains[cells[:, 0] * view.shape[1] + cells[:, 1]] < floor)  # counted already and seeing too few
     if floor > 0:  # a place with fewer hidden cells within the rays' reach than the floor sees too few: not scored
         keep[keep] = unknown_within_reach(scored, xy[keep], explorer.cfg.gain_range, table) >= floor
     cells, xy = cells[keep], xy[keep]
     order = np.argsort(distance.lengths(cells), kind="stable")  # lengths only of the places scored
     cells, xy = cells[order], xy[order]
     flat = cells[:, 0] * view.shape[1] + cells[:, 1]
-    lo, batch = 0, POCKET_BATCH[0]
-    while lo < len(xy):  # nearest first: most decisions score a few places
-        here = flat[lo : lo + batch]
-        new = np.isnan(gains[here])  # each place scored once a pocket grid (the levels of a decision)
-        if new.any():
-            gains[here[new]] = information_gain(scored, xy[lo : lo + batch][new], explorer.cfg.gain_range,
-                                                POCKET_RAYS, unknown)  # fmt: skip
-        ok = np.nonzero(gains[here] >= floor)[0]
-        if len(ok):
-            goal = xy[lo + ok[0]]
-            seen = unknown_in_sight(scored, goal, explorer.cfg.gain_range, POCKET_RAYS)
-            targets = view.to_world(np.column_stack(np.nonzero(seen)))
-            from slam2d.exploration.explorer import Goal
+    known = gains[flat]  # each place counted once a pocket grid (the levels of a decision), nearest first
+    k = first_seeing(scored, xy, explorer.cfg.gain_range, POCKET_RAYS, floor, known, unknown)
+    gains[flat] = known
+    if k < 0:
+        return None
+    seen = unknown_in_sight(scored, xy[k], explorer.cfg.gain_range, POCKET_RAYS)
+    targets = view.to_world(np.column_stack(np.nonzero(seen)))
+    from slam2d.exploration.explorer import Goal
 
-            return Goal(goal, "pocket", score=float(gains[here[ok[0]]]), targets=targets)
-        lo, batch = lo + batch, min(2 * batch, POCKET_BATCH[1])
-    return None
+    return Goal(xy[k], "pocket", score=float(known[k]), targets=targets)
+
 
 def _gains(explorer, view: GridView, state: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The gains (H·W,) of the places scored on the pocket grid ``state`` (NaN: not yet), its hidden cells

@@ -21,8 +21,8 @@ import itertools
 import numpy as np
 from numba import njit
 
-from slam2d.exploration.gridops import FREE, geodesic
-from slam2d.exploration.paths import as_paths
+from slam2d.exploration.gridops import FREE
+from slam2d.exploration.paths import Paths, as_paths
 
 SCALE = 100  # the solver's integer costs: cm
 COARSE = 0.2  # m: cell of the coarse grid the travel costs between subspaces are measured on
@@ -169,10 +169,18 @@ def greedy_cover(sees: np.ndarray, cost=None, min_cells: int = 1) -> list[int]:
 
 def coarse_grid(passable: np.ndarray, k: int) -> np.ndarray:
     """``passable`` (H, W) on cells k times larger (ceil(H / k), ceil(W / k)): passable when one of its cells is."""
+    return _coarse_any(np.ascontiguousarray(passable, dtype=np.bool_), int(k))
+
+
+@njit(cache=True)
+def _coarse_any(passable, k):
     h, w = passable.shape
-    padded = np.zeros((-(-h // k) * k, -(-w // k) * k), dtype=bool)
-    padded[:h, :w] = passable
-    return padded.reshape(padded.shape[0] // k, k, padded.shape[1] // k, k).any(axis=(1, 3))
+    out = np.zeros((-(-h // k), -(-w // k)), dtype=np.bool_)
+    for r in range(h):
+        row = out[r // k]
+        for cc in range(out.shape[1]):
+            row[cc] |= passable[r, cc * k : min(cc * k + k, w)].any()
+    return out
 
 
 # --------------------------------------------------------------------------- the strategy
@@ -184,7 +192,7 @@ class TourPlanner:
 
     def __init__(self):
         self.order: list[tuple[int, int]] = []  # the previous global tour, by subspace
-        self._rows: dict = {}  # rep cell -> (coarse distance field, decision it was measured at)
+        self._rows: dict = {}  # rep cell -> (its coarse distances, settled as far as asked; decision measured at)
         self._coarse_frame = None
         self.decisions = 0
 
@@ -229,17 +237,18 @@ class TourPlanner:
         frame = view.shape, view.resolution, tuple(np.asarray(view.origin, dtype=float))
         if frame != self._coarse_frame:
             self._rows, self._coarse_frame = {}, frame
-        coarse = coarse_grid(view.traversable(explorer.radius), k)
         at = np.asarray(cells, dtype=np.int64) // k
         out = np.empty((len(at), len(at)))
-        refresh = explorer.cfg.tour.refresh
+        refresh, coarse = explorer.cfg.tour.refresh, None
         for i, cell in enumerate(at):
             key = tuple(cell)
             row = self._rows.get(key)
             if row is None or self.decisions - row[1] >= refresh:
-                row = geodesic(coarse, cell, view.resolution * k, snap_cells=2), self.decisions
+                if coarse is None:  # made only when a row is measured
+                    coarse = coarse_grid(view.traversable(explorer.radius), k)
+                row = Paths(coarse, cell, view.resolution * k, snap_cells=2), self.decisions
                 self._rows[key] = row
-            out[i] = row[0][at[:, 0], at[:, 1]]
+            out[i] = row[0].lengths(at)  # the search resumed only as far as these cells
         return np.minimum(out, out.T)
 
     def _global_order(self, keys, cost, solver_ms) -> list[int]:
@@ -298,16 +307,19 @@ def _subspaces(view, found, cell: float, distance: np.ndarray):
     inv = inv.ravel()
     distance = as_paths(distance)
     goals, paths, members, ends = np.empty((len(keys), 2)), np.empty(len(keys)), [], []
+    order = np.argsort(inv, kind="stable")  # each subspace's cells in their order in ``cells``
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(inv, minlength=len(keys)))])
+    reach = distance.reach[cells[:, 0], cells[:, 1]]
     for k in range(len(keys)):
-        mine = cells[inv == k]
-        ok = distance.reach[mine[:, 0], mine[:, 1]]
+        at = order[bounds[k] : bounds[k + 1]]
+        mine, ok = cells[at], reach[at]
         if ok.any():
             own = mine[ok]
             best = own[np.argmin(np.hypot(*(own - mine.mean(axis=0)).T))]
             goals[k] = view.to_world(best)
             ends.append((k, best))
         else:
-            f = found[int(np.argmax(np.bincount(region[inv == k], minlength=len(found))))]
+            f = found[int(np.argmax(np.bincount(region[at], minlength=len(found))))]
             goals[k], paths[k] = f.goal, f.path
         members.append(mine)
     if ends:
