@@ -424,9 +424,11 @@ class Navigator:
         return stopping_speed(distance, float(velocity[0]), _STOP_DECEL * self.robot.max_accel, self.cfg.period)
 
     def _goal_speed(self, cmd: Command, pose, velocity) -> Command:
-        """``cmd`` slowed on its arc to the speed that stops at the end of the path (whatever the local
-        planner plans for its stop, the final approach then takes over at a speed it can stop from)."""
-        top = self._stopping_speed(self._remaining(pose), velocity)
+        """``cmd`` slowed on its arc to the speed that stops at the end of the path (within ``final_approach``:
+        at the goal, straight on), whatever the local planner plans for its stop: the final approach takes over
+        at a speed it can stop from, and a planner that drives the last metres itself stops there too."""
+        d = float(np.hypot(*(pose[:2] - self.goal[:2])))
+        top = self._stopping_speed(d if d <= self.cfg.final_approach else self._remaining(pose), velocity)
         if cmd.v <= top:
             return cmd
         return Command(top, cmd.w * top / cmd.v, cmd.blocked, cmd.state)
