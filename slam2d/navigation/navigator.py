@@ -57,7 +57,7 @@ _EXPLAINING = np.array([(dr, dc) for dr in range(-_EXPLAINED_CELLS, _EXPLAINED_C
 _FINAL_GAP = 0.01  # m kept between the robot's disc and any point on the final approach
 GOAL_PADDING = 1.0  # m of free cells kept around a goal beyond a map whose unknown cells are free
 _CREEP = 0.05  # m/s; slower than this, the final approach turns on the spot to a goal more than 0.3 rad off
-_STOP_DECEL = 0.8  # of max_accel: the deceleration the stop at the goal is planned with
+_STOP_DECEL = 0.9  # of max_accel: the deceleration the stop at the goal is planned with
 
 
 def make_local_planner(name: str, robot: RobotConfig, cfg: NavigatorConfig):
@@ -402,7 +402,8 @@ class Navigator:
         bulge) of the straight line to it, drive at it on the arc from the heading through it at the speed
         that stops on it (:func:`stopping_speed`), so that the robot neither stops short nor coasts past;
         turn on the spot first while it is more than 0.3 rad off and the robot is slow, or once it is
-        behind. This also lets the robot reach goals closer to a wall than the local planner's margin."""
+        behind. This also lets the robot reach goals closer to a wall than the local planner's margin. With
+        a point that near, within ``goal_tolerance`` is arrived."""
         d = float(np.hypot(*(pose[:2] - self.goal[:2])))
         if d > self.cfg.final_approach:
             return None
@@ -411,12 +412,15 @@ class Navigator:
         bulge = 0.5 * d * np.tan(min(abs(bearing), 1.0) / 2)  # m between the arc and the chord, at most
         keep = self.robot.radius + _FINAL_GAP + bulge + unmapped * (self.cfg.dwa.margin + self.cfg.dwa.obstacle_reach)
         if len(points) and (_segment_distance(points, goal) < keep).any():
+            if d <= self.cfg.goal_tolerance:  # the local planner places the robot no closer: arrived
+                self._arrived = True
+                return self._goal_command(pose, velocity)
             return None
         if abs(bearing) >= np.pi / 2 or (abs(bearing) > 0.3 and abs(float(velocity[0])) < _CREEP):
             return Command(0.0, float(np.clip(2.0 * bearing, -1.0, 1.0)), False, "final turn")
         curvature = 2.0 * np.sin(bearing) / d  # the arc from the heading through the goal
         arc = d * bearing / np.sin(bearing) if abs(bearing) > 1e-9 else d
-        v = min(self._stopping_speed(arc, velocity), self.robot.max_turn_rate / max(abs(curvature), 1e-9))
+        v = min(self._stopping_speed(arc, velocity), 0.5 * self.robot.max_turn_rate / max(abs(curvature), 1e-9))
         return Command(float(v), float(v * curvature), False, "final approach")
 
     def _stopping_speed(self, distance: float, velocity) -> float:
@@ -424,11 +428,12 @@ class Navigator:
         return stopping_speed(distance, float(velocity[0]), _STOP_DECEL * self.robot.max_accel, self.cfg.period)
 
     def _goal_speed(self, cmd: Command, pose, velocity) -> Command:
-        """``cmd`` slowed on its arc to the speed that stops at the end of the path (within ``final_approach``:
-        at the goal, straight on), whatever the local planner plans for its stop: the final approach takes over
-        at a speed it can stop from, and a planner that drives the last metres itself stops there too."""
+        """``cmd`` slowed on its arc to the speed that stops at the goal, along the path or straight on, whichever
+        is shorter (a band cuts the path's corners; its staircase and its lagging nearest point overstate it),
+        whatever the local planner plans for its stop: the final approach takes over at a speed it can stop
+        from, and a planner that drives the last centimetres itself stops there too."""
         d = float(np.hypot(*(pose[:2] - self.goal[:2])))
-        top = self._stopping_speed(d if d <= self.cfg.final_approach else self._remaining(pose), velocity)
+        top = self._stopping_speed(min(d, self._remaining(pose)), velocity)
         if cmd.v <= top:
             return cmd
         return Command(top, cmd.w * top / cmd.v, cmd.blocked, cmd.state)
