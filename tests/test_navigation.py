@@ -450,7 +450,7 @@ def test_the_robot_stops_on_the_goal_neither_short_of_it_nor_past_it(planner, ca
 def test_a_robot_stopped_outside_the_tolerance_approaches_again(hall):
     """Arrival is called 2.5 cm from the goal with the goal abeam; pushed 4 cm further off while it stops,
     the robot is not reported at the goal but drives back to it."""
-    world, grid = hall
+    _, grid = hall
     nav = Navigator([5.0, 2.0], config=NavigatorConfig())
     nav.step([5.0, 1.975, 0.0], np.array([0.1, 0.0]), np.zeros((0, 2)), grid, 0.0)  # abeam, within 3 cm
     assert nav._arrived

@@ -15,9 +15,10 @@ into the map, then backing off, a replan and a turn towards the new path. After
 exists on the map (cells blocked for less than ``_SETTLED_S`` count as free if
 only they are in the way: they may be a person the live map caught), the goal is unreachable; ``max_time`` bounds every run
 (status ``timeout``). Laser points the map does not explain are passed to the
-local planner as such (DWA gives them a growing margin: they may move). Within
-``final_approach`` of the goal a point controller closes in, then the robot
-turns to the goal heading if one was given.
+local planner as such (DWA gives them a growing margin: they may move). Every
+local planner's command is slowed to the speed that stops at the goal; within
+``final_approach`` of it a point controller drives the arc through it and stops on
+it (``goal_precision``), then the robot turns to the goal heading if one was given.
 """
 
 from __future__ import annotations
