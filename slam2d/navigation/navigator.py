@@ -102,7 +102,7 @@ class Navigator:
         self._raw = self._grid = self._cost = None
         self._cell_blocked_at = None  # (H, W) time (s) each cell of ``_raw`` became blocked; inf: free
         self._now, self._clear = 0.0, None  # _clear: the map's clearance (H, W) m, capped
-        self._index, self._level, self._arrived, self._last_distance = 0, 0, False, np.inf
+        self._index, self._level, self._arrived = 0, 0, False
         self._best = (np.inf, 0.0)  # (remaining path m, time)
         self._level_mark = np.inf  # remaining path m at the first recovery of a run of them
         self._blocked_since = None
