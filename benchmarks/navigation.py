@@ -2,6 +2,7 @@
 
 Usage: .venv/bin/python benchmarks/navigation.py [--worlds office rooms] [--pairs N] [--planners dwa fsm]
        [--people 0 5] [--slam on off] [--seed S] [--set KEY=VALUE ...] [--only WORLD:SEED ...] [--workers N]
+       [--save RUNS.json]
 
 Each run is `slam2d navigate` without the results folder (``slam2d.runs.navigate.simulate``):
 the simulated robot drives from a random free start to a random free goal at least
@@ -16,6 +17,7 @@ median pose error of the pose driven on, and the real-time factor.
 from __future__ import annotations
 
 import argparse
+import json
 import multiprocessing
 import os
 import statistics
@@ -106,9 +108,11 @@ def run_row(specs, n, planner, people, slam, seed, overrides=(), pool=None, only
             })  # fmt: skip
     runs = []
     for job, m in zip(jobs, pool.map(_run, jobs) if pool else map(_run, jobs)):
-        runs.append(m)
+        runs.append({**m, "world": Path(job["dataset.simulator.world"]).stem, "seed": job["seed"]})
         print(f"  {Path(job['dataset.simulator.world']).stem} seed {job['seed']}: {m['status']} {m['time']:.1f} s, "
-              f"collisions {m['collisions']}, goal error {m['goal_error'] * 100:.1f} cm"
+              f"collisions {m['collisions']}, goal error {m['goal_error'] * 100:.1f} cm (estimate to goal "
+              f"{m['stop_control_error'] * 100:.1f} cm, estimate off {m['stop_pose_error'] * 100:.1f} cm), "
+              f"heading {np.degrees(m['heading_error']):.1f} deg"
               + ("" if m["success"] else f" ({m['reason']})"), file=sys.stderr, flush=True)
     med = lambda key: statistics.median(r[key] for r in runs)  # noqa: E731
     return {
@@ -138,6 +142,7 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="config overrides for every run")
     ap.add_argument("--only", nargs="*", default=[], metavar="WORLD:SEED", help="only these runs, e.g. lab_d:1002")
     ap.add_argument("--workers", type=int, default=1, help="runs in parallel (processes)")
+    ap.add_argument("--save", metavar="JSON", help="write every run's metrics (with world, seed, planner) there")
     args = ap.parse_args(argv)
     # forkserver: a worker forked after numba's parallel kernels ran would abort (GNU OpenMP)
     pool = ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("forkserver")) if (
@@ -158,6 +163,10 @@ def main(argv: list[str]) -> None:
                       f"| {r['ratio']:.2f} | {r['goal_cm']:.1f} | {r['pose_cm']:.1f} | {r['rtf']:.1f} "
                       f"| {r['hz']:.0f} | {r['ms'][0]:.1f} / {r['ms'][1]:.1f} |", flush=True)
     paired(rows)
+    if args.save:
+        runs = [{**m, "planner": planner, "people_row": people, "slam_row": slam}
+                for (slam, planner, people), ms in rows.items() for m in ms]
+        Path(args.save).write_text(json.dumps(runs, indent=1, default=float))
 
 
 def paired(rows: dict) -> None:

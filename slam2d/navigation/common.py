@@ -8,7 +8,7 @@ import numpy as np
 
 from slam2d import geometry
 
-__all__ = ["Command", "point_along", "path_ahead", "approach_speed", "in_robot_frame"]
+__all__ = ["Command", "point_along", "path_ahead", "approach_speed", "stopping_speed", "in_robot_frame"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +47,17 @@ def path_ahead(path, xy, window: float = 2.0) -> np.ndarray:
 def approach_speed(distance: float, decel: float) -> float:
     """Largest speed (m/s) that stops within ``distance`` (m) at deceleration ``decel`` (m/s^2)."""
     return float(np.sqrt(2.0 * decel * max(distance, 0.0)))
+
+
+def stopping_speed(distance: float, speed: float, decel: float, period: float) -> float:
+    """Speed (m/s) to command now so that the robot, moving at ``speed`` (m/s) and reaching the command within
+    the control ``period`` (s), then braking at ``decel`` (m/s^2), stops after ``distance`` (m): the root of
+    (speed + v) / 2 * period + v^2 / (2 decel) = distance (0 if even v = 0 goes further)."""
+    rest = distance - 0.5 * abs(speed) * period
+    if rest <= 0.0:
+        return 0.0
+    half = 0.5 * decel * period
+    return float(-half + np.sqrt(half * half + 2.0 * decel * rest))
 
 
 def in_robot_frame(pose, xy) -> np.ndarray:

@@ -32,7 +32,9 @@ class NavigatorConfig(Section):
     wall_distance: float = Field(0.3, gt=0, description="m beyond the margin over which a soft cost falls to 0")
     wall_weight: float = Field(1.0, ge=0, description="extra step cost at the margin's edge (1 = double)")
     unknown_free: bool = Field(False, description="occupancy maps: unknown cells are free for planning")
-    goal_tolerance: float = Field(0.03, gt=0, description="m")
+    goal_tolerance: float = Field(0.03, gt=0, description="m; stopped within this of the goal is arrived")
+    goal_precision: float = Field(0.005, gt=0, description="m; the final approach stops once this close (or "
+                                  "once the goal, within goal_tolerance, is abeam)")
     yaw_tolerance: float = Field(0.035, gt=0, description="rad, when the goal has a heading")
     final_approach: float = Field(0.2, ge=0, description="m from the goal where a point controller takes over")
     stuck_time: float = Field(6.0, gt=0, description="s without `progress` m of progress -> recovery")

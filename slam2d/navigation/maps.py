@@ -9,10 +9,11 @@ everything else blocked) or an :class:`~slam2d.mapping.occupancy.OccupancyGrid`
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from slam2d.planning.grid import PlanningGrid
 
-__all__ = ["world_grid", "free_mask", "mark_points"]
+__all__ = ["world_grid", "free_mask", "mark_points", "nearest_free", "pad_to_reach"]
 
 _CHUNK = 20_000  # cell centres per point-in-polygon batch
 
@@ -81,3 +82,31 @@ def mark_points(grid: PlanningGrid, points) -> PlanningGrid:
     _mark_cells(grid, blocked, np.asarray(points, dtype=np.float64).reshape(-1, 2))
     out.free &= ~blocked
     return out
+
+
+def nearest_free(grid: PlanningGrid, xy, within: float):
+    """The cell of ``xy`` (m) if free, else the nearest free cell within ``within`` m; None if none."""
+    cell = grid.world_to_cell(xy)
+    if grid.is_free(cell):
+        return cell
+    if not grid.in_bounds(cell):
+        return None
+    dist, (rows, cols) = ndimage.distance_transform_edt(~grid.free, return_indices=True)
+    r, c = int(cell[0]), int(cell[1])
+    if dist[r, c] * grid.resolution > within:
+        return None
+    return np.array([rows[r, c], cols[r, c]])
+
+
+def pad_to_reach(free: np.ndarray, res: float, origin, point, margin: float):
+    """``free`` (H, W) padded with free cells so that ``point`` (x, y) m and ``margin`` m around it
+    lie inside; the new origin (x, y) m of cell (0, 0)."""
+    origin = np.asarray(origin, dtype=np.float64)
+    lo = np.floor((np.asarray(point) - margin - origin) / res).astype(int)  # (col, row) of the corner
+    hi = np.floor((np.asarray(point) + margin - origin) / res).astype(int)
+    before = np.maximum(-lo, 0)[::-1]  # (rows, cols) to add before
+    after = np.maximum(hi - (np.array(free.shape[::-1]) - 1), 0)[::-1]
+    if not (before.any() or after.any()):
+        return free, tuple(origin)
+    padded = np.pad(free, ((before[0], after[0]), (before[1], after[1])), constant_values=True)
+    return padded, tuple(origin - res * before[::-1])

@@ -15,9 +15,10 @@ into the map, then backing off, a replan and a turn towards the new path. After
 exists on the map (cells blocked for less than ``_SETTLED_S`` count as free if
 only they are in the way: they may be a person the live map caught), the goal is unreachable; ``max_time`` bounds every run
 (status ``timeout``). Laser points the map does not explain are passed to the
-local planner as such (DWA gives them a growing margin: they may move). Within
-``final_approach`` of the goal a point controller closes in, then the robot
-turns to the goal heading if one was given.
+local planner as such (DWA gives them a growing margin: they may move). Every
+local planner's command is slowed to the speed that stops at the goal; within
+``final_approach`` of it a point controller drives the arc through it and stops on
+it (``goal_precision``), then the robot turns to the goal heading if one was given.
 """
 
 from __future__ import annotations
@@ -30,9 +31,9 @@ from scipy import ndimage
 
 from slam2d import geometry
 from slam2d.navigation.base import LOCAL_PLANNERS, RECOVERY_BEHAVIOURS, register_recovery
-from slam2d.navigation.common import Command, approach_speed, in_robot_frame, point_along
+from slam2d.navigation.common import Command, in_robot_frame, point_along, stopping_speed
 from slam2d.navigation.config import NavigatorConfig
-from slam2d.navigation.maps import free_mask, mark_points
+from slam2d.navigation.maps import free_mask, mark_points, nearest_free, pad_to_reach
 from slam2d.planning.astar import AStar
 from slam2d.planning.grid import PlanningGrid, around, refresh_clearance
 from slam2d.sim.robot import RobotConfig
@@ -56,6 +57,8 @@ _EXPLAINING = np.array([(dr, dc) for dr in range(-_EXPLAINED_CELLS, _EXPLAINED_C
                         if abs(dr) + abs(dc) <= _EXPLAINED_CELLS])  # the offsets (rows, cols) of those cells
 _FINAL_GAP = 0.01  # m kept between the robot's disc and any point on the final approach
 GOAL_PADDING = 1.0  # m of free cells kept around a goal beyond a map whose unknown cells are free
+_CREEP = 0.05  # m/s; slower than this, the final approach turns on the spot to a goal more than 0.3 rad off
+_STOP_DECEL = 0.9  # of max_accel: the deceleration the stop at the goal is planned with
 
 
 def make_local_planner(name: str, robot: RobotConfig, cfg: NavigatorConfig):
@@ -99,7 +102,7 @@ class Navigator:
         self._raw = self._grid = self._cost = None
         self._cell_blocked_at = None  # (H, W) time (s) each cell of ``_raw`` became blocked; inf: free
         self._now, self._clear = 0.0, None  # _clear: the map's clearance (H, W) m, capped
-        self._index, self._level, self._arrived, self._last_distance = 0, 0, False, np.inf
+        self._index, self._level, self._arrived = 0, 0, False
         self._best = (np.inf, 0.0)  # (remaining path m, time)
         self._level_mark = np.inf  # remaining path m at the first recovery of a run of them
         self._blocked_since = None
@@ -125,7 +128,7 @@ class Navigator:
         self._now = self._now if now is None else float(now)
         free, res, origin = free_mask(map_grid, self.cfg.unknown_free)
         if self.cfg.unknown_free:  # a map being built may not reach the goal yet: beyond it is unknown, so free
-            free, origin = _reaching(free, res, origin, self.goal[:2], GOAL_PADDING)
+            free, origin = pad_to_reach(free, res, origin, self.goal[:2], GOAL_PADDING)
         same_frame = self._raw is not None and (res, tuple(origin)) == (self._raw.resolution, self._raw.origin)
         same_frame = same_frame and self._raw.free.shape == free.shape
         changed = free != self._raw.free if same_frame else None
@@ -227,7 +230,7 @@ class Navigator:
         goal = self._goal_cell(grid)
         if goal is None:
             return f"goal ({self.goal[0]:.2f}, {self.goal[1]:.2f}) is blocked or within the robot radius of an obstacle"
-        start = _nearest_free(grid, pose[:2], _SNAP)
+        start = nearest_free(grid, pose[:2], _SNAP)
         if start is None:
             return f"no free cell within {_SNAP} m of the robot at ({pose[0]:.2f}, {pose[1]:.2f})"
         result = AStar(grid, 8, cost).plan(start, goal)
@@ -256,8 +259,8 @@ class Navigator:
             # a map being built: what blocks the goal may be a person mapped in passing; drive to the
             # nearest free cell, where the laser sees the goal again (replanned at every new map)
             self._stand_in = True
-            return _nearest_free(grid, self.goal[:2], self.cfg.blocked_goal_reach)
-        return _nearest_free(grid, self.goal[:2], self.cfg.inflation_margin + 2 * grid.resolution)
+            return nearest_free(grid, self.goal[:2], self.cfg.blocked_goal_reach)
+        return nearest_free(grid, self.goal[:2], self.cfg.inflation_margin + 2 * grid.resolution)
 
     def optimal_length(self, start) -> float:
         """Length (m) of the shortest grid path from ``start`` (x, y) to the goal on the map inflated by the radius."""
@@ -301,7 +304,7 @@ class Navigator:
             return self._goal_command(pose, velocity)
         if self._manoeuvre:
             return self._manoeuvre_command(pose, points, now)
-        if (cmd := self._final_command(pose, points, self.unmapped(pose, points))) is not None:
+        if (cmd := self._final_command(pose, velocity, points, self.unmapped(pose, points))) is not None:
             return cmd
         self._track(pose)
         if np.hypot(*(pose[:2] - self.path[self._index])) > self.cfg.off_path:
@@ -313,6 +316,7 @@ class Navigator:
         t0 = _time.perf_counter()
         cmd = self.local.command(pose, velocity, points, self.path[self._index :], self.unmapped(pose, points))
         self.planner_seconds.append(_time.perf_counter() - t0)
+        cmd = self._goal_speed(cmd, pose, velocity)
         if cmd.blocked:
             self._blocked_since = now if self._blocked_since is None else self._blocked_since
             if now - self._blocked_since >= self.cfg.blocked_time:
@@ -369,13 +373,15 @@ class Navigator:
     # goal -------------------------------------------------------------------
 
     def _at_goal(self, pose, velocity) -> bool:
-        """Arrived within half the tolerance, or within it once no longer getting closer."""
+        """Arrived: within ``goal_precision`` of the goal, or within ``goal_tolerance`` with the goal abeam or
+        behind (driving on would not bring the robot closer). Once arrived the robot brakes; if it then stands
+        outside the tolerance (or is pushed off by more than twice it), it approaches again."""
         d = float(np.hypot(*(pose[:2] - self.goal[:2])))
-        tol, last = self.cfg.goal_tolerance, self._last_distance
-        self._last_distance = d
-        if d <= tol / 2 or (d <= tol and d >= last - 1e-4):
+        ahead = float(in_robot_frame(pose, self.goal[:2])[0])
+        tol = self.cfg.goal_tolerance
+        if d <= self.cfg.goal_precision or (d <= tol and ahead <= 0.0):
             self._arrived = True
-        elif d > 2 * tol + 0.02:
+        elif d > 2 * tol + 0.02 or (d > tol and np.abs(velocity).max() < 1e-3):
             self._arrived = False
         return self._arrived
 
@@ -387,29 +393,51 @@ class Navigator:
                 brake = np.sqrt(self.robot.max_turn_accel * abs(err))  # stops within err at half the accel
                 w = min(self.robot.max_turn_rate, brake, max(2.0 * abs(err), 0.1))
                 return Command(0.0, float(np.sign(err) * w), False, "align")
-        if np.abs(velocity).max() < 1e-3:
+        if np.abs(velocity).max() < 1e-3:  # stopped within the tolerance (else _at_goal approaches again)
             return self._finish(REACHED, "goal reached")
         return Command(0.0, 0.0, False, "stop")
 
-    def _final_command(self, pose, points, unmapped) -> Command | None:
+    def _final_command(self, pose, velocity, points, unmapped) -> Command | None:
         """Within ``final_approach`` of the goal and with no laser point within the robot's radius
-        (+ 1 cm; + the DWA's margin and obstacle reach for ``unmapped`` points, which may move)
-        of the straight line to it, drive straight at it:
-        turn on the spot while it is more than 0.3 rad off, then close in at the speed that stops
-        there. This lets the robot reach goals closer to a wall than the local planner's margin."""
+        (+ 1 cm; + the DWA's margin and obstacle reach for ``unmapped`` points, which may move; + the arc's
+        bulge) of the straight line to it, drive at it on the arc from the heading through it at the speed
+        that stops on it (:func:`stopping_speed`), so that the robot neither stops short nor coasts past;
+        turn on the spot first while it is more than 0.3 rad off and the robot is slow, or once it is
+        behind. This also lets the robot reach goals closer to a wall than the local planner's margin. With
+        a point that near, within ``goal_tolerance`` is arrived."""
         d = float(np.hypot(*(pose[:2] - self.goal[:2])))
         if d > self.cfg.final_approach:
             return None
         goal = in_robot_frame(pose, self.goal[:2])
-        keep = self.robot.radius + _FINAL_GAP + unmapped * (self.cfg.dwa.margin + self.cfg.dwa.obstacle_reach)
-        if len(points) and (_segment_distance(points, goal) < keep).any():
-            return None
         bearing = float(np.arctan2(goal[1], goal[0]))
-        w = float(np.clip(2.0 * bearing, -1.0, 1.0))
-        if abs(bearing) > 0.3:
-            return Command(0.0, w, False, "final turn")
-        v = min(approach_speed(d, 0.5 * self.robot.max_accel), 2.0 * d) * np.cos(bearing)
-        return Command(float(v), w, False, "final approach")
+        bulge = 0.5 * d * np.tan(min(abs(bearing), 1.0) / 2)  # m between the arc and the chord, at most
+        keep = self.robot.radius + _FINAL_GAP + bulge + unmapped * (self.cfg.dwa.margin + self.cfg.dwa.obstacle_reach)
+        if len(points) and (_segment_distance(points, goal) < keep).any():
+            if d <= self.cfg.goal_tolerance:  # the local planner places the robot no closer: arrived
+                self._arrived = True
+                return self._goal_command(pose, velocity)
+            return None
+        if abs(bearing) >= np.pi / 2 or (abs(bearing) > 0.3 and abs(float(velocity[0])) < _CREEP):
+            return Command(0.0, float(np.clip(2.0 * bearing, -1.0, 1.0)), False, "final turn")
+        curvature = 2.0 * np.sin(bearing) / d  # the arc from the heading through the goal
+        arc = d * bearing / np.sin(bearing) if abs(bearing) > 1e-9 else d
+        v = min(self._stopping_speed(arc, velocity), 0.5 * self.robot.max_turn_rate / max(abs(curvature), 1e-9))
+        return Command(float(v), float(v * curvature), False, "final approach")
+
+    def _stopping_speed(self, distance: float, velocity) -> float:
+        """m/s: the speed from which the robot, at ``velocity`` now, stops after ``distance`` m (``_STOP_DECEL``)."""
+        return stopping_speed(distance, float(velocity[0]), _STOP_DECEL * self.robot.max_accel, self.cfg.period)
+
+    def _goal_speed(self, cmd: Command, pose, velocity) -> Command:
+        """``cmd`` slowed on its arc to the speed that stops at the goal, along the path or straight on, whichever
+        is shorter (a band cuts the path's corners; its staircase and its lagging nearest point overstate it),
+        whatever the local planner plans for its stop: the final approach takes over at a speed it can stop
+        from, and a planner that drives the last centimetres itself stops there too."""
+        d = float(np.hypot(*(pose[:2] - self.goal[:2])))
+        top = self._stopping_speed(min(d, self._remaining(pose)), velocity)
+        if cmd.v <= top:
+            return cmd
+        return Command(top, cmd.w * top / cmd.v, cmd.blocked, cmd.state)
 
     # recovery ---------------------------------------------------------------
 
@@ -464,31 +492,3 @@ def _segment_distance(points: np.ndarray, end: np.ndarray) -> np.ndarray:
     ee = float(end @ end)
     u = np.clip(points @ end / ee, 0.0, 1.0) if ee > 0 else np.zeros(len(points))
     return np.hypot(*(points - u[:, None] * end).T)
-
-
-def _nearest_free(grid: PlanningGrid, xy, within: float):
-    """The cell of ``xy`` (m) if free, else the nearest free cell within ``within`` m; None if none."""
-    cell = grid.world_to_cell(xy)
-    if grid.is_free(cell):
-        return cell
-    if not grid.in_bounds(cell):
-        return None
-    dist, (rows, cols) = ndimage.distance_transform_edt(~grid.free, return_indices=True)
-    r, c = int(cell[0]), int(cell[1])
-    if dist[r, c] * grid.resolution > within:
-        return None
-    return np.array([rows[r, c], cols[r, c]])
-
-
-def _reaching(free: np.ndarray, res: float, origin, point, margin: float):
-    """``free`` (H, W) padded with free cells so that ``point`` (x, y) m and ``margin`` m around it
-    lie inside; the new origin (x, y) m of cell (0, 0)."""
-    origin = np.asarray(origin, dtype=np.float64)
-    lo = np.floor((np.asarray(point) - margin - origin) / res).astype(int)  # (col, row) of the corner
-    hi = np.floor((np.asarray(point) + margin - origin) / res).astype(int)
-    before = np.maximum(-lo, 0)[::-1]  # (rows, cols) to add before
-    after = np.maximum(hi - (np.array(free.shape[::-1]) - 1), 0)[::-1]
-    if not (before.any() or after.any()):
-        return free, tuple(origin)
-    padded = np.pad(free, ((before[0], after[0]), (before[1], after[1])), constant_values=True)
-    return padded, tuple(origin - res * before[::-1])

@@ -26,6 +26,7 @@ from slam2d.config import ExperimentConfig
 from slam2d.datasets.simulator import route_start
 from slam2d.errors import InputError, check_inside
 from slam2d.evaluation.trajectory import write_tum
+from slam2d.geometry import wrap_angle
 from slam2d.localization import KnownMap
 from slam2d.localization.base import LOCALIZERS
 from slam2d.navigation import Navigator, run_navigation, world_grid
@@ -142,6 +143,7 @@ def simulate(cfg: ExperimentConfig, progress=None) -> NavigationRun:
         "wall_s": wall,
         "real_time_factor": result.time / wall if wall > 0 else float("nan"),
         **_pose_errors(estimate, result.trajectory),
+        **_stop_errors(estimate, result.trajectory, goal),
     }
     return NavigationRun(world, result, estimate, online.grid if online else None, record, metrics)
 
@@ -200,6 +202,17 @@ def _pose_errors(estimate: np.ndarray, truth: np.ndarray) -> dict[str, float]:
     n = min(len(estimate), len(truth))
     err = np.hypot(*(estimate[:n, :2] - truth[:n, :2]).T)
     return {"pose_rmse": float(np.sqrt(np.mean(err**2))), "pose_error_end": float(err[-1])}
+
+
+def _stop_errors(estimate: np.ndarray, truth: np.ndarray, goal: np.ndarray) -> dict[str, float]:
+    """The goal error split at the stop: ``stop_control_error`` (m), the pose driven on (the estimate) to the goal,
+    which is the navigator's; ``stop_pose_error`` (m, rad: ``stop_heading_pose_error``), the estimate against the
+    true pose, which is the localisation's; ``goal_error`` (true pose to goal) is at most their sum."""
+    n = min(len(estimate), len(truth))
+    est, true = estimate[n - 1], truth[n - 1]
+    return {"stop_control_error": float(np.hypot(*(est[:2] - goal[:2]))),
+            "stop_pose_error": float(np.hypot(*(est[:2] - true[:2]))),
+            "stop_heading_pose_error": float(abs(wrap_angle(est[2] - true[2])))}
 
 
 def _write_trajectories(out: Path, result, estimate: np.ndarray) -> None:
