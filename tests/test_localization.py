@@ -19,6 +19,7 @@ from slam2d.localization import (
     MclConfig,
     ParticleFilter,
     kld_limit,
+    mcl,
 )
 from slam2d.localization.mcl import sample_motion
 from slam2d.localization.scenario import converged_at, replay, wander
@@ -268,6 +269,31 @@ def test_walls_missing_from_the_map_do_not_pass_for_a_kidnapping():
     assert MclConfig().recovery_best_beams < 1.0 and injected == 0 and worst < 0.2
     injected, worst = outcomes[1.0]
     assert injected > 1000 and worst > 5.0
+
+
+def test_walls_missing_along_metres_do_not_pass_for_a_kidnapping(monkeypatch):
+    """The map lacks the walls within 2.5 m of that corner (as a SLAM grid whose corridor wall was worn
+    off over metres): the best-fitting half of the beams fits up to 30 % worse, which the defaults take
+    for the map's imperfection; counting a share above 0.1 as a kidnap, the filter jumps away."""
+    world = World.office()
+    full = KnownMap.from_world(world)
+    stream = wander(world, full, 40.0, seed=3)
+    corner = stream.truth[len(stream.truth) // 3, :2]
+    cells = np.argwhere(full.occupied)
+    gone = cells[np.hypot(*(full.cell_to_world(cells) - corner).T) < 2.5]
+    occupied = full.occupied.copy()
+    occupied[gone[:, 0], gone[:, 1]] = False
+    known = KnownMap(occupied, full.free | full.occupied, full.resolution, full.origin, "worn")
+    outcomes = []
+    for noise in (mcl.CONFIDENT_NOISE, 0.1):
+        monkeypatch.setattr(mcl, "CONFIDENT_NOISE", noise)
+        pf = ParticleFilter(known, MclConfig(), 12.0, seed=3)
+        pf.init_pose(stream.truth[0], 0.1, 0.05)
+        worst = replay(pf, stream).position_error.max()
+        outcomes.append((pf.injected, worst))
+    (injected, worst), (injected_strict, worst_strict) = outcomes
+    assert injected == 0 and worst < 0.2
+    assert injected_strict > 1000 and worst_strict > 5.0
 
 
 def test_random_particles_are_drawn_when_the_weights_stay_even():
