@@ -15,7 +15,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView, inside_polygon
+from slam2d.exploration.gridops import (
+    FREE,
+    OCCUPIED,
+    UNKNOWN,
+    GridView,
+    inside_polygon,
+    true_cells,
+)
 from slam2d.exploration.paths import as_paths
 
 WALL_GAP = 2  # cells: frontier cells this close to an occupied cell are left out
@@ -236,11 +243,4 @@ def _cells_within(cells, reachable, lo, k, reach):
                 if not near[r, c] and reachable[r, c] and np.sqrt(float((r - cr) ** 2 + (c - cc) ** 2)) <= reach:
                     near[r, c] = True
                     n += 1
-    out = np.empty((n, 2), dtype=np.int64)
-    j = 0
-    for r in range(h):
-        for c in range(w):
-            if near[r, c]:
-                out[j, 0], out[j, 1] = r + lo[0], c + lo[1]
-                j += 1
-    return out
+    return true_cells(near, n, lo[0], lo[1])

@@ -321,12 +321,18 @@ def _entry_cells(state):
                                      or (c > 0 and state[r, c - 1] == 0) or (c < w - 1 and state[r, c + 1] == 0)):
                 entry[r, c] = True
                 n += 1
+    return true_cells(entry, n, 0, 0)
+
+
+@njit(cache=True)
+def true_cells(mask, n, r0, c0):
+    """The ``n`` True cells of ``mask`` (h, w) in raster order, offset by (``r0``, ``c0``): (n, 2) (row, col)."""
     out = np.empty((n, 2), dtype=np.int64)
     k = 0
-    for r in range(h):
-        for c in range(w):
-            if entry[r, c]:
-                out[k, 0], out[k, 1] = r, c
+    for r in range(mask.shape[0]):
+        for c in range(mask.shape[1]):
+            if mask[r, c]:
+                out[k, 0], out[k, 1] = r + r0, c + c0
                 k += 1
     return out
 
