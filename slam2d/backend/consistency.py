@@ -188,18 +188,18 @@ def binomial_tail(k: int, n: int, p: float) -> float:
     return float(np.exp(log_pmf).sum())
 
 
-def noise_ratio(graph: g2o.PoseGraphFile, poses, loops) -> float:
-    """The noise of the ``loops`` (M,) bool mask at ``poses`` (N, 3) relative to what the graph's information
-    matrices predict (``residual_ratio`` of their squared whitened residuals). Below 1: the information
+def noise_ratio(chi2: np.ndarray) -> float:
+    """The noise of loops with squared whitened residuals ``chi2`` (K,) (``edge_chi2``) relative to what the
+    graph's information matrices predict (``residual_ratio`` of their squared whitened residuals). Below 1: the information
     understates the precision (M3500: 0.010); about 1: calibrated; above 1: the information overstates it, or
-    false loops are among the ``loops`` (intel with 1000 grouped false loops among its 760 screened true
+    false loops are among them (intel with 1000 grouped false loops among its 760 screened true
     ones: 2535 by the median, 0.017 by the quartile, 0.007 at the outlier-free optimum). A ratio above 1 is
     refuted when more loops lie within the nominal chi-square gate than a noise that large leaves a
     ``REFUTE_P`` chance of (binomial tail): the solution fits those loops as their information states, the
     rest are false, and the ratio is theirs (CSAIL with 1000 grouped false loops among its 128 true ones:
     27 160 by the quartile, which leaves a loop a chance of 2e-6 to lie within the gate, where 126 true loops
     lie; 0.027 from them, 0.038 at the outlier-free optimum)."""
-    chi2 = edge_chi2(graph, poses)[np.asarray(loops, bool)]
+    chi2 = np.asarray(chi2, dtype=np.float64)
     ratio = residual_ratio(chi2)
     fitted = chi2 <= CHI2_3DOF_99
     if ratio <= 1 or not fitted.any():

@@ -147,10 +147,10 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
         iterations += n
         cost = factor_graph(robust, screened).error(g2o_values(graph.ids, poses))
         if best is None or cost < best[0]:
-            loops = screened & ~odometry
+            loops, chi2 = screened & ~odometry, edge_chi2(graph, poses)
             moved = loops & (edge_chi2(graph, start) > CHI2_3DOF_99)  # loops the start did not fit
-            short = min(residual_ratio(edge_chi2(graph, poses)[loops]), noise_ratio(graph, poses, moved))
-            best = (cost, poses, name, short, noise_ratio(graph, poses, loops))
+            short = min(residual_ratio(chi2[loops]), noise_ratio(chi2[moved]))
+            best = (cost, poses, name, short, noise_ratio(chi2[loops]))
     _, poses, name, _, ratio = best
     scale = consistency.gate_scale(ratio)
     phi_used = max(phi * max(1.0, ratio), DCS_CALIBRATED_PHI * ratio)
