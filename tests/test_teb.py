@@ -138,6 +138,23 @@ def test_band_reaches_full_speed_on_a_clear_path_and_stops_at_the_goal():
     assert v[-1] <= teb.robot.max_accel * dts[-1] * 1.06  # it can stop within the last interval (a soft limit)
 
 
+def test_the_first_segment_is_reachable_ramping_from_the_robots_velocity():
+    """A segment's speed is its mean over the interval, reached ramping from the robot's speed now: the change
+    from now to the first segment's middle is within the limits (as between two segments' middles). Turning
+    right at 1 rad/s with the path turning left, the band used to ask twice the turn acceleration (measured
+    over the whole first interval), which the command could not follow: it lagged the band and wove."""
+    teb = TimedElasticBand()
+    path = np.vstack([np.column_stack([np.arange(0.0, 0.8, 0.05), np.zeros(16)]),
+                      np.column_stack([np.full(40, 0.8), np.arange(0.05, 2.05, 0.05)])])  # fmt: skip
+    start = np.array([1.0, -1.0])
+    teb.command(np.zeros(3), start, np.empty((0, 2)), path)
+    poses, dts = teb.band
+    v, w, _, _ = segments(poses, dts)
+    half = dts[0] / 2
+    assert abs(w[0] - start[1]) <= 1.05 * teb.robot.max_turn_accel * half
+    assert abs(v[0] - start[0]) <= 1.05 * teb.robot.max_accel * half
+
+
 def test_a_band_that_would_touch_a_point_brakes_and_reports_blocked():
     """A wall across a corridor 0.6 m ahead at full speed: no band gets through; braking, blocked."""
     teb = TimedElasticBand()
@@ -225,3 +242,25 @@ def test_a_path_replanned_in_grid_steps_from_the_robot_is_driven_straight():
     length = np.linalg.norm(np.diff(trajectory[:, :2], axis=0), axis=1).sum()
     assert length < 1.003 * np.hypot(*(trajectory[-1, :2] - trajectory[0, :2]))
     assert np.sqrt(np.mean(trajectory[:, 2] ** 2)) < 0.06
+
+
+def test_a_path_joined_at_an_angle_is_driven_onto_without_weaving():
+    """Joining a straight path 0.5-1.2 rad off it at full speed (as after a door or a replan), the command
+    follows the band's own speed profile (linear from the robot's speed now to each segment's middle): the
+    turn rate changes direction 12 times over the three joins. Commanding the first segment's mean speed at
+    once ran ahead of the band, the robot overshot its turns and corrected back: 33 changes."""
+    path = np.column_stack([np.arange(0.0, 12.0, 0.05), np.zeros(240)])
+    changes = 0
+    for heading in (0.5, 0.85, 1.2):
+        teb, pose, velocity, turns = TimedElasticBand(), np.array([0.0, 0.0, heading]), np.array([1.0, 0.0]), []
+        for _ in range(80):
+            near = int(np.argmin(np.hypot(*(path - pose[:2]).T)))
+            cmd = teb.command(pose, velocity, np.empty((0, 2)), np.vstack([pose[:2], path[near + 1 :]]))
+            velocity = np.array([cmd.v, cmd.w])
+            turns.append(cmd.w)
+            for _ in range(10):  # a unicycle, 10 ms steps
+                pose = pose + 0.01 * np.array([cmd.v * np.cos(pose[2]), cmd.v * np.sin(pose[2]), cmd.w])
+        assert abs(pose[1]) < 0.05 and abs(pose[2]) < 0.05  # on the path, along it
+        turns = np.array(turns)
+        changes += int((np.diff(np.sign(turns[np.abs(turns) > 0.05])) != 0).sum())
+    assert changes <= 15

@@ -15,14 +15,16 @@ x_0 the robot, fixed) and the time intervals dt_i (s) between them. Its factors:
 - velocity: |v| and |w| of every segment within the robot's limits (backwards at most
   ``max_speed_back``), dt_i above ``min_dt``;
 - acceleration: of every pair of segments, from the robot's velocity at the start, to a stop at
-  the final goal;
+  the final goal (a segment's speed is its mean, at its middle: each change is over the time between
+  those points, from now and to the end over half an interval);
 - non-holonomic kinematics: both poses of a segment make equal angles with its chord (a
   differential drive moves on arcs), and it drives forwards;
 - total time: every dt_i pulled to 0, which makes the band time-optimal.
 
 Every call re-solves the band (Levenberg-Marquardt, ``iterations``) warm-started from the last one,
 moved into the new robot frame, with poses inserted or removed so that each dt stays near
-``dt_ref``; the command is the first segment's (v, w), clipped to what the robot reaches in one
+``dt_ref``; the command is the band's (v, w) one period on (linear from the robot's speed now to the
+first segment's at its middle), clipped to what the robot reaches in one
 period and slowed on its arc until the robot, braking at full deceleration after the period,
 stops short of every point (a point that may move with its margin grown, as the DWA's arcs).
 A band whose first ``check_time`` s would bring the disc onto a laser point, or whose slowest
@@ -333,12 +335,12 @@ class TimedElasticBand:
         return bool((tree.query(xy[1:])[0] >= min(self.robot.radius + 0.005, now - 1e-4)).all())
 
     def _first_command(self, poses, dts, velocity, points, moving) -> Command:
-        """The first segment's (v, w), within what the robot reaches in one period, slowed (on the same arc)
+        """The band's (v, w) one period on, within what the robot reaches in one period, slowed (on the same arc)
         until it can still stop short of every point, a ``moving`` one's margin grown as in the band; braking
         and blocked when even the slowest reachable speed cannot."""
         r, period = self.robot, self.cfg.period
-        v, w = (float(x[0]) for x in segments(poses[:2], dts[:1])[:2])
         v0, w0 = float(velocity[0]), float(velocity[1])
+        v, w = _speeds_at(period, poses, dts, velocity)
         v = float(np.clip(v, v0 - r.max_accel * period, v0 + r.max_accel * period))
         v = float(np.clip(v, -self.cfg.max_speed_back, r.max_speed))
         w = float(np.clip(w, w0 - r.max_turn_accel * period, w0 + r.max_turn_accel * period))
@@ -386,6 +388,16 @@ class TimedElasticBand:
         w = math.copysign(min(r.max_turn_rate, brake), bearing)
         w = float(np.clip(w, w0 - r.max_turn_accel * period, w0 + r.max_turn_accel * period))
         return Command(float(v), w, False, "turn to path")
+
+
+def _speeds_at(t: float, poses, dts, velocity) -> tuple[float, float]:
+    """The band's (v m/s, w rad/s) at ``t`` s: linear between the robot's ``velocity`` now and each segment's
+    speed at its middle (a segment's speed is its mean: the acceleration factors measure between these points).
+    The first segment's speed itself, commanded at once, ran ahead of the band: the robot turned late, then
+    too far, and wove."""
+    v, w = segments(poses, dts)[:2]
+    at = np.concatenate([[0.0], np.cumsum(dts) - 0.5 * dts])
+    return tuple(float(np.interp(t, at, np.concatenate([[x0], x]))) for x0, x in zip(velocity[:2], (v, w)))
 
 
 def _length(path: np.ndarray) -> float:

@@ -156,7 +156,9 @@ def acceleration_residual(P, dts, start, end, a_max, alpha_max):
     """Keeps the change of speed from the robot's velocity ``start`` (v m/s, w rad/s) to the first segment's,
     between consecutive segments and, if ``end`` (2,) is finite, from the last segment's to ``end``, within
     ``a_max`` m/s^2 and ``alpha_max`` rad/s^2: error (2 q,), the excess of the linear accelerations (start,
-    pairs, end), then of the angular ones."""
+    pairs, end), then of the angular ones. A segment's speed is its mean, at its middle: the start's change
+    is over half the first interval, as the end's over half the last (over the whole interval, the band
+    planned twice the acceleration the robot has, and the robot lagged it)."""
     n, m = len(P), len(dts)
     v, w, gv, gw = segments(P, dts)
     closed = np.isfinite(end[0])
@@ -165,9 +167,9 @@ def acceleration_residual(P, dts, start, end, a_max, alpha_max):
     for block in range(2):
         x, g, lim = (v, gv, a_max) if block == 0 else (w, gw, alpha_max)
         base = block * q
-        acc = (x[0] - start[block]) / dts[0]  # over the first interval
+        acc = 2 * (x[0] - start[block]) / dts[0]  # from now to the first segment's middle
         e[base], d = _excess(acc, -lim, lim)
-        _spread(dP, ddt, base, 0, g[0], d / dts[0])
+        _spread(dP, ddt, base, 0, g[0], 2 * d / dts[0])
         ddt[base, 0] -= d * acc / dts[0]
         for i in range(m - 1):
             total = dts[i] + dts[i + 1]
@@ -179,10 +181,10 @@ def acceleration_residual(P, dts, start, end, a_max, alpha_max):
             ddt[row, i] -= d * acc / total
             ddt[row, i + 1] -= d * acc / total
         if closed:
-            acc = (end[block] - x[m - 1]) / dts[m - 1]
+            acc = 2 * (end[block] - x[m - 1]) / dts[m - 1]  # from the last segment's middle to its end
             row = base + q - 1
             e[row], d = _excess(acc, -lim, lim)
-            _spread(dP, ddt, row, m - 1, g[m - 1], -d / dts[m - 1])
+            _spread(dP, ddt, row, m - 1, g[m - 1], -2 * d / dts[m - 1])
             ddt[row, m - 1] -= d * acc / dts[m - 1]
     return e, dP, ddt
 
