@@ -23,7 +23,7 @@ from slam2d.localization import (
 )
 from slam2d.localization.mcl import sample_motion
 from slam2d.localization.scenario import converged_at, replay, wander
-from slam2d.localization.sensor import BeamModel, LikelihoodField
+from slam2d.localization.sensor import BeamModel, LikelihoodField, seen_through
 from slam2d.sim import Robot, RobotConfig, World
 from slam2d.types import Scan
 
@@ -294,6 +294,52 @@ def test_walls_missing_along_metres_do_not_pass_for_a_kidnapping(monkeypatch):
     (injected, worst), (injected_strict, worst_strict) = outcomes
     assert injected == 0 and worst < 0.2
     assert injected_strict > 1000 and worst_strict > 5.0
+
+
+def _square_room(half: float, size: float = 12.0) -> KnownMap:
+    """A map (0.05 m cells, origin at -size/2) whose only walls are a square of half-width ``half`` m round (0, 0)."""
+    n = int(size / 0.05)
+    centres = -size / 2 + (np.arange(n) + 0.5) * 0.05
+    x, y = np.meshgrid(centres, centres)
+    ring = np.abs(np.maximum(np.abs(x), np.abs(y)) - half) < 0.05
+    return KnownMap(ring, ~ring, 0.05, (-size / 2, -size / 2))
+
+
+def test_readings_beyond_the_walls_tell_a_wrong_pose_from_a_map_lacking_walls():
+    """From the centre of a 4 m square room, every reading ends on its walls. In the room's own map none
+    passes a wall; in a map that lacks the east wall (readings short of what the map predicts) none
+    either; in the map of a 2 m room every one does."""
+    angles = np.linspace(-np.pi, np.pi, 60, endpoint=False)
+    reach = 2.0 / np.maximum(np.abs(np.cos(angles)), np.abs(np.sin(angles)))
+    scan = _scan_at(np.column_stack([reach * np.cos(angles), reach * np.sin(angles)]))
+    centre = np.zeros(3)
+    room = _square_room(2.0)
+    occupied = room.occupied.copy()
+    occupied[:, int((6.0 + 1.5) / 0.05):] = False  # x > 1.5 m: the east wall
+    lacking = KnownMap(occupied, room.free, 0.05, room.origin)
+    assert seen_through(room, centre, scan, 60, 12.0) == 0.0
+    assert lacking.occupied.sum() < room.occupied.sum() and seen_through(lacking, centre, scan, 60, 12.0) == 0.0
+    assert seen_through(_square_room(1.0), centre, scan, 60, 12.0) == 1.0
+    assert seen_through(room, centre, _scan_at(np.array([[1.0, 0.0]])), 60, 12.0) is None  # too few returns
+
+
+def test_a_kidnap_whose_best_half_still_fits_is_told_by_readings_beyond_the_walls(monkeypatch):
+    """Office seed 5: after the jump the best-fitting half of the beams fits within 40 % of the usual,
+    which alone passes for a map lacking a wall; the readings beyond the map's walls at the old pose
+    lower the threshold and the filter recovers. Without them it does not within 15 s."""
+    world = World.office()
+    known = KnownMap.from_world(world)
+    stream = wander(world, known, 30.0, seed=5, kidnap_at=[10.0])
+    k = stream.kidnaps[0]
+    recovered = {}
+    for name, level in (("readings", mcl.SEEN_THROUGH), ("best half only", math.inf)):
+        monkeypatch.setattr(mcl, "SEEN_THROUGH", level)
+        pf = ParticleFilter(known, MclConfig(), 12.0, seed=5)
+        pf.init_pose(stream.truth[0], 0.1, math.radians(3.0))
+        back = converged_at(replay(pf, stream), k)
+        recovered[name] = None if back is None else (back - k) * 0.1
+    assert recovered["readings"] is not None and recovered["readings"] <= 5.0
+    assert recovered["best half only"] is None or recovered["best half only"] > 15.0
 
 
 def test_random_particles_are_drawn_when_the_weights_stay_even():

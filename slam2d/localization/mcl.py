@@ -44,7 +44,7 @@ from slam2d.localization.clusters import (
 from slam2d.localization.config import MclConfig
 from slam2d.localization.maps import KnownMap
 from slam2d.localization.sampling import kld_limit, low_variance_indices, sample_motion
-from slam2d.localization.sensor import LikelihoodField, sensor_model
+from slam2d.localization.sensor import LikelihoodField, seen_through, sensor_model
 from slam2d.types import Scan
 
 __all__ = ["Estimate", "ParticleFilter", "kld_limit", "low_variance_indices", "sample_motion"]
@@ -52,6 +52,8 @@ __all__ = ["Estimate", "ParticleFilter", "kld_limit", "low_variance_indices", "s
 PARTICLE_BEAM_BYTES = 32  # memory per particle and beam while a scan is weighed (float64 temporaries)
 CONFIDENT_NOISE = 0.4  # random share below which a confident filter draws no random particle: a map lacking
 # walls the laser sees dims the best-fitting half of the beams by up to 30 % (ACES in its SLAM map), a kidnap by ~90 %
+SEEN_THROUGH = 0.4  # short-term average share of beams read beyond the map's walls from which the pose is doubted
+THROUGH_NOISE = 0.1  # random share below which a confident filter whose scans see through walls draws nothing
 LOCAL_SPREAD = np.array([0.3, 0.3, 0.1])  # m, m, rad: sd of recovery candidates around the current particles
 STATES = ("tracking", "ambiguous", "lost")
 FIT_DEFICIT = 0.1  # short-term average likelihood this far below the long-term one: the pose is not claimed
@@ -107,6 +109,7 @@ class ParticleFilter:
         self.log_w = np.zeros(0)
         self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)  # of all beams, of the best-fitting share
         self.w_fit = 0.0  # short-term average likelihood of every beam (FIT_ALPHA), for the state
+        self.through = 0.0  # short-term average (FIT_ALPHA) share of beams read beyond the map's walls at the pose
         self.updates = self.resamples = self.injected = 0
         self._odom: np.ndarray | None = None  # odometry at the last update
         self._estimate: Estimate | None = None
@@ -177,7 +180,7 @@ class ParticleFilter:
         self.particles = poses
         self.log_w = np.full(len(poses), -math.log(len(poses)))
         self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
-        self.w_fit = 0.0
+        self.w_fit = self.through = 0.0
         self._estimate = self._labels = None
         self._tested = self._anchored = self._searching = False
 
@@ -236,6 +239,7 @@ class ParticleFilter:
         While the pose is uncertain the weights come from the smoother field; the likelihood
         averages always do, so that they stay comparable. With ``hypothesis_fit`` the clusters'
         mean poses are scored in the same pass as the particles."""
+        self._watch_through(scan)
         sharp = self.confident() and self.coarse is not self.sensor
         refit = self.cfg.hypothesis_fit and self._labels is not None and len(self._labels) == len(self.particles)
         k = int(self._labels.max()) + 1 if refit else 0
@@ -256,6 +260,17 @@ class ParticleFilter:
         if self._resample_due() or (self.confident() and self.random_share() > 0):
             self._resample(scan)
         self._update_estimate()
+
+    def _watch_through(self, scan: Scan) -> None:
+        """Average into ``through`` the share of beams the scan reads beyond the map's walls at the last
+        estimate moved by the odometry since (only with recovery on)."""
+        est, odom = self._estimate, self._estimate_odom
+        if not self._recovering() or est is None or odom is None:
+            return
+        share = seen_through(self.map, geometry.compose(est.pose, geometry.between(odom, self._odom)), scan,
+                             self.cfg.beams, self.range_max)  # fmt: skip
+        if share is not None:
+            self.through += FIT_ALPHA * (share - self.through)
 
     def _recovering(self) -> bool:
         return self.cfg.alpha_slow > 0 and self.cfg.alpha_fast > 0
@@ -294,6 +309,8 @@ class ParticleFilter:
         While confident, a share up to ``CONFIDENT_NOISE`` is the map's imperfection and draws nothing:
         a single random particle on a look-alike corridor would outscore a place whose map lacks a wall,
         and where a SLAM map lacks a wall along metres of corridor the best half fits up to 30 % worse.
+        But a map lacking walls makes readings short; readings beyond the map's walls (``through`` at
+        least ``SEEN_THROUGH``) mean a wrong pose, and then a share above ``THROUGH_NOISE`` draws.
         A search (no ``tracking`` since the global start or the last random particles) whose cloud has
         settled where the scans fit worse than usual is not confident either: after a kidnap the cloud
         can settle on a wrong place whose best half of the beams fits."""
@@ -302,7 +319,8 @@ class ParticleFilter:
         if not self._recovering() or self.w_slow[i] <= 0:
             return 0.0
         share = 1.0 - self.w_fast[i] / self.w_slow[i]
-        return share if share > (CONFIDENT_NOISE if confident else 0.0) else 0.0
+        noise = (THROUGH_NOISE if self.through >= SEEN_THROUGH else CONFIDENT_NOISE) if confident else 0.0
+        return share if share > noise else 0.0
 
     def _resample(self, scan: Scan) -> None:
         """Low-variance resampling with random free-space poses, as many as KLD sampling asks.

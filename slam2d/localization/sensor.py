@@ -23,7 +23,10 @@ from slam2d.localization.config import MclConfig
 from slam2d.localization.maps import KnownMap
 from slam2d.types import Scan
 
-__all__ = ["BeamModel", "LikelihoodField", "select_beams", "sensor_model"]
+__all__ = ["BeamModel", "LikelihoodField", "seen_through", "select_beams", "sensor_model"]
+
+THROUGH_MARGIN = 0.3  # m a reading must reach beyond the first wall along its beam to count as seen through
+THROUGH_MIN_BEAMS = 10  # fewer returns than this tell nothing
 
 
 def select_beams(scan: Scan, count: int, skip_max: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -190,6 +193,20 @@ def _ray(x, y, dx, dy, occupied, ox, oy, res, range_max, h, w):  # pragma: no co
         else:
             t, row, t_r = t_r, row + step_r, t_r + t_dr
     return range_max
+
+
+def seen_through(known: KnownMap, pose: np.ndarray, scan: Scan, count: int, range_max: float) -> float | None:
+    """Share of ``count`` beams of ``scan`` (returns short of range_max) that read more than THROUGH_MARGIN m
+    beyond the first occupied cell along them from ``pose`` (3,): beams passing walls the map holds. A map
+    that lacks a wall the laser sees makes readings short, not long; a wrong pose makes both. None with
+    fewer than THROUGH_MIN_BEAMS returns."""
+    ranges, angles = select_beams(scan, count)
+    if len(ranges) < THROUGH_MIN_BEAMS:
+        return None
+    expected = _raycast(np.ascontiguousarray(pose, dtype=np.float64).reshape(1, 3),
+                        np.asarray(scan.sensor_pose, dtype=np.float64), angles, known.occupied,
+                        known.origin[0], known.origin[1], known.resolution, float(range_max))[0]  # fmt: skip
+    return float(np.mean(ranges > expected + THROUGH_MARGIN))
 
 
 def sensor_model(known: KnownMap, cfg: MclConfig, range_max: float):
