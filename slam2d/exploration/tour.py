@@ -62,7 +62,7 @@ def solve_open_tour(cost: np.ndarray, end: int | None = None, initial=None, time
     if initial is not None:
         start = cheapest_insertion(cost, [k for k in initial if k in set(inner)], inner, end if end < n else None)
         routing.CloseModelWithParameters(params)
-        warm = routing.ReadAssignmentFromRoutes([start], True)
+        warm = routing.ReadAssignmentFromRoutes([[manager.NodeToIndex(k) for k in start]], True)  # indices, not nodes
         if warm is not None:
             solution = routing.SolveFromAssignmentWithParameters(warm, params)
     if solution is None:
