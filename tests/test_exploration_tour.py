@@ -126,3 +126,42 @@ def test_the_tour_drives_to_a_viewpoint_of_the_opening_and_spends_it_once_its_ce
     state = view.state.copy()
     state[66:80, 30:60] = FREE  # the unknown beyond the opening seen: its cells are no frontier any more
     assert ex.spent(goal, GridView(state, view.resolution, view.origin))
+
+
+def test_the_subspaces_within_the_horizon_are_toured_before_the_others():
+    """A corridor east of the robot returns west below it and ends 4 m from a small leftover N 5 m west of the
+    robot: the shortest open tour leaves N to the end (a trip back once the east grows further); with a 6 m
+    horizon the three subspaces within it (N, M 3 m east, F 5 m south-west) come first, each subspace once, and
+    stay first once the robot has moved away."""
+    from slam2d.exploration.tour import TourPlanner
+
+    pts = np.array([[0, 0], [-5, 1], [3, 0], [10, 0], [17, 0], [17, -6], [10, -6], [3, -6], [-4, -3]], dtype=float)
+    cost = np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1))
+    keys = [(k, 0) for k in range(1, len(pts))]  # N is subspace 0, M 1, F 7
+    plain = TourPlanner()._global_order(keys, cost, 50.0, 0.0)
+    assert plain[-1] == 0 and sorted(plain) == list(range(8))
+    planner = TourPlanner()
+    local = planner._global_order(keys, cost, 50.0, 6.0)
+    assert sorted(local[:3]) == [0, 1, 7] and sorted(local) == list(range(8))
+    # the robot drives east to (14, -1): N, M and F stay begun and come before D and E, never within 6 m
+    pts[0] = [14.0, -1.0]
+    cost = np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1))
+    later = planner._global_order(keys, cost, 50.0, 6.0)
+    assert max(later.index(k) for k in (0, 1, 7)) < min(later.index(k) for k in (5, 6))
+    assert TourPlanner()._global_order(keys, cost, 50.0, 6.0)[-1] == 0  # without memory N is last again
+
+
+def test_frontier_cells_a_reached_viewpoint_did_not_clear_are_no_target_any_more():
+    """The robot reaches the viewpoint of the opening and the map does not change (the cells stay frontier, as
+    a grazing view leaves them): the next decision does not send it to look at the same cells again."""
+    from slam2d.exploration import config as explore_config
+    from slam2d.exploration.explorer import Explorer
+
+    view, _, _ = room_with_an_opening()
+    ex = Explorer(explore_config.load(None, {"exploration.strategy": "tour"}).exploration, 0.2, 0.05, 12.0)
+    first = ex.decide(np.array([1.0, 1.0, 0.0]), view)
+    assert first is not None and first.kind == "viewpoint"
+    ex.reached(first)
+    again = ex.decide(np.array([*first.position, 0.0]), view)
+    old = {tuple(c) for c in np.round(first.targets, 3)}
+    assert again is None or again.targets is None or not old & {tuple(c) for c in np.round(again.targets, 3)}

@@ -31,6 +31,8 @@ class TourConfig(Section):
                                                     "to be chosen")  # fmt: skip
     max_cells: int = Field(400, gt=0, description="frontier cells of the local subspace covered at most (evenly "
                                                   "thinned beyond)")  # fmt: skip
+    horizon: float = Field(8.0, ge=0, description="m of path from the robot: the subspaces this close are toured "
+                                                 "before the others (TARE's local horizon)")  # fmt: skip
     solver_ms: float = Field(10.0, gt=0, description="ms the TSP solver's local search may take per tour")
     refresh: int = Field(10, ge=1, description="decisions a subspace's travel costs are kept before they are "
                                                "measured again on the map")  # fmt: skip

@@ -93,6 +93,7 @@ class Explorer:
         self.visited: list[np.ndarray] = []
         self.inaccessible: list[np.ndarray] = []
         self.retired = np.zeros((0, 2))  # (K, 2) m: hidden cells a pocket view reached did not reveal
+        self.viewed = np.zeros((0, 2))  # (K, 2) m: frontier cells a viewpoint reached was chosen to see
         self.decision_seconds: list[float] = []  # wall clock of each decision
         self.decision_cpu_seconds: list[float] = []  # the deciding thread's CPU time (little moved by other jobs)
         self.fallbacks = self.pocket_goals = self.tight_goals = 0
@@ -413,6 +414,8 @@ class Explorer:
 
     def reached(self, goal: Goal) -> None:
         self.visited.append(goal.position.copy())
+        if goal.kind == "viewpoint" and goal.targets is not None:
+            self.viewed = np.concatenate([self.viewed, goal.targets])
         self._retire(goal)
         if goal.candidate is not None:
             goal.candidate.alive = False

@@ -11,12 +11,16 @@ rather than rebuilding it (FUEL's incremental refinement). Local layer: in the t
 viewpoints (reachable cells every ``spacing`` m) are chosen by greedy set cover of its frontier cells, a
 viewpoint covering the frontier cells in line of sight within ``view_range`` m (rays over free cells); the
 viewpoints are ordered into an open path from the robot that ends at the next subspace's node (the local tour
-joins the global one), and the robot drives to the first.
+joins the global one), and the robot drives to the first. Two rules against leaving pieces behind: a subspace
+once within ``horizon`` m of path from the robot is begun, and the begun subspaces are toured before the others
+(TARE's local horizon, finished before the robot leaves it); the frontier cells a viewpoint reached was chosen to
+see and did not clear are no target any more (the tour would send the robot to look at them again and again).
 """
 
 from __future__ import annotations
 
 import itertools
+from dataclasses import replace
 
 import numpy as np
 from numba import njit
@@ -27,6 +31,7 @@ from slam2d.exploration.paths import Paths, as_paths
 SCALE = 100  # the solver's integer costs: cm
 COARSE = 0.2  # m: cell of the coarse grid the travel costs between subspaces are measured on
 FAR = 10**9  # cost of an arc no path takes
+LEAVE = 1e4  # m added to an arc from a subspace not begun into a begun one (the begun ones first)
 
 
 def solve_open_tour(cost: np.ndarray, end: int | None = None, initial=None, time_ms: float = 50.0) -> list[int]:
@@ -62,7 +67,7 @@ def solve_open_tour(cost: np.ndarray, end: int | None = None, initial=None, time
     if initial is not None:
         start = cheapest_insertion(cost, [k for k in initial if k in set(inner)], inner, end if end < n else None)
         routing.CloseModelWithParameters(params)
-        warm = routing.ReadAssignmentFromRoutes([start], True)
+        warm = routing.ReadAssignmentFromRoutes([[manager.NodeToIndex(k) for k in start]], True)  # indices, not nodes
         if warm is not None:
             solution = routing.SolveFromAssignmentWithParameters(warm, params)
     if solution is None:
@@ -194,6 +199,7 @@ class TourPlanner:
         self.order: list[tuple[int, int]] = []  # the previous global tour, by subspace
         self._rows: dict = {}  # rep cell -> (its coarse distances, settled as far as asked; decision measured at)
         self._coarse_frame = None
+        self.begun: set = set()  # subspaces once within the horizon
         self.decisions = 0
 
     def choose(self, explorer, pose, view, distance):
@@ -201,12 +207,12 @@ class TourPlanner:
 
         cfg = explorer.cfg.tour
         self.decisions += 1
-        found = explorer.frontiers(pose, view, distance)
+        found = _unviewed(view, explorer.frontiers(pose, view, distance), explorer.viewed)
         if not found:
             return None
         keys, goals, paths, members = _subspaces(view, found, cfg.cell, distance)
         cost = self._costs(explorer, view, pose, goals, paths)
-        order = self._global_order(keys, cost, cfg.solver_ms)
+        order = self._global_order(keys, cost, cfg.solver_ms, cfg.horizon)
         first = order[0]
         nxt = goals[order[1]] if len(order) > 1 else None
         cells = members[first]
@@ -251,10 +257,19 @@ class TourPlanner:
             out[i] = row[0].lengths(at)  # the search resumed only as far as these cells
         return np.minimum(out, out.T)
 
-    def _global_order(self, keys, cost, solver_ms) -> list[int]:
-        """Indices of the subspaces in tour order, warm-started from the previous decision's order."""
+    def _global_order(self, keys, cost, solver_ms, horizon) -> list[int]:
+        """Indices of the subspaces in tour order, warm-started from the previous decision's order. A subspace once
+        within ``horizon`` m of path from the robot is *begun*, and the begun subspaces are toured before the others
+        (TARE's local horizon, finished before the robot leaves it; a begun subspace left for the end of the tour is
+        a trip back once the tour has grown the other way): an arc from one not begun to a begun one costs
+        ``LEAVE`` m more."""
         index = {key: i for i, key in enumerate(keys)}
         previous = [index[key] + 1 for key in self.order if key in index]
+        self.begun |= {keys[k - 1] for k in range(1, len(cost)) if cost[0, k] <= horizon}
+        near = np.array([False] + [key in self.begun for key in keys])
+        if near.any() and not near[1:].all():
+            cost = cost.copy()
+            cost[np.ix_(np.flatnonzero(~near)[1:], near)] += LEAVE  # not from the robot (node 0)
         order = [k - 1 for k in solve_open_tour(cost, initial=previous, time_ms=solver_ms)]
         self.order = [keys[i] for i in order]
         return order
@@ -293,6 +308,26 @@ class TourPlanner:
         end = len(pts) - 1 if nxt is not None else None
         first = chosen[solve_open_tour(cost, end=end, time_ms=cfg.solver_ms)[0] - 1] if len(chosen) > 1 else chosen[0]
         return xy[first].copy(), view.to_world(cells[sees[first]])
+
+
+def _unviewed(view, found: list, viewed: np.ndarray) -> list:
+    """The frontier regions ``found`` without the cells ``viewed`` (K, 2) m (frontier cells a viewpoint reached was
+    chosen to see and did not clear: the map keeps them frontier from there, another viewpoint would not fare
+    better); a region with none left is dropped."""
+    if len(viewed) == 0:
+        return found
+    mask = np.zeros(view.shape, dtype=bool)
+    cells = view.to_cell(viewed)
+    cells = cells[view.inside(cells)]
+    mask[cells[:, 0], cells[:, 1]] = True
+    out = []
+    for f in found:
+        keep = ~mask[f.cells[:, 0], f.cells[:, 1]]
+        if keep.all():
+            out.append(f)
+        elif keep.any():
+            out.append(replace(f, cells=f.cells[keep], size=int(keep.sum())))
+    return out
 
 
 def _subspaces(view, found, cell: float, distance: np.ndarray):
