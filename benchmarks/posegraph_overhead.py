@@ -1,4 +1,5 @@
-"""The whole ``slam2d optimize`` command on clean graphs beside a bare GTSAM script, in one run.
+"""The whole ``slam2d optimize`` command on clean graphs beside a bare GTSAM script, in one run; with
+``--outliers``, the command under injected false loops beside the same command on the clean graph.
 
 The bare script: ``import gtsam``, ``readG2o``, a tight prior on the first pose, GTSAM's
 ``LevenbergMarquardtOptimizer`` with default parameters, the error printed. The command:
@@ -11,6 +12,13 @@ process's wall time not in a step: interpreter start, imports, the results folde
 
     SLAM2D_DATA=... nice .venv/bin/python benchmarks/posegraph_overhead.py [--graphs M3500 intel MIT CSAIL]
         [--repeats 5]
+    SLAM2D_DATA=... nice .venv/bin/python benchmarks/posegraph_overhead.py --graphs intel CSAIL M3500 --repeats 3 \
+        --outliers 100 1000 --kinds random local group --methods pc_dcs gnc
+
+With ``--outliers`` every robust command (``--robust METHOD --outliers N --outlier-kind KIND --seed 1``)
+runs interleaved with the clean command (plain least squares, the defaults); the table gives each one's
+median wall time, its ratio to the clean command's median (issue 54's bound: 10 x), and from its
+``metrics.json`` the false loops rejected, the true loops kept and whether it verified and certified.
 """
 
 from __future__ import annotations
@@ -47,11 +55,48 @@ def spread(xs: list[float]) -> str:
     return f"{statistics.median(xs):.2f} ({min(xs):.2f}-{max(xs):.2f})"
 
 
+def command(path: str, out: Path, extra: list[str]) -> tuple[float, dict]:
+    """Wall time (s) and metrics.json of ``slam2d optimize PATH`` with ``extra`` options into ``out``."""
+    took = wall([sys.executable, "-m", "slam2d.cli", "optimize", path, "--out", str(out), "-q", *extra])
+    return took, json.loads(next(out.glob("*/metrics.json")).read_text())
+
+
+def under_outliers(args) -> None:
+    """The table of the robust commands under false loops against the clean command."""
+    cases = [(m, n, k) for n in args.outliers for k in args.kinds for m in args.methods]
+    print("| graph | method | false loops | wall s | x clean command | false rejected | true kept | verified, certified |")
+    print("|---|---|---|---:|---:|---:|---:|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.graphs:
+            path = str(DATA / "posegraphs" / f"{name}.g2o")
+            times: dict = {case: [] for case in [None, *cases]}
+            last: dict = {}
+            for r in range(args.repeats):
+                for i, case in enumerate(times):
+                    extra = [] if case is None else ["--robust", case[0], "--outliers", str(case[1]),
+                                                     "--outlier-kind", case[2], "--seed", "1"]  # fmt: skip
+                    took, last[case] = command(path, Path(tmp) / f"{name}-{r}-{i}", extra)
+                    times[case].append(took)
+            clean = statistics.median(times[None])
+            print(f"| {name} | none (clean graph) | 0 | {spread(times[None])} | 1.0 | - | - | "
+                  f"{last[None]['verified']}, {last[None]['certified']} |")
+            for case in cases:
+                m = last[case]
+                print(f"| {name} | {case[0]} | {case[1]} {case[2]} | {spread(times[case])} | "
+                      f"{statistics.median(times[case]) / clean:.1f} | {m['outliers_rejected']} / {m['outliers_injected']} | "
+                      f"{100 * m['true_loops_kept']:.2f} % | {m['verified']}, {m['certified']} |", flush=True)  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--graphs", nargs="+", default=["M3500", "intel", "MIT", "CSAIL"])
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--outliers", type=int, nargs="+", help="false loops injected: the robust commands' table")
+    ap.add_argument("--kinds", nargs="+", default=["random"])
+    ap.add_argument("--methods", nargs="+", default=["pc_dcs", "gnc"])
     args = ap.parse_args()
+    if args.outliers:
+        return under_outliers(args)
     slam2d = [sys.executable, "-m", "slam2d.cli", "optimize"]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
