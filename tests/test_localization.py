@@ -22,7 +22,7 @@ from slam2d.localization import (
     mcl,
 )
 from slam2d.localization.mcl import sample_motion
-from slam2d.localization.scenario import converged_at, replay, wander
+from slam2d.localization.scenario import Track, converged_at, false_convergence, replay, wander
 from slam2d.localization.sensor import BeamModel, LikelihoodField, seen_through
 from slam2d.sim import Robot, RobotConfig, World
 from slam2d.types import Scan
@@ -340,6 +340,21 @@ def test_a_kidnap_whose_best_half_still_fits_is_told_by_readings_beyond_the_wall
         recovered[name] = None if back is None else (back - k) * 0.1
     assert recovered["readings"] is not None and recovered["readings"] <= 5.0
     assert recovered["best half only"] is None or recovered["best half only"] > 15.0
+
+
+def test_a_claim_is_held_for_seconds_not_scans_on_a_log_slower_than_the_simulator():
+    """A log scanning every 0.2 s: a wrong `tracking` claim held 6 s is a false convergence (30 scans, fewer
+    than the simulator's 50 in 5 s), one held 4 s is not; a right one held 6 s converges."""
+    def track(wrong: np.ndarray, error: float) -> Track:
+        n = len(wrong)
+        state = np.where(wrong, "tracking", "ambiguous")
+        return Track(np.zeros((n, 3)), np.where(wrong, error, 0.0), np.zeros(n), np.zeros(n), np.zeros(n),
+                     np.zeros(n), np.zeros(0), state=state, stamps=np.arange(n) * 0.2)  # fmt: skip
+
+    held = np.r_[np.zeros(10, bool), np.ones(30, bool), np.zeros(60, bool)]  # 6 s
+    brief = np.r_[np.zeros(10, bool), np.ones(20, bool), np.zeros(70, bool)]  # 4 s
+    assert false_convergence(track(held, 3.0)) and not false_convergence(track(brief, 3.0))
+    assert converged_at(track(held, 0.05)) == 10 and converged_at(track(brief, 0.05)) is None
 
 
 def test_random_particles_are_drawn_when_the_weights_stay_even():

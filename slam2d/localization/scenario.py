@@ -120,7 +120,7 @@ def _stream(scans: list, truth: list, kidnaps: list) -> Stream:
 class Track:
     """A filter's replay of a stream: estimates (N, 3), their errors (N,) m and (N,) rad, particle
     counts (N,), the heaviest cluster's share (N,) and position sd (N,) m, ms per update, the
-    filter's state (N,) (tracking / ambiguous / lost)."""
+    filter's state (N,) (tracking / ambiguous / lost) and the scans' stamps (N,) s."""
 
     estimates: np.ndarray
     position_error: np.ndarray
@@ -131,6 +131,7 @@ class Track:
     update_ms: np.ndarray
     snapshots: dict = field(default_factory=dict)
     state: np.ndarray | None = None
+    stamps: np.ndarray | None = None  # None: scans PERIOD s apart
 
     def tracking(self) -> np.ndarray:
         """(N,) bool: the filter claimed its pose (every scan if no state was recorded)."""
@@ -144,7 +145,7 @@ class _Recorder:
     """Per-scan estimates of a filter (what :class:`Track` holds), gathered while the scans come."""
 
     def __init__(self):
-        self.est, self.count, self.share, self.sd, self.state, self.ms = [], [], [], [], [], []
+        self.est, self.count, self.share, self.sd, self.state, self.ms, self.stamps = [], [], [], [], [], [], []
 
     def add(self, pf: ParticleFilter, scan: Scan) -> np.ndarray:
         """Feed ``scan`` to ``pf`` and record its estimate; the pose (3,) moved to the scan's odometry."""
@@ -158,6 +159,7 @@ class _Recorder:
         self.share.append(e.share)
         self.sd.append(e.sd_xy)
         self.state.append(e.state)
+        self.stamps.append(scan.stamp)
         return pose
 
     def track(self, truth: np.ndarray, snapshots: dict | None = None) -> Track:
@@ -165,7 +167,8 @@ class _Recorder:
         err = np.hypot(*(est[:, :2] - truth[:, :2]).T)
         head = np.abs(geometry.wrap_angle(est[:, 2] - truth[:, 2]))
         return Track(est, err, head, np.array(self.count), np.array(self.share), np.array(self.sd),
-                     np.array(self.ms), snapshots or {}, np.array(self.state, dtype=str))  # fmt: skip
+                     np.array(self.ms), snapshots or {}, np.array(self.state, dtype=str),
+                     np.array(self.stamps, dtype=np.float64))  # fmt: skip
 
 
 def replay(pf: ParticleFilter, stream: Stream, snapshot_at=(), view=None, progress=None) -> Track:
@@ -235,13 +238,19 @@ def _towards(scan: Scan, bearing: float) -> tuple[float, float] | None:
     return SPEED, float(np.clip(1.5 * bearing, -1.0, 1.0))
 
 
-def _held(ok: np.ndarray, from_index: int, steps: int) -> int | None:
-    """First index >= from_index where ``ok`` holds for ``steps`` scans in a row (to the end if shorter)."""
-    run = 0
+def _held(ok: np.ndarray, from_index: int, stamps: np.ndarray | None) -> int | None:
+    """First index >= from_index from which ``ok`` holds for HOLD s in a row (from that scan to the end of the
+    last one's period; ``stamps`` (N,) s, None: scans PERIOD s apart, so that a log's own scan rate counts)."""
+    stamps = np.arange(len(ok)) * PERIOD if stamps is None else np.asarray(stamps, dtype=np.float64)
+    period = float(np.median(np.diff(stamps))) if len(stamps) > 1 else PERIOD
+    start = None
     for i in range(from_index, len(ok)):
-        run = run + 1 if ok[i] else 0
-        if run >= steps:
-            return i - steps + 1
+        if not ok[i]:
+            start = None
+            continue
+        start = i if start is None else start
+        if stamps[i] - stamps[start] + period >= HOLD - 1e-6:
+            return start
     return None
 
 
@@ -254,7 +263,7 @@ def converged_at(track: Track, from_index: int = 0) -> int | None:
     """First scan (>= from_index) from which the filter is tracking with an error below 0.2 m and
     5 degrees for 5 s."""
     ok = (track.position_error < POSITION_OK) & (track.heading_error < HEADING_OK) & track.tracking()
-    return _held(ok, from_index, round(HOLD / PERIOD))
+    return _held(ok, from_index, track.stamps)
 
 
 WRONG = 0.5  # m
@@ -264,7 +273,7 @@ def false_convergence(track: Track, from_index: int = 0) -> bool:
     """Whether the filter claimed its pose (state tracking) while more than 0.5 m wrong, for 5 s,
     after ``from_index``."""
     ok = track.tracking() & (track.position_error > WRONG)
-    return _held(ok, from_index, round(HOLD / PERIOD)) is not None
+    return _held(ok, from_index, track.stamps) is not None
 
 
 def final_state(track: Track) -> str:
