@@ -22,7 +22,13 @@ from slam2d.localization import (
     mcl,
 )
 from slam2d.localization.mcl import sample_motion
-from slam2d.localization.scenario import Track, converged_at, false_convergence, replay, wander
+from slam2d.localization.scenario import (
+    Track,
+    converged_at,
+    false_convergence,
+    replay,
+    wander,
+)
 from slam2d.localization.sensor import BeamModel, LikelihoodField, seen_through
 from slam2d.sim import Robot, RobotConfig, World
 from slam2d.types import Scan
