@@ -97,7 +97,6 @@ def main() -> None:
     args = ap.parse_args()
     if args.outliers:
         return under_outliers(args)
-    slam2d = [sys.executable, "-m", "slam2d.cli", "optimize"]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.graphs:
@@ -105,9 +104,8 @@ def main() -> None:
             bare, ours, steps = [], [], []
             for r in range(args.repeats):
                 bare.append(wall([sys.executable, "-c", BARE, path]))
-                out = Path(tmp) / f"{name}-{r}"
-                ours.append(wall(slam2d + [path, "--out", str(out), "-q"]))
-                metrics = json.loads(next(out.glob("*/metrics.json")).read_text())
+                took, metrics = command(path, Path(tmp) / f"{name}-{r}", [])
+                ours.append(took)
                 assert metrics["verified"] and metrics["certified"], metrics
                 steps.append(metrics["timings"])
             names = list(steps[0])

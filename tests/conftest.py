@@ -1,8 +1,9 @@
-"""Shared fixtures: real data from SLAM2D_DATA (default ../shared/datasets)."""
+"""Shared fixtures: real data from SLAM2D_DATA (default ../shared/datasets); the localisation benchmark's plans."""
 
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import pytest
@@ -23,3 +24,16 @@ def _data_file(rel: str) -> Path:
 def data_file():
     """Call with a path relative to SLAM2D_DATA; skips (or fails in CI) when absent."""
     return _data_file
+
+
+@pytest.fixture
+def wings_plan(tmp_path) -> Path:
+    """The localisation benchmark's U-shaped plan (two wings alike but where the corridor joining them leaves)
+    as a PNG (0.05 m/px) in ``tmp_path``."""
+    from PIL import Image
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from localization import _wings
+
+    Image.fromarray(_wings()[::-1]).save(tmp_path / "wings.png")
+    return tmp_path / "wings.png"

@@ -4,7 +4,6 @@ recovery from a kidnapping, determinism, bad input, the localize command and the
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -476,16 +475,6 @@ def test_navigation_drives_on_the_mcl_pose():
 # --------------------------------------------------------------------------- hypotheses and look-alikes
 
 
-def _wings() -> np.ndarray:
-    """The benchmark's U-shaped plan: two wings alike but where the corridor joining them leaves."""
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from localization import _wings as wings
-
-    return wings()
-
-
 def _two_rooms(folder) -> str:
     """A plan (0.05 m/px) of two identical, unconnected 5 m x 4 m rooms 10 m apart along x, each with
     a partition and a box that make it look different under any turn (nothing tells the rooms apart)."""
@@ -609,13 +598,10 @@ def test_navigation_on_mcl_turns_in_place_while_the_pose_is_ambiguous(tmp_path):
     assert [e[1] for e in result.events] == ["hold"]
 
 
-def test_the_disambiguating_goal_looks_where_the_wings_differ(tmp_path):
-    from PIL import Image
-
+def test_the_disambiguating_goal_looks_where_the_wings_differ(wings_plan):
     from slam2d.localization.active import disambiguating_goal, separation
 
-    Image.fromarray(_wings()[::-1]).save(tmp_path / "wings.png")
-    known = KnownMap.load(tmp_path / "wings.png")
+    known = KnownMap.load(wings_plan)
     truth = np.array([7.7, 17.0, -np.pi / 2])  # far end of the west wing; the east wing's copy is 17.5 m east
     copy = truth + [17.5, 0.0, 0.0]
     rng = np.random.default_rng(0)
@@ -635,15 +621,12 @@ def test_the_disambiguating_goal_looks_where_the_wings_differ(tmp_path):
     assert known.free[tuple(known.world_to_cell(goal.pose[None, :2])[0])]
 
 
-def test_navigation_on_mcl_drives_where_the_wings_differ_then_to_its_goal(tmp_path):
-    from PIL import Image
-
+def test_navigation_on_mcl_drives_where_the_wings_differ_then_to_its_goal(wings_plan):
     from slam2d.localization import MclPoseSource
     from slam2d.navigation import run_navigation, world_grid
     from slam2d.sim.world import load_world
 
-    Image.fromarray(_wings()[::-1]).save(tmp_path / "wings.png")
-    world, known = load_world(str(tmp_path / "wings.png")), KnownMap.load(tmp_path / "wings.png")
+    world, known = load_world(str(wings_plan)), KnownMap.load(wings_plan)
     start, goal = np.array([7.7, 17.0, -np.pi / 2]), (7.7, 9.0)  # far end of the west wing, a goal in it
     robot = Robot(world, start, seed=0)
     source = MclPoseSource(known, start, MclConfig(max_particles=5000), robot.cfg.laser.range_max, seed=0)

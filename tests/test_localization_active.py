@@ -4,8 +4,6 @@ jump, towards the places that tell its hypotheses apart (scenario.active_run wit
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -35,24 +33,13 @@ def test_active_run_is_the_wanderers_stream_until_the_kidnap_and_the_same_jump()
     assert stream.travelled[k] == stream.travelled[k - 1]  # a teleport is no travel
 
 
-def _wings_plan(folder: Path) -> Path:
-    """The benchmark's U-shaped plan (two wings alike but where the corridor joining them leaves) as a PNG."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from localization import _wings
-    from PIL import Image
-
-    Image.fromarray(_wings()[::-1]).save(folder / "wings.png")
-    return folder / "wings.png"
-
-
-def test_active_moves_after_a_kidnap_recover_where_the_wandering_robot_stays_ambiguous(tmp_path):
+def test_active_moves_after_a_kidnap_recover_where_the_wandering_robot_stays_ambiguous(wings_plan):
     """The wings, kidnap seed 6: after the jump the filter holds the true wing and the other one, which
     it cannot tell apart while the robot wanders (ambiguous 20 s on); driving to where their predicted
     scans differ, it tracks at the truth within 15 s of the jump and never claims a wrong place."""
     from slam2d.sim.world import load_world
 
-    plan = _wings_plan(tmp_path)
-    world, known = load_world(str(plan)), KnownMap.load(plan)
+    world, known = load_world(str(wings_plan)), KnownMap.load(wings_plan)
     passive = wander(world, known, 30.0, 6, kidnap_at=[10.0])
     outcomes = {}
     for name in ("passive", "active"):

@@ -113,10 +113,7 @@ class BeamModel:
 
     def expected_ranges(self, particles: np.ndarray, sensor, angles: np.ndarray) -> np.ndarray:
         """Ranges (P, n) m to the first occupied cell along ``angles`` (sensor frame) from each particle."""
-        m = self.map
-        return _raycast(np.ascontiguousarray(particles), np.asarray(sensor, dtype=np.float64),
-                        np.asarray(angles, dtype=np.float64), m.occupied, m.origin[0], m.origin[1],
-                        m.resolution, self.range_max)  # fmt: skip
+        return expected_ranges(self.map, particles, sensor, angles, self.range_max)
 
     def log_likelihood(self, particles: np.ndarray, scan: Scan, best: float = 1.0) -> tuple[np.ndarray, int]:
         """Log-likelihood (P,) of ``scan`` at ``particles`` (P, 3), and the number of beams it counts
@@ -203,10 +200,16 @@ def seen_through(known: KnownMap, pose: np.ndarray, scan: Scan, count: int, rang
     ranges, angles = select_beams(scan, count)
     if len(ranges) < THROUGH_MIN_BEAMS:
         return None
-    expected = _raycast(np.ascontiguousarray(pose, dtype=np.float64).reshape(1, 3),
-                        np.asarray(scan.sensor_pose, dtype=np.float64), angles, known.occupied,
-                        known.origin[0], known.origin[1], known.resolution, float(range_max))[0]  # fmt: skip
+    expected = expected_ranges(known, np.reshape(pose, (1, 3)), scan.sensor_pose, angles, range_max)[0]
     return float(np.mean(ranges > expected + THROUGH_MARGIN))
+
+
+def expected_ranges(known: KnownMap, poses: np.ndarray, sensor, angles: np.ndarray, range_max: float) -> np.ndarray:
+    """Ranges (P, n) m to the first occupied cell of ``known`` along ``angles`` (sensor frame, the sensor at
+    ``sensor`` (3,) on the robot) from each of ``poses`` (P, 3), at most ``range_max``."""
+    return _raycast(np.ascontiguousarray(poses, dtype=np.float64), np.asarray(sensor, dtype=np.float64),
+                    np.asarray(angles, dtype=np.float64), known.occupied, known.origin[0], known.origin[1],
+                    known.resolution, float(range_max))  # fmt: skip
 
 
 def sensor_model(known: KnownMap, cfg: MclConfig, range_max: float):
