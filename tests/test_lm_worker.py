@@ -114,7 +114,7 @@ def test_every_step_of_pc_dcs_runs_in_a_worker(monkeypatch):
     monkeypatch.setattr(consistency, "pairwise_support", _not_in(parent, consistency.pairwise_support))
     monkeypatch.setattr(ini, "chordal", _not_in(parent, ini.chordal))
     monkeypatch.setattr(ini, "spanning_tree", _not_in(parent, ini.spanning_tree))
-    monkeypatch.setattr(admission, "innovations", _not_in(parent, admission.innovations))
+    monkeypatch.setattr(admission, "admit_linearised", _not_in(parent, admission.admit_linearised))
     there = outliers.pc_dcs(graph, g2o_factor_list(graph), init="spanning_tree,chordal_screened")
     assert np.array_equal(there.poses, here.poses) and np.array_equal(there.inlier, here.inlier)
     assert not there.inlier[injected].any()

@@ -19,7 +19,6 @@ import numpy as np
 from slam2d.backend import certificate, consistency, outliers
 from slam2d.backend import initialization as ini
 from slam2d.backend import robust as rb
-from slam2d.backend.consistency import CHI2_3DOF_99
 from slam2d.backend.factors import (
     factor_graph,
     g2o_factor_list,
@@ -53,7 +52,7 @@ class BatchResult:
     LM iterations (all solves of the method), GNC graduation steps, wall time (s) of the
     optimisation (the start excluded), the start's name; ``verified`` when the certificate holds on
     the kept edges or else a second start reached the same error (None: not checked); ``inlier`` (M,) bool per edge (odometry always; for pc_dcs
-    and GNC the loops of their final least squares, else a loop within the chi-square 99 % gate);
+    and GNC the loops of their final least squares, else a loop within ``outliers.inlier_gate``);
     ``certified``: SE-Sync's certificate holds next to the result (``certificate.certify`` on the
     kept edges: every edge of an outlier-free least-squares solve; None when not checked);
     ``scale``: the noise scale of the gates (``consistency.gate_scale``); ``timings``: wall time (s)
@@ -108,7 +107,7 @@ def _lm(graph: g2o.PoseGraphFile, fg, initial) -> tuple[np.ndarray, int, float]:
 
 def _classify(graph: g2o.PoseGraphFile, poses) -> np.ndarray:
     """(M,) bool inlier flags (see ``BatchResult.inlier``)."""
-    return (consistency.edge_chi2(graph, poses) <= CHI2_3DOF_99) | g2o.odometry_mask(graph)
+    return (consistency.edge_chi2(graph, poses) <= outliers.inlier_gate(graph)) | g2o.odometry_mask(graph)
 
 
 @dataclass(frozen=True)

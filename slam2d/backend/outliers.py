@@ -54,8 +54,6 @@ DCS_CALIBRATED_PHI = 100.0  # pc_dcs: DCS's Phi at least this times the noise ra
 # With calibrated information Phi = 1 drops true loops (a simulated grid: 8-15 %, the test's laps: 8 of 41); 30
 # dropped 11 of intel's heavy-tailed loops with its information x 10 (99 % of them within 45 noise units at the
 # optimum, the largest at 90), 100 none
-INLIER_GATE = CHI2_3DOF_99  # a loop's final gate (chi-square); residuals at the optimum are smaller than the
-# noise (the laps of the tests: 0.62 of it), so calibrated true loops beyond it are rarer than 1 %
 PC_DCS_START = "spanning_tree"  # pc_dcs's start: the odometry, which grouped false loops that pass the screen do
 # not bend (the chordal start of the screened graph, the second start before, cost M3500 with 1000 grouped false
 # loops 42 LM iterations through their fill-in and changed no result once Phi and the readmission gate follow
@@ -112,6 +110,12 @@ def _pick(factors, keep) -> list:
     return [f for f, k in zip(factors, keep) if k]
 
 
+def inlier_gate(graph: g2o.PoseGraphFile, scale: float = 1.0) -> float:
+    """A loop's final gate (chi-square): ``consistency.loop_gate`` of the graph's loops times the noise
+    ``scale``; residuals at the optimum are smaller than the noise (the laps of the tests: 0.62 of it)."""
+    return consistency.loop_gate(int((~g2o.odometry_mask(graph)).sum())) * scale
+
+
 def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | None = None) -> Solution:
     """The ``pc_dcs`` method (``plain``: ``g2o_factor_list(graph)``; ``phi``: DCS's Phi, whitened
     units, times the noise scale):
@@ -126,7 +130,7 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
        when above 1), DCS over the screened loops again from there;
     3. DCS from that solution over the odometry and every loop within ``READMIT_NOISE_CHI2`` times the
        noise ratio (the graph's noise units: the same loops at any scale of the information);
-    4. least squares over the odometry and the loops within ``INLIER_GATE`` times ``gate_scale``, judged
+    4. least squares over the odometry and the loops within ``inlier_gate`` (``gate_scale``), judged
        again at its solution (``least_squares_kept``);
     5. the loops left out enter one by one while their innovation against the kept graph is within that
        gate (``admission.admit_consistent``: the loops the screen could not support, as on MIT)."""
@@ -161,10 +165,10 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
     keep = odometry | (edge_chi2(graph, poses) <= READMIT_NOISE_CHI2 * ratio)
     poses, n = _solve(graph, _pick(robust, keep), poses)
     iterations += n
-    keep, poses, n = least_squares_kept(graph, plain, poses, INLIER_GATE * scale)
+    keep, poses, n = least_squares_kept(graph, plain, poses, inlier_gate(graph, scale))
     seconds["solve"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    keep, poses, more, _ = admission.admit_consistent(graph, plain, keep, poses, INLIER_GATE * scale,
+    keep, poses, more, _ = admission.admit_consistent(graph, plain, keep, poses, inlier_gate(graph, scale),
                                                       lambda k, p: _solve(graph, _pick(plain, k), p))
     seconds["admit"] = time.perf_counter() - t0
     return Solution(poses, keep, iterations + n + more, 0, scale, name, seconds, phi_used)
@@ -204,7 +208,7 @@ def _weights(chi2: np.ndarray, mu: float, gate: float, loss: str) -> np.ndarray:
 
 def gnc(graph: g2o.PoseGraphFile, plain: list, start, loss: str = "tls", scale: float = 1.0,
         warm: bool = True, init: str = "pc_dcs", max_steps: int = GNC_MAX_STEPS) -> Solution:
-    """GNC from ``start`` (N, 3) with the odometry as known inliers, the gate ``INLIER_GATE * scale``,
+    """GNC from ``start`` (N, 3) with the odometry as known inliers, the gate ``inlier_gate(graph, scale)``,
     then least squares over the loops of weight >= ``GNC_OUTLIER_WEIGHT`` (unless the last weighted solve was
     that one: binary weights). ``warm``: ``start`` is a
     robust solution, so the graduation begins near the target kernel (TLS: mu = ``GNC_TLS_WARM_MU``,
@@ -214,7 +218,7 @@ def gnc(graph: g2o.PoseGraphFile, plain: list, start, loss: str = "tls", scale: 
     step)."""
     t0 = time.perf_counter()
     odometry = g2o.odometry_mask(graph)
-    gate = INLIER_GATE * scale
+    gate = inlier_gate(graph, scale)
     poses, iterations, steps = np.asarray(start, dtype=np.float64), 0, 0
     chi2 = edge_chi2(graph, poses)
     top = float(chi2[~odometry].max(initial=0.0))
@@ -253,14 +257,14 @@ def gnc(graph: g2o.PoseGraphFile, plain: list, start, loss: str = "tls", scale: 
 def robust_cost(graph: g2o.PoseGraphFile, poses, method: str, phi: float, scale: float) -> float:
     """The cost a method minimises, at ``poses`` (N, 3), over every edge (odometry plain): for
     ``pc_dcs`` GTSAM's error under DCS with Phi ``phi``; for GNC 0.5 * the sum of squared
-    whitened residuals, each loop's truncated at the gate ``CHI2_3DOF_99 * scale`` (TLS) or under
+    whitened residuals, each loop's truncated at ``inlier_gate`` (TLS) or under
     Geman-McClure of that width."""
     if method == "pc_dcs":
         robust = g2o_factor_list(graph, "dcs", phi, plain_odometry=True)
         return float(factor_graph(robust).error(g2o_values(graph.ids, poses)))
     chi2 = edge_chi2(graph, poses)
     loops = ~g2o.odometry_mask(graph)
-    gate = INLIER_GATE * scale
+    gate = inlier_gate(graph, scale)
     rho = chi2.copy()
     rho[loops] = (np.minimum(chi2, gate) if method == "tls" else gate * chi2 / (gate + chi2))[loops]
     return 0.5 * float(rho.sum())
