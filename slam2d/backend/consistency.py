@@ -229,13 +229,17 @@ def noise_ratio(chi2: np.ndarray) -> float:
 GATE_NOISE_MAX = 30.0  # a gate is at most this times its quantile of the measured noise (the noise ratio times it)
 
 
-def gate_scale(ratio: float) -> float:
-    """What gates in whitened units are multiplied by, given the ``noise_ratio``: at least 1, so a graph whose
-    information overstates its precision keeps its true loops and a calibrated one the nominal gates, but
-    at most ``GATE_NOISE_MAX`` times the ratio, so the gates of a graph whose information understates its
-    precision follow its noise (M3500: 0.31 at its own information, the same in noise units with its
-    information × 0.1; without the cap, false loops 400-1000 times the noise passed there)."""
-    return min(max(1.0, ratio), GATE_NOISE_MAX * ratio) if ratio > 0 else 1.0
+def gate_scale(ratio: float, loops: int = 1) -> float:
+    """What a graph's loop gate (``loop_gate`` of its ``loops``) is multiplied by, given the ``noise_ratio``:
+    at least 1, so a graph whose information overstates its precision keeps its true loops and a calibrated
+    one the gate of all its loops, but the gate at most ``GATE_NOISE_MAX`` times the 99 % quantile of one
+    loop's measured noise, so the gates of a graph whose information understates its precision follow its
+    noise (M3500: 0.126 of its 27.3 at its own information, 340 noise units, the same with its information
+    × 0.1; without the cap, false loops 400-1000 times the noise passed there, and at 30 times the gate of
+    all its loops (820 noise units) a group of 10 false loops)."""
+    if ratio <= 0:
+        return 1.0
+    return min(max(1.0, ratio), GATE_NOISE_MAX * ratio * CHI2_3DOF_99 / loop_gate(loops))
 
 
 def subgraph(graph: g2o.PoseGraphFile, keep) -> g2o.PoseGraphFile:

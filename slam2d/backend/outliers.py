@@ -156,7 +156,7 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
             short = min(residual_ratio(chi2[loops]), noise_ratio(chi2[moved]))
             best = (cost, poses, name, short, noise_ratio(chi2[loops]))
     _, poses, name, _, ratio = best
-    scale = consistency.gate_scale(ratio)
+    scale = consistency.gate_scale(ratio, int((~odometry).sum()))
     phi_used = max(phi * max(1.0, ratio), DCS_CALIBRATED_PHI * ratio)
     if phi_used != phi:  # DCS again from there with Phi in the graph's own noise units
         robust = g2o_factor_list(graph, "dcs", phi_used, plain_odometry=True)
