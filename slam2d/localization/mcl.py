@@ -42,6 +42,7 @@ from slam2d.localization.clusters import (
     hypotheses,
 )
 from slam2d.localization.config import MclConfig
+from slam2d.localization.home import HOME_SPREAD, Home
 from slam2d.localization.maps import KnownMap
 from slam2d.localization.sampling import kld_limit, low_variance_indices, sample_motion
 from slam2d.localization.sensor import LikelihoodField, seen_through, sensor_model
@@ -111,6 +112,7 @@ class ParticleFilter:
         self.w_fit = 0.0  # short-term average likelihood of every beam (FIT_ALPHA), for the state
         self.through = 0.0  # short-term average (FIT_ALPHA) share of beams read beyond the map's walls at the pose
         self.updates = self.resamples = self.injected = 0
+        self.home = Home()  # the place last tracked, weighed against a far estimate (slam2d.localization.home)
         self._odom: np.ndarray | None = None  # odometry at the last update
         self._estimate: Estimate | None = None
         self._labels: np.ndarray | None = None  # cluster of each particle at the last estimate
@@ -183,6 +185,7 @@ class ParticleFilter:
         self.w_fit = self.through = 0.0
         self._estimate = self._labels = None
         self._tested = self._anchored = self._searching = False
+        self.home = Home()
 
     # the filter ------------------------------------------------------------
 
@@ -244,17 +247,21 @@ class ParticleFilter:
         refit = self.cfg.hypothesis_fit and self._labels is not None and len(self._labels) == len(self.particles)
         k = int(self._labels.max()) + 1 if refit else 0
         means, old = cluster_means(self.particles, self.log_w, self._labels, k) if refit else (np.zeros((0, 3)), None)
-        poses, p = np.concatenate([self.particles, means]), len(self.particles)
+        home = self.home.candidates(self._odom, self.rng) if refit and self.cfg.hypotheses else np.zeros((0, 3))
+        poses, p = np.concatenate([self.particles, means, home]), len(self.particles)
         coarse, beams = self.coarse.log_likelihood(poses, scan)
         fine = self.sensor.log_likelihood(poses, scan)[0] if sharp else coarse
         self.updates += 1
+        if beams > 0 and len(home):
+            self.home.weigh(home, coarse[p + k:], float(coarse[p + self._best_label]),
+                            seen_through(self.map, home[0], scan, self.cfg.beams, self.range_max))  # fmt: skip
         if beams > 0:
             if self._recovering():
                 for i, (fit, counted) in enumerate(self._recovery_fits(self.particles, scan, coarse[:p], beams)):
                     self._average(i, float(logsumexp(self.log_w + fit)), counted)
             joint = self.log_w + fine[:p]
             if refit:
-                between = coarse[p:] if self.cfg.hypotheses else fine[p:]  # hypotheses weighed on the smooth field
+                between = coarse[p:p + k] if self.cfg.hypotheses else fine[p:p + k]  # hypotheses weighed on the smooth field
                 joint = joint + (old + between - _group_logsumexp(joint, self._labels, k))[self._labels]
             self.log_w = joint - logsumexp(joint)
         if self._resample_due() or (self.confident() and self.random_share() > 0):
@@ -407,7 +414,8 @@ class ParticleFilter:
             return "tracking" if compact and best.weight >= 0.9 else "lost"
         if not compact:
             return "lost"
-        return "tracking" if self._tested and self._fits() and evidence >= self.evidence_threshold else "ambiguous"
+        claimed = self._tested and self._fits() and evidence >= self.evidence_threshold
+        return "tracking" if claimed and not self.home.holds(self.evidence_threshold) else "ambiguous"
 
     def _fits(self) -> bool:
         """Whether the scans fit as they usually do (``w_fit`` within FIT_DEFICIT of the long-term average
@@ -421,6 +429,8 @@ class ParticleFilter:
         hypothesis holds yet), unless an initial pose rules them out and no random particle came since."""
         before, odom_before = self._estimate, self._estimate_odom
         est = self._estimate = self._cluster_estimate()
+        if self._follow_home(est):
+            est = self._estimate = self._cluster_estimate()
         self._searching = self._searching and est.state != "tracking"
         self._estimate_odom = self._odom.copy() if self._odom is not None else None
         if not self.cfg.hypotheses:
@@ -437,6 +447,24 @@ class ParticleFilter:
             if not self._anchored:  # held places are raised only when the pose turns compact
                 self._add_lookalikes(est, before is None or before.state == "lost")
             self._estimate = self._cluster_estimate()
+
+    def _follow_home(self, est: Estimate) -> bool:
+        """Move the place last tracked along with ``est`` (:class:`Home`), giving it back particles
+        (``hypothesis_particles`` round it, exp(-evidence) times the best hypothesis's weight) once its
+        recent evidence over the best reaches the threshold; True when the estimate is to be made again."""
+        if not self.cfg.hypotheses or self._odom is None:
+            return False
+        held, home = self.home.holds(self.evidence_threshold), self.home
+        if not home.update(est.pose, est.state, self._odom, self.map, self.evidence_threshold, SEEN_THROUGH):
+            return home.holds(self.evidence_threshold) != held
+        n = max(self.cfg.hypothesis_particles, 1)
+        cloud = home.pose + self.rng.standard_normal((n, 3)) * HOME_SPREAD
+        cloud[:, 2] = geometry.wrap_angle(cloud[:, 2])
+        best = logsumexp(self.log_w[self._labels == self._best_label])
+        self.particles = np.concatenate([self.particles, cloud])
+        self.log_w = np.concatenate([self.log_w, np.full(n, best - home.evidence - math.log(n))])
+        self.log_w -= logsumexp(self.log_w)
+        return True
 
     def _add_lookalikes(self, est: Estimate, raise_held: bool = True) -> int:
         """Give the best hypothesis's look-alike places its weight: with ``raise_held`` a hypothesis
