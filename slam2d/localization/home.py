@@ -4,12 +4,13 @@ A real robot is rarely kidnapped. Where a map lacks what the laser sees, the rig
 for seconds, the filter draws random particles and a far place can out-fit it meanwhile (FR079 in its
 own SLAM map: 21–32 m away). So the place the filter last tracked (or followed since) is kept: moved by
 the odometry and refined by the scans (the best-fitting of ``HOME_CANDIDATES`` poses round it), it is
-weighed against the best hypothesis every update. A new place far from it is claimed only while its
-*recent* evidence over the old one (log-likelihood differences, decayed by ``EVIDENCE_DECAY`` an update,
-so that a stretch the map cannot explain is forgotten once the robot has passed it) reaches the map's
-evidence threshold; once the old place's recent evidence over the new one does, it gets its particles
-back. The old place is dropped once its scans read beyond its walls (a wrong pose, not a map lacking
-walls: a kidnap) or it stands in a wall.
+weighed every update against the best hypothesis's heaviest particles on the best-fitting share of the
+beams (``recovery_best_beams``, the sharp field: what the map lacks at the right place leaves the rest
+explained, a wrong place explains few beams). A new place is claimed only while its *recent* evidence
+over the old one (log-likelihood differences decayed by ``EVIDENCE_DECAY`` an update, so that a stretch
+the map cannot explain is forgotten once the robot has passed it) reaches the map's evidence threshold;
+once the old place's recent evidence over the new one does, it gets its particles back. It is dropped
+once its scans read beyond its walls (``seen_through``: a wrong pose, a kidnap) or it stands in a wall.
 """
 
 from __future__ import annotations
@@ -47,9 +48,13 @@ class Home:
         if not self.away:
             return np.zeros((0, 3))
         self.pose, self.odom = self.moved(odom), odom.copy()
-        near = self.pose + rng.standard_normal((HOME_CANDIDATES - 1, 3)) * HOME_SPREAD
-        near[:, 2] = geometry.wrap_angle(near[:, 2])
-        return np.vstack([self.pose, near])
+        return np.vstack([self.pose, self.cloud(HOME_CANDIDATES - 1, rng)])
+
+    def cloud(self, count: int, rng: np.random.Generator) -> np.ndarray:
+        """``count`` poses (count, 3) round the place (sd ``HOME_SPREAD``)."""
+        poses = self.pose + rng.standard_normal((count, 3)) * HOME_SPREAD
+        poses[:, 2] = geometry.wrap_angle(poses[:, 2])
+        return poses
 
     def weigh(self, candidates: np.ndarray, loglik: np.ndarray, best: float, through: float | None) -> None:
         """Refine the place to the best-fitting candidate (log-likelihoods ``loglik``), add the best
