@@ -304,9 +304,10 @@ def test_walls_missing_along_metres_do_not_pass_for_a_kidnapping(monkeypatch):
 def test_a_far_place_is_not_claimed_while_the_map_only_lacks_what_the_laser_sees_here(monkeypatch):
     """The map lacks the walls within 3 m of a corner of the office (the laser still sees them): while the
     robot passes it the best-fitting half of the beams fits more than 40 % worse, random particles come and
-    the filter jumps 10-13 m away to a look-alike that fits. Without the place it tracked kept (the old
-    code), it claims the look-alike for 5 s (a false convergence) and ends there; with it, the look-alike is
-    claimed only while its recent evidence over the old place holds, and the old place wins back."""
+    the filter jumps 4-13 m away to places that fit. Without the place it tracked kept (the code before),
+    it claims one of them for seconds (a false convergence) and ends there; with it, the far places'
+    recent evidence over the old place never reaches the threshold once the robot has passed the corner,
+    and the filter never claims a wrong place."""
     world = World.office()
     full = KnownMap.from_world(world)
     stream = wander(world, full, 40.0, seed=3)
@@ -323,10 +324,10 @@ def test_a_far_place_is_not_claimed_while_the_map_only_lacks_what_the_laser_sees
         pf = ParticleFilter(known, MclConfig(), 12.0, seed=3)
         pf.init_pose(stream.truth[0], 0.1, 0.05)
         tracks[name] = replay(pf, stream)
-        assert pf.injected > 1000 and tracks[name].position_error.max() > 5.0  # the jump
+        assert pf.injected > 1000 and tracks[name].position_error.max() > 3.0  # the jump
     kept, lost = tracks["kept"], tracks["not kept"]
-    assert not false_convergence(kept) and kept.state[-1] == "tracking" and kept.position_error[-1] < 0.2
-    assert false_convergence(lost) and lost.position_error[-1] > 5.0
+    assert not (kept.tracking() & (kept.position_error > 0.5)).any()
+    assert false_convergence(lost) and lost.tracking()[-1] and lost.position_error[-1] > 5.0
 
 
 def _square_room(half: float, size: float = 12.0) -> KnownMap:
