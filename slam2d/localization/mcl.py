@@ -248,11 +248,11 @@ class ParticleFilter:
         refit = self.cfg.hypothesis_fit and self._labels is not None and len(self._labels) == len(self.particles)
         k = int(self._labels.max()) + 1 if refit else 0
         means, old = cluster_means(self.particles, self.log_w, self._labels, k) if refit else (np.zeros((0, 3)), None)
-        home = self.home.candidates(self._odom, self.rng) if refit and self.cfg.hypotheses else np.zeros((0, 3))
-        poses, p = np.concatenate([self.particles, means, home]), len(self.particles)
+        poses, p = np.concatenate([self.particles, means]), len(self.particles)
         coarse, beams = self.coarse.log_likelihood(poses, scan)
         fine = self.sensor.log_likelihood(poses, scan)[0] if sharp else coarse
         self.updates += 1
+        home = self.home.candidates(self._odom, self.rng) if refit and self.cfg.hypotheses else np.zeros((0, 3))
         if beams > 0 and len(home):
             self._weigh_home(home, scan)
         if beams > 0:
@@ -261,7 +261,7 @@ class ParticleFilter:
                     self._average(i, float(logsumexp(self.log_w + fit)), counted)
             joint = self.log_w + fine[:p]
             if refit:
-                between = coarse[p:p + k] if self.cfg.hypotheses else fine[p:p + k]  # hypotheses weighed on the smooth field
+                between = coarse[p:] if self.cfg.hypotheses else fine[p:]  # hypotheses weighed on the smooth field
                 joint = joint + (old + between - _group_logsumexp(joint, self._labels, k))[self._labels]
             self.log_w = joint - logsumexp(joint)
         if self._resample_due() or (self.confident() and self.random_share() > 0):
