@@ -301,6 +301,35 @@ def test_walls_missing_along_metres_do_not_pass_for_a_kidnapping(monkeypatch):
     assert injected_strict > 1000 and worst_strict > 5.0
 
 
+def test_a_far_place_is_not_claimed_while_the_map_only_lacks_what_the_laser_sees_here(monkeypatch):
+    """The map lacks the walls within 3 m of a corner of the office (the laser still sees them): while the
+    robot passes it the best-fitting half of the beams fits more than 40 % worse, random particles come and
+    the filter jumps 4-13 m away to places that fit. Without the place it tracked kept (the code before),
+    it claims one of them for seconds (a false convergence) and ends there; with it, the far places'
+    recent evidence over the old place never reaches the threshold once the robot has passed the corner,
+    and the filter never claims a wrong place."""
+    world = World.office()
+    full = KnownMap.from_world(world)
+    stream = wander(world, full, 40.0, seed=3)
+    corner = stream.truth[len(stream.truth) // 3, :2]
+    cells = np.argwhere(full.occupied)
+    gone = cells[np.hypot(*(full.cell_to_world(cells) - corner).T) < 3.0]
+    occupied = full.occupied.copy()
+    occupied[gone[:, 0], gone[:, 1]] = False
+    known = KnownMap(occupied, full.free | full.occupied, full.resolution, full.origin, "worn")
+    tracks = {}
+    for name in ("kept", "not kept"):
+        if name == "not kept":
+            monkeypatch.setattr(mcl.ParticleFilter, "_follow_home", lambda self, est: False)
+        pf = ParticleFilter(known, MclConfig(), 12.0, seed=3)
+        pf.init_pose(stream.truth[0], 0.1, 0.05)
+        tracks[name] = replay(pf, stream)
+        assert pf.injected > 1000 and tracks[name].position_error.max() > 3.0  # the jump
+    kept, lost = tracks["kept"], tracks["not kept"]
+    assert not (kept.tracking() & (kept.position_error > 0.5)).any()
+    assert false_convergence(lost) and lost.tracking()[-1] and lost.position_error[-1] > 5.0
+
+
 def _square_room(half: float, size: float = 12.0) -> KnownMap:
     """A map (0.05 m cells, origin at -size/2) whose only walls are a square of half-width ``half`` m round (0, 0)."""
     n = int(size / 0.05)

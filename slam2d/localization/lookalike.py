@@ -17,11 +17,13 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
+from scipy.special import logsumexp
 
 from slam2d import geometry
+from slam2d.localization.clusters import _same_place
 from slam2d.localization.maps import KnownMap
 
-__all__ = ["LookAlike", "LookAlikes", "look_alikes"]
+__all__ = ["LookAlike", "LookAlikes", "add_lookalikes", "look_alikes"]
 
 ANALYSIS_CELL = 0.1  # m, grid of the analysis
 TOLERANCE = 1  # cells of ANALYSIS_CELL: a wall landing this close to a wall matches (copies drawn off by a cell)
@@ -227,3 +229,31 @@ def _in_map_frame(known: KnownMap, region, match, k, shift, centre, off, factor)
     up = np.repeat(np.repeat(small, factor, axis=0), factor, axis=1)
     full[:up.shape[0], :up.shape[1]] = up
     return LookAlike(np.array([t[0], t[1], float(geometry.wrap_angle(angle))]), full & known.free, match)
+
+
+def add_lookalikes(pf, est, raise_held: bool = True) -> int:
+    """Give the best hypothesis of filter ``pf`` (its estimate ``est``) weight at its look-alike places:
+    with ``raise_held`` a hypothesis already there is raised to it (before the pose was compact, the weights told how many global
+    candidates fell near each place more than how the scans fit; once another hypothesis takes the
+    lead they tell the evidence, which is kept), elsewhere its particles are copied there; how many
+    places."""
+    best = est.hypotheses[0]
+    inside = pf._labels == pf._best_label
+    source, source_w = pf.particles[inside], pf.log_w[inside]
+    best_mass = logsumexp(source_w)
+    images, raised = [], 0
+    for place in pf.lookalikes.at(best.pose):
+        image = place.image(best.pose[None])[0]
+        held = [i for i, h in enumerate(est.hypotheses) if _same_place(image, h.pose)]
+        if not held:
+            images.append(place.image(source))
+        elif held[0] > 0 and raise_held:
+            members = pf._labels == pf._hypothesis_labels[held[0]]
+            pf.log_w[members] += best_mass - logsumexp(pf.log_w[members])
+            raised += 1
+    if images:
+        pf.particles = np.concatenate([pf.particles, *images])
+        pf.log_w = np.concatenate([pf.log_w, *[source_w] * len(images)])
+    if images or raised:
+        pf.log_w -= logsumexp(pf.log_w)
+    return len(images) + raised

@@ -14,8 +14,10 @@ best-fitting half of the beams, so that a map lacking part of what the laser
 sees does not pass for a kidnapping) and keeping as many particles as KLD sampling
 (Fox 2003) asks. The pose is the weighted mean of the heaviest cluster of
 particles (connected histogram bins), with its covariance; between updates it
-follows the odometry. Everything is vectorised over particles (numba for the
-sensor models); the same seed gives the same particles.
+follows the odometry. Once it jumps away from the place it tracked, that place is
+kept (:mod:`slam2d.localization.home`): the new one is claimed only while its recent
+evidence over the old one holds. Vectorised over particles (numba for the sensor
+models); the same seed gives the same particles.
 """
 
 from __future__ import annotations
@@ -42,6 +44,8 @@ from slam2d.localization.clusters import (
     hypotheses,
 )
 from slam2d.localization.config import MclConfig
+from slam2d.localization.home import Home
+from slam2d.localization.lookalike import add_lookalikes, look_alikes
 from slam2d.localization.maps import KnownMap
 from slam2d.localization.sampling import kld_limit, low_variance_indices, sample_motion
 from slam2d.localization.sensor import LikelihoodField, seen_through, sensor_model
@@ -111,6 +115,7 @@ class ParticleFilter:
         self.w_fit = 0.0  # short-term average likelihood of every beam (FIT_ALPHA), for the state
         self.through = 0.0  # short-term average (FIT_ALPHA) share of beams read beyond the map's walls at the pose
         self.updates = self.resamples = self.injected = 0
+        self.home = Home()  # the place last tracked, weighed against a far estimate (slam2d.localization.home)
         self._odom: np.ndarray | None = None  # odometry at the last update
         self._estimate: Estimate | None = None
         self._labels: np.ndarray | None = None  # cluster of each particle at the last estimate
@@ -123,8 +128,6 @@ class ParticleFilter:
         self.lookalikes = None  # the map's look-alike places (slam2d.localization.lookalike), with hypotheses
         self.evidence_threshold = math.inf  # log weight ratio best / runner-up from which the state is tracking
         if self.cfg.hypotheses:
-            from slam2d.localization.lookalike import look_alikes
-
             self.lookalikes = look_alikes(known, self.cfg.lookalike_radius, self.cfg.lookalike_match)
             c = self.cfg.confidence
             self.evidence_threshold = math.log(self.lookalikes.places * c / (1.0 - c))
@@ -183,6 +186,7 @@ class ParticleFilter:
         self.w_fit = self.through = 0.0
         self._estimate = self._labels = None
         self._tested = self._anchored = self._searching = False
+        self.home = Home()
 
     # the filter ------------------------------------------------------------
 
@@ -248,6 +252,9 @@ class ParticleFilter:
         coarse, beams = self.coarse.log_likelihood(poses, scan)
         fine = self.sensor.log_likelihood(poses, scan)[0] if sharp else coarse
         self.updates += 1
+        home = self.home.candidates(self._odom, self.rng) if refit and self.cfg.hypotheses else np.zeros((0, 3))
+        if beams > 0 and len(home):
+            self._weigh_home(home, scan)
         if beams > 0:
             if self._recovering():
                 for i, (fit, counted) in enumerate(self._recovery_fits(self.particles, scan, coarse[:p], beams)):
@@ -260,6 +267,17 @@ class ParticleFilter:
         if self._resample_due() or (self.confident() and self.random_share() > 0):
             self._resample(scan)
         self._update_estimate()
+
+    def _weigh_home(self, home: np.ndarray, scan: Scan) -> None:
+        """Weigh the old place's candidate poses ``home`` against as many of the best hypothesis's heaviest
+        particles, on the sharp field's best-fitting ``recovery_best_beams`` of the beams (a map lacking what
+        the laser sees leaves them explained at the right place); the best-fitting pose of each counts."""
+        inside = np.flatnonzero(self._labels == self._best_label)
+        top = inside[np.argsort(-self.log_w[inside], kind="stable")[:len(home)]]
+        poses = np.concatenate([home, self.particles[top]])
+        ll = self.sensor.log_likelihood(poses, scan, best=self.cfg.recovery_best_beams)[0]
+        through = seen_through(self.map, home[0], scan, self.cfg.beams, self.range_max)
+        self.home.weigh(home, ll[:len(home)], float(ll[len(home):].max()), through)
 
     def _watch_through(self, scan: Scan) -> None:
         """Average into ``through`` the share of beams the scan reads beyond the map's walls at the last
@@ -407,7 +425,8 @@ class ParticleFilter:
             return "tracking" if compact and best.weight >= 0.9 else "lost"
         if not compact:
             return "lost"
-        return "tracking" if self._tested and self._fits() and evidence >= self.evidence_threshold else "ambiguous"
+        claimed = self._tested and self._fits() and evidence >= self.evidence_threshold
+        return "tracking" if claimed and not self.home.holds(self.evidence_threshold) else "ambiguous"
 
     def _fits(self) -> bool:
         """Whether the scans fit as they usually do (``w_fit`` within FIT_DEFICIT of the long-term average
@@ -421,6 +440,8 @@ class ParticleFilter:
         hypothesis holds yet), unless an initial pose rules them out and no random particle came since."""
         before, odom_before = self._estimate, self._estimate_odom
         est = self._estimate = self._cluster_estimate()
+        if self._follow_home(est):
+            est = self._estimate = self._cluster_estimate()
         self._searching = self._searching and est.state != "tracking"
         self._estimate_odom = self._odom.copy() if self._odom is not None else None
         if not self.cfg.hypotheses:
@@ -435,35 +456,24 @@ class ParticleFilter:
         if not self._tested:
             self._tested = True
             if not self._anchored:  # held places are raised only when the pose turns compact
-                self._add_lookalikes(est, before is None or before.state == "lost")
+                add_lookalikes(self, est, before is None or before.state == "lost")
             self._estimate = self._cluster_estimate()
 
-    def _add_lookalikes(self, est: Estimate, raise_held: bool = True) -> int:
-        """Give the best hypothesis's look-alike places its weight: with ``raise_held`` a hypothesis
-        already there is raised to it (before the pose was compact, the weights told how many global
-        candidates fell near each place more than how the scans fit; once another hypothesis takes the
-        lead they tell the evidence, which is kept), elsewhere its particles are copied there; how many
-        places."""
-        best = est.hypotheses[0]
-        inside = self._labels == self._best_label
-        source, source_w = self.particles[inside], self.log_w[inside]
-        best_mass = logsumexp(source_w)
-        images, raised = [], 0
-        for place in self.lookalikes.at(best.pose):
-            image = place.image(best.pose[None])[0]
-            held = [i for i, h in enumerate(est.hypotheses) if _same_place(image, h.pose)]
-            if not held:
-                images.append(place.image(source))
-            elif held[0] > 0 and raise_held:
-                members = self._labels == self._hypothesis_labels[held[0]]
-                self.log_w[members] += best_mass - logsumexp(self.log_w[members])
-                raised += 1
-        if images:
-            self.particles = np.concatenate([self.particles, *images])
-            self.log_w = np.concatenate([self.log_w, *[source_w] * len(images)])
-        if images or raised:
-            self.log_w -= logsumexp(self.log_w)
-        return len(images) + raised
+    def _follow_home(self, est: Estimate) -> bool:
+        """Move the place last tracked along with ``est`` (:class:`Home`), giving it back particles
+        (``hypothesis_particles`` round it, exp(-evidence) times the best hypothesis's weight) once its
+        recent evidence over the best reaches the threshold; True when the estimate is to be made again."""
+        if not self.cfg.hypotheses or self._odom is None:
+            return False
+        held, home = self.home.holds(self.evidence_threshold), self.home
+        if not home.update(est.pose, est.state, self._odom, self.map, self.evidence_threshold, SEEN_THROUGH):
+            return home.holds(self.evidence_threshold) != held
+        n = max(self.cfg.hypothesis_particles, 1)
+        best = logsumexp(self.log_w[self._labels == self._best_label])
+        self.particles = np.concatenate([self.particles, home.cloud(n, self.rng)])
+        self.log_w = np.concatenate([self.log_w, np.full(n, best - home.evidence - math.log(n))])
+        self.log_w -= logsumexp(self.log_w)
+        return True
 
     @property
     def state(self) -> str:
