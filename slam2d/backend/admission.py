@@ -103,8 +103,8 @@ def admit_consistent(graph: g2o.PoseGraphFile, plain: list, keep, poses, gate: f
     ``ADMIT_MAX_ROUNDS`` of them and only while at most ``ADMIT_MAX_REJECTED`` are out. A loop takes part
     in a later round only while its squared whitened residual over the largest eigenvalue of its innovation
     covariance in the first round, a lower bound of its innovation (entries only shrink that covariance),
-    is within ``ADMIT_BOUND_SLACK`` times the gate (manhattan with 100 random false loops: 13 loops take
-    part after the first round instead of 113). Returns (keep, poses, LM iterations, loops admitted)."""
+    is within ``ADMIT_BOUND_SLACK`` times the gate (manhattan with 100 random false loops: 17 loops take
+    part in the second round instead of 112). Returns (keep, poses, LM iterations, loops admitted)."""
     keep, iterations, admitted = np.array(keep, bool), 0, 0
     spread = np.full(len(keep), np.inf)
     for _ in range(ADMIT_MAX_ROUNDS):
