@@ -276,19 +276,25 @@ def test_walls_missing_from_the_map_do_not_pass_for_a_kidnapping():
     assert injected > 1000 and worst > 5.0
 
 
-def test_walls_missing_along_metres_do_not_pass_for_a_kidnapping(monkeypatch):
-    """The map lacks the walls within 2.5 m of that corner (as a SLAM grid whose corridor wall was worn
-    off over metres): the best-fitting half of the beams fits up to 30 % worse, which the defaults take
-    for the map's imperfection; counting a share above 0.1 as a kidnap, the filter jumps away."""
+def worn_office(radius: float):
+    """The office's map without the walls within ``radius`` (m) of a corner a 40 s wander (seed 3) passes,
+    and that wander."""
     world = World.office()
     full = KnownMap.from_world(world)
     stream = wander(world, full, 40.0, seed=3)
     corner = stream.truth[len(stream.truth) // 3, :2]
     cells = np.argwhere(full.occupied)
-    gone = cells[np.hypot(*(full.cell_to_world(cells) - corner).T) < 2.5]
+    gone = cells[np.hypot(*(full.cell_to_world(cells) - corner).T) < radius]
     occupied = full.occupied.copy()
     occupied[gone[:, 0], gone[:, 1]] = False
-    known = KnownMap(occupied, full.free | full.occupied, full.resolution, full.origin, "worn")
+    return KnownMap(occupied, full.free | full.occupied, full.resolution, full.origin, "worn"), stream
+
+
+def test_walls_missing_along_metres_do_not_pass_for_a_kidnapping(monkeypatch):
+    """The map lacks the walls within 2.5 m of that corner (as a SLAM grid whose corridor wall was worn
+    off over metres): the best-fitting half of the beams fits up to 30 % worse, which the defaults take
+    for the map's imperfection; counting a share above 0.1 as a kidnap, the filter jumps away."""
+    known, stream = worn_office(2.5)
     outcomes = []
     for noise in (mcl.CONFIDENT_NOISE, 0.1):
         monkeypatch.setattr(mcl, "CONFIDENT_NOISE", noise)
@@ -308,15 +314,7 @@ def test_a_far_place_is_not_claimed_while_the_map_only_lacks_what_the_laser_sees
     it claims one of them for seconds (a false convergence) and ends there; with it, the far places'
     recent evidence over the old place never reaches the threshold once the robot has passed the corner,
     and the filter never claims a wrong place."""
-    world = World.office()
-    full = KnownMap.from_world(world)
-    stream = wander(world, full, 40.0, seed=3)
-    corner = stream.truth[len(stream.truth) // 3, :2]
-    cells = np.argwhere(full.occupied)
-    gone = cells[np.hypot(*(full.cell_to_world(cells) - corner).T) < 3.0]
-    occupied = full.occupied.copy()
-    occupied[gone[:, 0], gone[:, 1]] = False
-    known = KnownMap(occupied, full.free | full.occupied, full.resolution, full.origin, "worn")
+    known, stream = worn_office(3.0)
     tracks = {}
     for name in ("kept", "not kept"):
         if name == "not kept":
