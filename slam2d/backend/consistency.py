@@ -181,7 +181,7 @@ LOOP_FAMILY_P = 0.01  # a graph's loop gate: the chance that one of its true loo
 def loop_gate(loops: int) -> float:
     """The chi-square gate (3 dof) that all of ``loops`` true loops with calibrated information pass with
     probability 1 - ``LOOP_FAMILY_P`` (Sidak: each at (1 - p)^(1/loops)); 11.34, the 99 % quantile, for one
-    loop, 27.2 for 1954 (M3500). One gate per loop at 99 % drops 1 % of a calibrated graph's true loops, and
+    loop, 27.3 for 1954 (M3500). One gate per loop at 99 % drops 1 % of a calibrated graph's true loops, and
     each that carries weight moves the solution off the plain optimum (manhattan: one true loop at 13.2,
     9.7 cm RMS)."""
     each = (1.0 - LOOP_FAMILY_P) ** (1.0 / max(int(loops), 1))
