@@ -83,8 +83,8 @@ def under_outliers(args) -> None:
             for case in cases:
                 m = last[case]
                 print(f"| {name} | {case[0]} | {case[1]} {case[2]} | {spread(times[case])} | "
-                      f"{statistics.median(times[case]) / clean:.1f} | {m['outliers_rejected']} / {m['outliers_injected']} | "
-                      f"{100 * m['true_loops_kept']:.2f} % | {m['verified']}, {m['certified']} |", flush=True)  # fmt: skip
+                      f"{statistics.median(times[case]) / clean:.1f} | {m.get('outliers_rejected', 0)} / {m.get('outliers_injected', 0)} | "
+                      f"{100 * m.get('true_loops_kept', 1.0):.2f} % | {m['verified']}, {m['certified']} |", flush=True)  # fmt: skip
 
 
 def main() -> None:

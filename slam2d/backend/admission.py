@@ -71,12 +71,11 @@ def admit_linearised(graph: g2o.PoseGraphFile, plain: list, keep, poses, edges, 
     r = b[rows].copy()
     heading = np.zeros(a.shape[1] // 3)
     left, order = np.ones(len(edges), bool), []
-    spread = np.linalg.eigvalsh(np.eye(3) + cross.reshape(len(edges), 3, len(edges), 3)[
-        np.arange(len(edges)), :, np.arange(len(edges)), :])[:, -1]
+    covariance = lambda k: np.eye(3) + cross.reshape(len(edges), 3, len(edges), 3)[k, :, k, :]
+    spread = np.linalg.eigvalsh(covariance(np.arange(len(edges))))[:, -1]
     while left.any():
         k = np.flatnonzero(left)
-        blocks = cross.reshape(len(edges), 3, len(edges), 3)[k, :, k, :]
-        s_mat = np.eye(3) + blocks
+        s_mat = covariance(k)  # (k, 3, 3): each loop's innovation covariance
         res = r.reshape(-1, 3)[k]
         d2 = np.einsum("ki,ki->k", res, np.linalg.solve(s_mat, res[..., None])[..., 0])
         best = int(np.argmin(d2))

@@ -11,7 +11,7 @@ from scipy import ndimage
 
 from slam2d import geometry
 
-__all__ = ["Hypothesis", "cluster_means", "clusters", "hypotheses", "weighted_pose"]
+__all__ = ["Hypothesis", "cluster_means", "clusters", "hypotheses", "same_place", "weighted_pose"]
 
 MAX_HYPOTHESES = 20  # clusters reported and kept alive at resampling, heaviest first
 SAME_PLACE = (1.0, 0.5)  # m, rad: a look-alike image this close to a hypothesis is already held
@@ -101,7 +101,7 @@ def hypotheses(poses: np.ndarray, log_w: np.ndarray, labels: np.ndarray, count: 
     return out, mass, order
 
 
-def _same_place(a: np.ndarray, b: np.ndarray) -> bool:
+def same_place(a: np.ndarray, b: np.ndarray) -> bool:
     """Whether poses ``a`` and ``b`` (3,) lie within SAME_PLACE of each other."""
     return bool(math.hypot(a[0] - b[0], a[1] - b[1]) < SAME_PLACE[0]
                 and abs(float(geometry.wrap_angle(a[2] - b[2]))) < SAME_PLACE[1])  # fmt: skip

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from slam2d import geometry
-from slam2d.localization.clusters import _same_place
+from slam2d.localization.clusters import same_place
 from slam2d.localization.maps import KnownMap
 
 HOME_CANDIDATES = 20  # poses scored round the old place each update (itself included)
@@ -77,7 +77,7 @@ class Home:
                 self._set(pose, odom)
             return False
         here = self.moved(odom)
-        if _same_place(pose, here):
+        if same_place(pose, here):
             if state != "lost":
                 self._set(pose, odom)
             return False

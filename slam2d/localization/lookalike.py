@@ -20,7 +20,7 @@ from scipy import ndimage
 from scipy.special import logsumexp
 
 from slam2d import geometry
-from slam2d.localization.clusters import _same_place
+from slam2d.localization.clusters import same_place
 from slam2d.localization.maps import KnownMap
 
 __all__ = ["LookAlike", "LookAlikes", "add_lookalikes", "look_alikes"]
@@ -244,7 +244,7 @@ def add_lookalikes(pf, est, raise_held: bool = True) -> int:
     images, raised = [], 0
     for place in pf.lookalikes.at(best.pose):
         image = place.image(best.pose[None])[0]
-        held = [i for i, h in enumerate(est.hypotheses) if _same_place(image, h.pose)]
+        held = [i for i, h in enumerate(est.hypotheses) if same_place(image, h.pose)]
         if not held:
             images.append(place.image(source))
         elif held[0] > 0 and raise_held:

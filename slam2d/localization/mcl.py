@@ -38,10 +38,10 @@ from slam2d.localization.clusters import (
     _bins,
     _distinct_so_far,
     _group_logsumexp,
-    _same_place,
     cluster_means,
     clusters,
     hypotheses,
+    same_place,
 )
 from slam2d.localization.config import MclConfig
 from slam2d.localization.home import Home
@@ -451,7 +451,7 @@ class ParticleFilter:
             return
         if before is not None and odom_before is not None and self._odom is not None:
             expected = geometry.compose(before.pose, geometry.between(odom_before, self._odom))
-            if not _same_place(est.pose, expected):  # another hypothesis leads: test it too
+            if not same_place(est.pose, expected):  # another hypothesis leads: test it too
                 self._tested = False
         if not self._tested:
             self._tested = True
