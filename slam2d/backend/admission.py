@@ -96,11 +96,12 @@ def admit_linearised(graph: g2o.PoseGraphFile, plain: list, keep, poses, edges, 
     return np.array(order, dtype=int), spread
 
 
-def admit_consistent(graph: g2o.PoseGraphFile, plain: list, keep, poses, gate: float, solve):
+def admit_consistent(graph: g2o.PoseGraphFile, plain: list, keep, poses, gate: float, solve, candidates=None):
     """Greedy admission (see module) of the loops outside ``keep`` (M,) bool, starting from ``poses`` (N, 3),
     the least-squares solution of the kept edges: rounds of ``admit_linearised`` (in a worker), each followed
     by ``solve(keep, poses)`` (least squares over the kept edges; returns (poses, LM iterations)), at most
-    ``ADMIT_MAX_ROUNDS`` of them and only while at most ``ADMIT_MAX_REJECTED`` are out. A loop takes part
+    ``ADMIT_MAX_ROUNDS`` of them and only while at most ``ADMIT_MAX_REJECTED`` may enter (``candidates`` (M,)
+    bool: only these loops may; default every loop out). A loop takes part
     in a later round only while its squared whitened residual over the largest eigenvalue of its innovation
     covariance in an earlier round, a lower bound of its innovation (entries only shrink that covariance),
     is within ``ADMIT_BOUND_SLACK`` times the gate (manhattan with 100 random false loops: 17 loops take
@@ -108,7 +109,7 @@ def admit_consistent(graph: g2o.PoseGraphFile, plain: list, keep, poses, gate: f
     keep, iterations, admitted = np.array(keep, bool), 0, 0
     spread = np.full(len(keep), np.inf)
     for _ in range(ADMIT_MAX_ROUNDS):
-        rejected = np.flatnonzero(~keep)
+        rejected = np.flatnonzero(~keep if candidates is None else ~keep & candidates)
         if not len(rejected) or len(rejected) > ADMIT_MAX_REJECTED:
             break
         rejected = rejected[edge_chi2(graph, poses)[rejected] <= ADMIT_BOUND_SLACK * gate * spread[rejected]]

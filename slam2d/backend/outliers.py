@@ -166,6 +166,8 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
     poses, n = _solve(graph, _pick(robust, keep), poses)
     iterations += n
     keep, poses, n = least_squares_kept(graph, plain, poses, inlier_gate(graph, scale))
+    keep, poses, more = contest(graph, plain, keep, poses, inlier_gate(graph, scale), scale)
+    iterations += more
     seconds["solve"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     keep, poses, more, _ = admission.admit_consistent(graph, plain, keep, poses, inlier_gate(graph, scale),
@@ -192,6 +194,22 @@ def least_squares_kept(graph: g2o.PoseGraphFile, plain: list, poses, gate: float
         poses, n = _solve(graph, _pick(plain, keep), poses)
         iterations += n
     return keep, poses, iterations
+
+
+def contest(graph: g2o.PoseGraphFile, plain: list, keep, poses, gate: float, scale: float = 1.0):
+    """The kept loops beyond one loop's 99 % gate (``CHI2_3DOF_99 * scale``) at ``poses`` (N, 3), the
+    least-squares solution of ``keep`` (M,), are contested: each re-enters only by its innovation against
+    the least-squares solution of the other kept edges (``admission.admit_consistent``), as a rejected
+    loop would. A false loop that bent the solution until it fitted within ``gate`` does not (manhattan
+    with 1000 local false loops: two at 20 and 24 there, 89 and 137 at the true optimum); a true loop in
+    the tail of the noise does. Returns (keep, poses, LM iterations)."""
+    contested = np.asarray(keep, bool) & ~g2o.odometry_mask(graph) & (edge_chi2(graph, poses) > CHI2_3DOF_99 * scale)
+    if not contested.any():
+        return keep, poses, 0
+    solve = lambda k, p: _solve(graph, _pick(plain, k), p)
+    poses, n = solve(keep & ~contested, poses)
+    keep, poses, more, _ = admission.admit_consistent(graph, plain, keep & ~contested, poses, gate, solve, contested)
+    return keep, poses, n + more
 
 
 def _weights(chi2: np.ndarray, mu: float, gate: float, loss: str) -> np.ndarray:
