@@ -19,38 +19,37 @@ RUN_ALL, RUN_UNTIL_ALL, RUN_UNTIL_ANY = 0, 1, 2  # how far :func:`_dial` runs
 
 
 @njit(cache=True)
-def _reach(flat, h, w, start, out):
-    """Mark ``out`` (H·W,) the cells 4-connected to ``start`` over ``flat`` (H·W,) bool (breadth first)."""
-    queue = np.empty(h * w, dtype=np.int32)
+def _reach(flat, w, start, out):
+    """Mark ``out`` the cells 4-connected to ``start`` over ``flat`` (bool, a grid of rows ``w`` cells long whose
+    border cells are all False, so that no step leaves it): breadth first. Returns how many."""
+    queue = np.empty(flat.shape[0], dtype=np.int32)
     out[start] = True
     queue[0], head, tail = start, 0, 1
     while head < tail:
         v = queue[head]
         head += 1
-        r, c = v // w, v % w
-        if r > 0 and flat[v - w] and not out[v - w]:
-            out[v - w], queue[tail], tail = True, v - w, tail + 1
-        if r < h - 1 and flat[v + w] and not out[v + w]:
-            out[v + w], queue[tail], tail = True, v + w, tail + 1
-        if c > 0 and flat[v - 1] and not out[v - 1]:
-            out[v - 1], queue[tail], tail = True, v - 1, tail + 1
-        if c < w - 1 and flat[v + 1] and not out[v + 1]:
-            out[v + 1], queue[tail], tail = True, v + 1, tail + 1
+        for u in (v - w, v + w, v - 1, v + 1):
+            if flat[u] and not out[u]:
+                out[u] = True
+                queue[tail] = u
+                tail += 1
+    return tail
 
 
 @njit(cache=True)
-def _dial(flat, h, w, dist, queue, sizes, k, target, left, mode):
-    """Process buckets from ``k`` (cells nearer than k are final) of the search held in ``dist`` (H·W,) cells,
-    ``queue`` (3, cap) of three buckets in turn with their ``sizes`` (a cell is queued in the bucket of
-    its tentative length). ``target`` (H·W,) bool marks cells asked for, ``left`` of them not yet final. ``mode``: to the end
-    (RUN_ALL), until no target is left (RUN_UNTIL_ALL) or one is final (RUN_UNTIL_ANY); a bucket is always
-    finished. Returns (k, left)."""
+def _dial(flat, w, dist, queue, sizes, k, target, left, mode):
+    """Process buckets from ``k`` (cells nearer than k are final) of the search held in ``dist`` cells over ``flat``
+    (bool, rows of ``w`` cells, border cells all False), ``queue`` (3, cap) of three buckets in turn with their
+    ``sizes`` (a cell is queued in the bucket of its tentative length). ``target`` (bool) marks cells asked for,
+    ``left`` of them not yet final. ``mode``: to the end (RUN_ALL), until no target is left (RUN_UNTIL_ALL) or one
+    is final (RUN_UNTIL_ANY); a bucket is always finished. Returns (k, left)."""
     diag = 1.4142135623730951
     start_left = left
     while sizes[0] + sizes[1] + sizes[2] > 0:
         if (mode == RUN_UNTIL_ALL and left == 0) or (mode == RUN_UNTIL_ANY and left < start_left):
             break
-        b = k % 3
+        b, b1, b2 = k % 3, (k + 1) % 3, (k + 2) % 3
+        n1, n2 = sizes[b1], sizes[b2]  # a step of 1 or sqrt(2) from bucket k lands in bucket k + 1 or k + 2
         for i in range(sizes[b]):
             v = queue[b, i]
             d = dist[v]
@@ -58,9 +57,7 @@ def _dial(flat, h, w, dist, queue, sizes, k, target, left, mode):
                 continue
             if target[v]:
                 left -= 1
-            r, c = v // w, v % w
-            up, dn = r > 0 and flat[v - w], r < h - 1 and flat[v + w]
-            lf, rt = c > 0 and flat[v - 1], c < w - 1 and flat[v + 1]
+            up, dn, lf, rt = flat[v - w], flat[v + w], flat[v - 1], flat[v + 1]
             for j in range(8):
                 if j == 0:
                     ok, u, nd = up, v - w, d + 1.0
@@ -82,9 +79,13 @@ def _dial(flat, h, w, dist, queue, sizes, k, target, left, mode):
                     old, dist[u] = dist[u], nd
                     nb = int(nd)
                     if old == np.inf or int(old) != nb:  # else queued in that bucket already: each cell once a bucket
-                        queue[nb % 3, sizes[nb % 3]] = u
-                        sizes[nb % 3] += 1
-        sizes[b] = 0
+                        if nb == k + 1:
+                            queue[b1, n1] = u
+                            n1 += 1
+                        else:
+                            queue[b2, n2] = u
+                            n2 += 1
+        sizes[b], sizes[b1], sizes[b2] = 0, n1, n2
         k += 1
     return k, left
 
@@ -100,30 +101,33 @@ class Paths:
     whole (H, W) array (also what ``np.asarray`` and indexing give)."""
 
     def __init__(self, passable, start_cell, resolution: float, snap_cells: int = 10, allowed=None):
-        self._flat = np.ascontiguousarray(passable, dtype=np.bool_).ravel()
-        self.shape = np.shape(passable)
+        passable = np.asarray(passable, dtype=np.bool_)
+        self.shape = passable.shape
         self.resolution = float(resolution)
         h, w = self.shape
-        self._dist = np.full(h * w, np.inf)
-        seen = np.zeros(h * w, dtype=np.bool_)
-        start = _snap(self._flat.reshape(self.shape), np.asarray(start_cell, dtype=np.int64), snap_cells)
+        self._w = w + 2  # the search runs on the grid framed by a border of impassable cells
+        padded = np.zeros((h + 2, w + 2), dtype=np.bool_)
+        padded[1:-1, 1:-1] = passable
+        self._flat = padded.ravel()
+        self._dist = np.full(padded.size, np.inf)
+        seen = np.zeros(padded.size, dtype=np.bool_)
+        start = _snap(passable, np.asarray(start_cell, dtype=np.int64), snap_cells)
         self._extra, self._k, self._left = 0.0, 0, 0
         self._sizes = np.zeros(3, dtype=np.int64)
         if start is not None:
             cell, self._extra = start
-            s = int(cell[0]) * w + int(cell[1])
-            _reach(self._flat, h, w, s, seen)
+            s = (int(cell[0]) + 1) * self._w + int(cell[1]) + 1
+            n = _reach(self._flat, self._w, s, seen)
             self._dist[s] = 0.0
-            self._queue = np.empty((3, int(np.count_nonzero(seen)) + 1), dtype=np.int32)
+            self._queue = np.empty((3, n + 1), dtype=np.int32)
             self._queue[0, 0], self._sizes[0] = s, 1
-        seen = seen.reshape(self.shape)
+        seen = np.ascontiguousarray(seen.reshape(h + 2, w + 2)[1:-1, 1:-1])
         self.reach = seen if allowed is None else seen & np.asarray(allowed, dtype=bool)
-        self._target = np.zeros(h * w, dtype=np.bool_)
+        self._target = np.zeros(padded.size, dtype=np.bool_)
 
     def _run(self, mode: int) -> None:
         if self._sizes.sum():
-            h, w = self.shape
-            self._k, self._left = _dial(self._flat, h, w, self._dist, self._queue, self._sizes, self._k,
+            self._k, self._left = _dial(self._flat, self._w, self._dist, self._queue, self._sizes, self._k,
                                         self._target, self._left, mode)  # fmt: skip
 
     def _metres(self, cells_dist) -> np.ndarray:
@@ -139,24 +143,24 @@ class Paths:
         h, w = self.shape
         ok = (cells[:, 0] >= 0) & (cells[:, 0] < h) & (cells[:, 1] >= 0) & (cells[:, 1] < w)
         ok[ok] = self.reach[cells[ok, 0], cells[ok, 1]]
-        flat = cells[ok, 0] * w + cells[ok, 1]
+        flat = (cells[ok, 0] + 1) * self._w + cells[ok, 1] + 1
         out = np.full(len(cells), np.inf)
         pending = flat[self._dist[flat] >= self._k]  # not final yet
         if len(pending):
-            self._target[:] = False
             self._target[pending] = True
-            self._left = int(np.count_nonzero(self._target))
+            self._left = int(np.count_nonzero(self._target[pending]))  # each cell once
             self._run(RUN_UNTIL_ANY if nearest else RUN_UNTIL_ALL)
+            self._target[pending] = False
         d = self._dist[flat]
         out[ok] = self._metres(np.where(d < self._k, d, self._k))  # beyond the buckets done: the lower bound
         return out
 
     def dense(self) -> np.ndarray:
         """The path length (H, W) m to every cell, inf out of ``reach``."""
-        self._target[:] = False
         self._left = 0
         self._run(RUN_ALL)
-        out = self._metres(self._dist).reshape(self.shape)
+        h, w = self.shape
+        out = self._metres(self._dist.reshape(h + 2, w + 2)[1:-1, 1:-1])
         out[~self.reach] = np.inf
         return out
 
