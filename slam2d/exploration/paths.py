@@ -37,9 +37,9 @@ def _reach(flat, w, start, out):
 
 
 @njit(cache=True)
-def _dial(flat, w, dist, queue, sizes, k, target, left, mode):
-    """Process buckets from ``k`` (cells nearer than k are final) of the search held in ``dist`` cells over ``flat``
-    (bool, rows of ``w`` cells, border cells all False), ``queue`` (3, cap) of three buckets in turn with their
+def _dial(w, dist, queue, sizes, k, target, left, mode):
+    """Process buckets from ``k`` (cells nearer than k are final) of the search held in ``dist`` cells (rows of ``w``
+    cells; -1 in cells not passable, which frame the grid), ``queue`` (3, cap) of three buckets in turn with their
     ``sizes`` (a cell is queued in the bucket of its tentative length). ``target`` (bool) marks cells asked for,
     ``left`` of them not yet final. ``mode``: to the end (RUN_ALL), until no target is left (RUN_UNTIL_ALL) or one
     is final (RUN_UNTIL_ANY); a bucket is always finished. Returns (k, left)."""
@@ -57,34 +57,81 @@ def _dial(flat, w, dist, queue, sizes, k, target, left, mode):
                 continue
             if target[v]:
                 left -= 1
-            up, dn, lf, rt = flat[v - w], flat[v + w], flat[v - 1], flat[v + 1]
-            for j in range(8):
-                if j == 0:
-                    ok, u, nd = up, v - w, d + 1.0
-                elif j == 1:
-                    ok, u, nd = dn, v + w, d + 1.0
-                elif j == 2:
-                    ok, u, nd = lf, v - 1, d + 1.0
-                elif j == 3:
-                    ok, u, nd = rt, v + 1, d + 1.0
-                elif j == 4:
-                    ok, u, nd = up and lf and flat[v - w - 1], v - w - 1, d + diag
-                elif j == 5:
-                    ok, u, nd = up and rt and flat[v - w + 1], v - w + 1, d + diag
-                elif j == 6:
-                    ok, u, nd = dn and lf and flat[v + w - 1], v + w - 1, d + diag
-                else:
-                    ok, u, nd = dn and rt and flat[v + w + 1], v + w + 1, d + diag
-                if ok and nd < dist[u]:
-                    old, dist[u] = dist[u], nd
-                    nb = int(nd)
-                    if old == np.inf or int(old) != nb:  # else queued in that bucket already: each cell once a bucket
-                        if nb == k + 1:
-                            queue[b1, n1] = u
-                            n1 += 1
-                        else:
-                            queue[b2, n2] = u
-                            n2 += 1
+            # blocked cells hold -1: no step enters them; corners are not cut
+            up, dn, lf, rt = dist[v - w] >= 0.0, dist[v + w] >= 0.0, dist[v - 1] >= 0.0, dist[v + 1] >= 0.0
+            d1, d2 = d + 1.0, d + diag
+            if dist[v - w] > d1:
+                old, dist[v - w] = dist[v - w], d1
+                if int(d1) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v - w
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v - w
+                    n2 += 1
+            if dist[v + w] > d1:
+                old, dist[v + w] = dist[v + w], d1
+                if int(d1) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v + w
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v + w
+                    n2 += 1
+            if dist[v - 1] > d1:
+                old, dist[v - 1] = dist[v - 1], d1
+                if int(d1) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v - 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v - 1
+                    n2 += 1
+            if dist[v + 1] > d1:
+                old, dist[v + 1] = dist[v + 1], d1
+                if int(d1) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v + 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v + 1
+                    n2 += 1
+            if up and lf and dist[v - w - 1] > d2:
+                old, dist[v - w - 1] = dist[v - w - 1], d2
+                if int(d2) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v - w - 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v - w - 1
+                    n2 += 1
+            if up and rt and dist[v - w + 1] > d2:
+                old, dist[v - w + 1] = dist[v - w + 1], d2
+                if int(d2) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v - w + 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v - w + 1
+                    n2 += 1
+            if dn and lf and dist[v + w - 1] > d2:
+                old, dist[v + w - 1] = dist[v + w - 1], d2
+                if int(d2) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v + w - 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v + w - 1
+                    n2 += 1
+            if dn and rt and dist[v + w + 1] > d2:
+                old, dist[v + w + 1] = dist[v + w + 1], d2
+                if int(d2) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v + w + 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v + w + 1
+                    n2 += 1
         sizes[b], sizes[b1], sizes[b2] = 0, n1, n2
         k += 1
     return k, left
@@ -108,8 +155,8 @@ class Paths:
         self._w = w + 2  # the search runs on the grid framed by a border of impassable cells
         padded = np.zeros((h + 2, w + 2), dtype=np.bool_)
         padded[1:-1, 1:-1] = passable
-        self._flat = padded.ravel()
-        self._dist = np.full(padded.size, np.inf)
+        flat = padded.ravel()
+        self._dist = np.where(flat, np.inf, -1.0)
         seen = np.zeros(padded.size, dtype=np.bool_)
         start = _snap(passable, np.asarray(start_cell, dtype=np.int64), snap_cells)
         self._extra, self._k, self._left = 0.0, 0, 0
@@ -117,7 +164,7 @@ class Paths:
         if start is not None:
             cell, self._extra = start
             s = (int(cell[0]) + 1) * self._w + int(cell[1]) + 1
-            n = _reach(self._flat, self._w, s, seen)
+            n = _reach(flat, self._w, s, seen)
             self._dist[s] = 0.0
             self._queue = np.empty((3, n + 1), dtype=np.int32)
             self._queue[0, 0], self._sizes[0] = s, 1
@@ -127,7 +174,7 @@ class Paths:
 
     def _run(self, mode: int) -> None:
         if self._sizes.sum():
-            self._k, self._left = _dial(self._flat, self._w, self._dist, self._queue, self._sizes, self._k,
+            self._k, self._left = _dial(self._w, self._dist, self._queue, self._sizes, self._k,
                                         self._target, self._left, mode)  # fmt: skip
 
     def _metres(self, cells_dist) -> np.ndarray:
