@@ -322,3 +322,32 @@ def test_shares_split_each_cell_a_point_sees_among_the_points_seeing_it(seed):
     assert np.array_equal(own, [s.sum() for s in seen]) and own.max() > 0
     assert np.allclose(shares, [(1.0 / seers[s]).sum() for s in seen])
     assert np.isclose(shares.sum(), np.count_nonzero(seers))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_ray_records_kept_between_grids_give_the_gains_and_shares_cast_anew(seed):
+    """``RayRecords``: after random local changes of the hidden grid (near the edge too) and points that come and go,
+    the kept records give bit for bit the gains and shares of every point's rays cast anew, and points far from the
+    changes are not cast again."""
+    from slam2d.exploration.gains import RayRecords
+    from slam2d.exploration.gridops import shared_gain, unknown_cells
+
+    rng = np.random.default_rng(1100 + seed)
+    state = random_map(rng, (120, 150))
+    records, recast = RayRecords(), 0
+    pool = rng.uniform([0.0, 0.0], [150 * 0.05, 120 * 0.05], size=(40, 2))
+    for step in range(10):
+        if step:
+            r, c = rng.integers(-5, state.shape[0]), rng.integers(-5, state.shape[1])
+            patch = state[max(r, 0) : r + rng.integers(2, 12), max(c, 0) : c + rng.integers(2, 12)]
+            patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.5, 0.2, 0.3])
+        view = GridView(state.copy(), 0.05, (0.0, 0.0))
+        records.update(view)
+        pts = pool[rng.random(len(pool)) < 0.7]
+        before = len(records._kept)
+        own, shares = records.shared(view, pts, 1.5, 120, unknown_cells(view))
+        recast += len(records._kept) - before
+        fresh_own, fresh_shares = shared_gain(view, pts, 1.5, 120)
+        assert np.array_equal(own, fresh_own) and np.array_equal(shares, fresh_shares)
+        assert np.array_equal(records.gains(view, pts[::2], 1.5, 120, unknown_cells(view)), fresh_own[::2])
+    assert 0 < recast < 0.8 * 10 * len(pool)

@@ -30,6 +30,7 @@ from slam2d.exploration.frontiers import (
     find_frontiers,
     frontier_mask,
 )
+from slam2d.exploration.gains import RayRecords
 from slam2d.exploration.gridops import (
     FREE,
     OCCUPIED,
@@ -38,7 +39,6 @@ from slam2d.exploration.gridops import (
     cells_inside_polygon,
     information_gain,
     inside_polygon,
-    shared_gain,
     straight_reachable,
     unknown_cells,
 )
@@ -100,6 +100,7 @@ class Explorer:
         self._hidden_of: tuple = (None, None, None)  # (view, its hidden-cell grid, its entry cells) counted on last
         self._maintained: tuple = (None, -1, [])  # (view, inaccessible goals, its open candidates) of the last upkeep
         self._hidden_grid = None  # the hidden-cell grid, kept between views
+        self._rays = RayRecords()  # the gains' rays on it, kept where it did not change
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
         self._gains_of: tuple = (None,) * 5  # (pocket grid, its places' gains, hidden cells, reach table, frame)
@@ -155,7 +156,7 @@ class Explorer:
         if not live:
             return []
         pts = np.array([c.position for c in live])
-        gain = information_gain(self._hidden(view), pts, self.cfg.gain_range, self.cfg.gain_rays,
+        gain = self._rays.gains(self._hidden(view), pts, self.cfg.gain_range, self.cfg.gain_rays,
                                 self._hidden_entries(view))  # fmt: skip
         floor = self.cfg.min_gain / view.resolution**2
         out = []
@@ -230,8 +231,8 @@ class Explorer:
         fronts = np.array([f.goal for f in found]).reshape(-1, 2)
         points = np.concatenate([pts, fronts])
         goals = np.concatenate([target, fronts])
-        own, shares = shared_gain(self._hidden(view), points, self.cfg.gain_range, self.cfg.gain_rays,
-                                  self._hidden_entries(view))  # fmt: skip
+        own, shares = self._rays.shared(self._hidden(view), points, self.cfg.gain_range, self.cfg.gain_rays,
+                                        self._hidden_entries(view))  # fmt: skip
         gain = np.concatenate([[c.gain for c in live], own[len(live) :]])
         path = np.concatenate([path, [f.path for f in found]])
         score, length, gamma = self.utility_terms(pose, points, gain, path, goals, shares)
@@ -258,6 +259,7 @@ class Explorer:
             outside = self._outside(view)
             state = self._hidden_grid(view.state, *(() if outside is None else (outside,)))
             self._hidden_of = view, GridView(state, view.resolution, view.origin), None
+            self._rays.update(self._hidden_of[1])
         return self._hidden_of[1]
 
     def _hidden_entries(self, view: GridView) -> np.ndarray:

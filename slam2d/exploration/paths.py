@@ -19,18 +19,19 @@ RUN_ALL, RUN_UNTIL_ALL, RUN_UNTIL_ANY = 0, 1, 2  # how far :func:`_dial` runs
 
 
 @njit(cache=True)
-def _reach(flat, w, start, out):
-    """Mark ``out`` the cells 4-connected to ``start`` over ``flat`` (bool, a grid of rows ``w`` cells long whose
-    border cells are all False, so that no step leaves it): breadth first. Returns how many."""
+def _reach(flat, w, start, seen, dist):
+    """Mark ``seen`` the cells 4-connected to ``start`` over ``flat`` (bool, a grid of rows ``w`` cells long whose
+    border cells are all False, so that no step leaves it), breadth first, and set their ``dist`` inf. Returns
+    how many."""
     queue = np.empty(flat.shape[0], dtype=np.int32)
-    out[start] = True
+    seen[start], dist[start] = True, np.inf
     queue[0], head, tail = start, 0, 1
     while head < tail:
         v = queue[head]
         head += 1
         for u in (v - w, v + w, v - 1, v + 1):
-            if flat[u] and not out[u]:
-                out[u] = True
+            if flat[u] and not seen[u]:
+                seen[u], dist[u] = True, np.inf
                 queue[tail] = u
                 tail += 1
     return tail
@@ -39,7 +40,7 @@ def _reach(flat, w, start, out):
 @njit(cache=True)
 def _dial(w, dist, queue, sizes, k, target, left, mode):
     """Process buckets from ``k`` (cells nearer than k are final) of the search held in ``dist`` cells (rows of ``w``
-    cells; -1 in cells not passable, which frame the grid), ``queue`` (3, cap) of three buckets in turn with their
+    cells; -1 in cells it never enters: not passable, or not 4-connected to the start, and the grid's frame), ``queue`` (3, cap) of three buckets in turn with their
     ``sizes`` (a cell is queued in the bucket of its tentative length). ``target`` (bool) marks cells asked for,
     ``left`` of them not yet final. ``mode``: to the end (RUN_ALL), until no target is left (RUN_UNTIL_ALL) or one
     is final (RUN_UNTIL_ANY); a bucket is always finished. Returns (k, left)."""
@@ -152,11 +153,10 @@ class Paths:
         self.shape = passable.shape
         self.resolution = float(resolution)
         h, w = self.shape
-        self._w = w + 2  # the search runs on the grid framed by a border of impassable cells
+        self._w = w + 2  # the search runs on the grid framed by a border of cells it never enters
         padded = np.zeros((h + 2, w + 2), dtype=np.bool_)
         padded[1:-1, 1:-1] = passable
-        flat = padded.ravel()
-        self._dist = np.where(flat, np.inf, -1.0)
+        self._dist = np.full(padded.size, -1.0)  # -1: not reached by the breadth-first pass, never entered
         seen = np.zeros(padded.size, dtype=np.bool_)
         start = _snap(passable, np.asarray(start_cell, dtype=np.int64), snap_cells)
         self._extra, self._k, self._left = 0.0, 0, 0
@@ -164,12 +164,12 @@ class Paths:
         if start is not None:
             cell, self._extra = start
             s = (int(cell[0]) + 1) * self._w + int(cell[1]) + 1
-            n = _reach(flat, self._w, s, seen)
+            n = _reach(padded.ravel(), self._w, s, seen, self._dist)
             self._dist[s] = 0.0
             self._queue = np.empty((3, n + 1), dtype=np.int32)
             self._queue[0, 0], self._sizes[0] = s, 1
-        seen = np.ascontiguousarray(seen.reshape(h + 2, w + 2)[1:-1, 1:-1])
-        self.reach = seen if allowed is None else seen & np.asarray(allowed, dtype=bool)
+        seen = seen.reshape(h + 2, w + 2)[1:-1, 1:-1]
+        self.reach = seen.copy() if allowed is None else seen & np.asarray(allowed, dtype=bool)
         self._target = np.zeros(padded.size, dtype=np.bool_)
 
     def _run(self, mode: int) -> None:
