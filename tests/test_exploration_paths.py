@@ -351,3 +351,45 @@ def test_ray_records_kept_between_grids_give_the_gains_and_shares_cast_anew(seed
         assert np.array_equal(own, fresh_own) and np.array_equal(shares, fresh_shares)
         assert np.array_equal(records.gains(view, pts[::2], 1.5, 120, unknown_cells(view)), fresh_own[::2])
     assert 0 < recast < 0.8 * 10 * len(pool)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_frontier_cells_refreshed_where_the_map_changed_equal_a_full_pass(seed):
+    """The frontier cells (``frontier_mask`` with the depth the explorer uses), kept between views and recomputed round
+    the cells that changed, are the full pass's after every change, near the grid's edge too."""
+    from slam2d.exploration.frontiers import WALL_GAP, frontier_mask
+
+    rng = np.random.default_rng(1300 + seed)
+    state = random_map(rng)
+    kept = LocalRefresh(lambda st: frontier_mask(st, depth=8), max(8 + 1, WALL_GAP))
+    for _ in range(8):
+        r, c = rng.integers(-5, state.shape[0]), rng.integers(-5, state.shape[1])
+        patch = state[max(r, 0) : r + rng.integers(2, 30), max(c, 0) : c + rng.integers(2, 30)]
+        patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.6, 0.1, 0.3])
+        assert np.array_equal(kept(state), frontier_mask(state, depth=8))
+
+
+@pytest.mark.parametrize("strategy", ["nearest_frontier", "utility"])
+def test_decisions_of_an_explorer_kept_over_changing_maps_equal_those_made_from_nothing(strategy):
+    """One explorer deciding on a map that changes here and there between decisions (its frontier cells, hidden
+    cells and gains' rays kept where nothing changed) chooses the goals, with the scores, of a new explorer each time."""
+    cfg = ExplorationConfig(strategy=strategy)
+    rng = np.random.default_rng(1400)
+    state = random_map(rng, (120, 150))
+    kept = Explorer(cfg, 0.2, 0.05, 12.0)
+    chosen = 0
+    for _ in range(12):
+        for _ in range(rng.integers(1, 4)):
+            r, c = rng.integers(-3, state.shape[0]), rng.integers(-3, state.shape[1])
+            patch = state[max(r, 0) : r + rng.integers(2, 15), max(c, 0) : c + rng.integers(2, 15)]
+            patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.6, 0.1, 0.3])
+        view = GridView(state.copy(), 0.05, (0.0, 0.0))
+        pose = random_start(rng, view)
+        goal = kept.decide(pose, view)
+        fresh = Explorer(cfg, 0.2, 0.05, 12.0).decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+        assert (goal is None) == (fresh is None)
+        if goal is not None:
+            assert goal.kind == fresh.kind and np.array_equal(goal.position, fresh.position)
+            assert goal.score == fresh.score
+            chosen += 1
+    assert chosen >= 8

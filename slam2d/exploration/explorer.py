@@ -100,6 +100,7 @@ class Explorer:
         self._hidden_of: tuple = (None, None, None)  # (view, its hidden-cell grid, its entry cells) counted on last
         self._maintained: tuple = (None, -1, [])  # (view, inaccessible goals, its open candidates) of the last upkeep
         self._hidden_grid = None  # the hidden-cell grid, kept between views
+        self._frontier_grid = None  # the frontier cells, kept between views
         self._rays = RayRecords()  # the gains' rays on it, kept where it did not change
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
@@ -208,8 +209,12 @@ class Explorer:
         """The frontier regions the robot can reach (``find_frontiers``), away from visited and inaccessible goals;
         with ``nearest`` only the nearest one's ``path`` is exact (the others' a lower bound above it)."""
         avoid = self.visited + self.inaccessible
+        depth = depth_cells(self.width, view.resolution)
+        if self._frontier_grid is None or self._frontier_grid.depth != depth:  # refreshed where the map changed
+            self._frontier_grid = LocalRefresh(lambda st: frontier_mask(st, depth=depth), max(depth + 1, WALL_GAP))
+            self._frontier_grid.depth = depth
         return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
-                              self.cfg.avoid_radius, self.width, nearest)  # fmt: skip
+                              self.cfg.avoid_radius, self.width, nearest, self._frontier_grid(view.state))  # fmt: skip
 
     def frontier_goal(self, pose, view, distance, cost=None) -> Goal | None:
         """The goal of the frontier region of lowest ``cost`` (a function of a region; default its path length, and

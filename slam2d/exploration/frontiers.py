@@ -136,7 +136,8 @@ def frontier_regions(mask: np.ndarray, min_cells: int) -> list[np.ndarray]:
 def _regions(mask: np.ndarray, min_cells: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`frontier_regions` as one array: the regions' cells (N, 2) one region after another, region k
     from ``starts[k]`` to ``starts[k + 1]`` (R + 1,)."""
-    cells, label, n = _label8(np.asarray(mask, dtype=np.bool_))
+    mask = np.ascontiguousarray(mask, dtype=np.bool_)
+    cells, label, n = _label8(mask, np.flatnonzero(mask))
     order = np.argsort(label, kind="stable")
     sizes = np.bincount(label, minlength=n + 1)[1:]
     big = sizes >= min_cells
@@ -146,41 +147,37 @@ def _regions(mask: np.ndarray, min_cells: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
-def _label8(mask):
-    """The cells (N, 2) of ``mask`` in raster order, each one's region label (N,) (1..n, numbered in the
-    raster order of the regions' first cells; 8-connected, by depth-first search) and n."""
+def _label8(mask, flat):
+    """The cells (N, 2) of ``mask`` (H, W) bool in raster order (``flat`` (N,): their flat indices, in order), each
+    one's region label (N,) (1..n, numbered in the raster order of the regions' first cells; 8-connected, by
+    depth-first search) and n."""
     h, w = mask.shape
-    labels = np.zeros((h, w), dtype=np.int32)
-    n_cells = 0
-    for r in range(h):
-        for c in range(w):
-            n_cells += mask[r, c]
+    n_cells = flat.shape[0]
+    labels = np.zeros(h * w, dtype=np.int32)
     stack = np.empty(n_cells, dtype=np.int64)
     cells = np.empty((n_cells, 2), dtype=np.int64)
     label = np.empty(n_cells, dtype=np.int64)
-    n = k = 0
-    for r in range(h):
-        for c in range(w):
-            if not mask[r, c]:
-                continue
-            if labels[r, c] == 0:
-                n += 1
-                labels[r, c], stack[0], top = n, r * w + c, 1
-                while top > 0:
-                    top -= 1
-                    vr, vc = stack[top] // w, stack[top] % w
-                    for rr in range(max(vr - 1, 0), min(vr + 2, h)):
-                        for cc in range(max(vc - 1, 0), min(vc + 2, w)):
-                            if mask[rr, cc] and labels[rr, cc] == 0:
-                                labels[rr, cc], stack[top] = n, rr * w + cc
-                                top += 1
-            cells[k, 0], cells[k, 1], label[k] = r, c, labels[r, c]
-            k += 1
+    n = 0
+    for k in range(n_cells):
+        v = flat[k]
+        r, c = v // w, v % w
+        if labels[v] == 0:
+            n += 1
+            labels[v], stack[0], top = n, v, 1
+            while top > 0:
+                top -= 1
+                vr, vc = stack[top] // w, stack[top] % w
+                for rr in range(max(vr - 1, 0), min(vr + 2, h)):
+                    for cc in range(max(vc - 1, 0), min(vc + 2, w)):
+                        if mask[rr, cc] and labels[rr * w + cc] == 0:
+                            labels[rr * w + cc], stack[top] = n, rr * w + cc
+                            top += 1
+        cells[k, 0], cells[k, 1], label[k] = r, c, labels[v]
     return cells, label, n
 
 
 def find_frontiers(view: GridView, robot_xy, distance, min_size: float, reach: float, polygon=None, avoid=(),
-                   avoid_radius: float = 0.5, depth: float = 0.0, nearest: bool = False) -> list[Frontier]:
+                   avoid_radius: float = 0.5, depth: float = 0.0, nearest: bool = False, mask=None) -> list[Frontier]:
     """Reachable frontier regions of ``view``.
 
     ``distance``: path lengths from the robot over traversable cells, a :class:`~slam2d.exploration.paths.Paths`
@@ -188,10 +185,12 @@ def find_frontiers(view: GridView, robot_xy, distance, min_size: float, reach: f
     how far from the region a goal cell may lie; ``polygon`` (K, 2) m: frontier cells outside are ignored; goals
     within ``avoid_radius`` of an ``avoid`` point (visited, inaccessible) are left out; ``depth`` m: how deep
     the unknown must run on from a frontier cell (``frontier_mask``); ``nearest``: only the nearest region's
-    ``path`` need be exact (the others' may be a lower bound above it: the search stops there).
+    ``path`` need be exact (the others' may be a lower bound above it: the search stops there); ``mask``: the
+    view's ``frontier_mask`` of that depth if known (changed here).
     """
     paths = as_paths(distance)
-    mask = frontier_mask(view.state, depth=depth_cells(depth, view.resolution))
+    if mask is None:
+        mask = frontier_mask(view.state, depth=depth_cells(depth, view.resolution))
     if polygon is not None:
         rows, cols = np.nonzero(mask)
         keep = inside_polygon(view.to_world(np.column_stack([rows, cols])), polygon)
