@@ -393,3 +393,21 @@ def test_decisions_of_an_explorer_kept_over_changing_maps_equal_those_made_from_
             assert goal.score == fresh.score
             chosen += 1
     assert chosen >= 8
+
+
+def test_searches_reusing_one_scratch_equal_searches_on_fresh_arrays():
+    """Paths made one after another with the same ``Scratch`` (grids of two shapes, starts anywhere) give the lengths
+    and reach of searches on fresh arrays."""
+    from slam2d.exploration.paths import Scratch
+
+    rng = np.random.default_rng(1500)
+    scratch = Scratch()
+    for k in range(12):
+        view = GridView(random_map(rng, (90, 110) if k % 3 else (100, 80)), 0.05, (0.0, 0.0))
+        passable = view.traversable(0.2)
+        start = np.argwhere(passable)[rng.integers(np.count_nonzero(passable))]
+        kept = Paths(passable, start, 0.05, scratch=scratch)
+        fresh = Paths(passable, start, 0.05)
+        cells = np.argwhere(fresh.reach)[:: 7]
+        assert np.array_equal(kept.reach, fresh.reach)
+        assert np.array_equal(kept.lengths(cells), fresh.lengths(cells)) and np.array_equal(kept.dense(), fresh.dense())

@@ -43,7 +43,7 @@ from slam2d.exploration.gridops import (
     unknown_cells,
 )
 from slam2d.exploration.hybrid import FINAL, HybridMap
-from slam2d.exploration.paths import Paths, path_lengths
+from slam2d.exploration.paths import Paths, Scratch, path_lengths
 from slam2d.exploration.pockets import (
     POCKET_RAYS,
     LocalRefresh,
@@ -101,6 +101,7 @@ class Explorer:
         self._maintained: tuple = (None, -1, [])  # (view, inaccessible goals, its open candidates) of the last upkeep
         self._hidden_grid = None  # the hidden-cell grid, kept between views
         self._frontier_grid = None  # the frontier cells, kept between views
+        self._scratch = Scratch()  # the buffers of the path search, one decision's level at a time
         self._rays = RayRecords()  # the gains' rays on it, kept where it did not change
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
@@ -198,7 +199,8 @@ class Explorer:
     def _decide(self, pose, view: GridView, clearance: float) -> Goal | None:
         """The next goal over paths keeping ``clearance`` m from obstacles."""
         roomy = view.traversable(self.radius + self.cfg.goal_clearance)  # goals only where the robot has room
-        distance = Paths(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution, allowed=roomy)
+        distance = Paths(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution, allowed=roomy,
+                         scratch=self._scratch)  # fmt: skip
         goal = self.strategy.choose(self, pose, view, distance)
         if goal is None and self.cfg.pockets:
             goal = pocket_goal(self, pose, view, distance)

@@ -13,17 +13,16 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["Paths", "as_paths", "path_lengths"]
+__all__ = ["Paths", "Scratch", "as_paths", "path_lengths"]
 
 RUN_ALL, RUN_UNTIL_ALL, RUN_UNTIL_ANY = 0, 1, 2  # how far :func:`_dial` runs
 
 
 @njit(cache=True)
-def _reach(flat, w, start, seen, dist):
+def _reach(flat, w, start, seen, dist, queue):
     """Mark ``seen`` the cells 4-connected to ``start`` over ``flat`` (bool, a grid of rows ``w`` cells long whose
-    border cells are all False, so that no step leaves it), breadth first, and set their ``dist`` inf. Returns
-    how many."""
-    queue = np.empty(flat.shape[0], dtype=np.int32)
+    border cells are all False, so that no step leaves it), breadth first (``queue``: room for every cell), and set
+    their ``dist`` inf. Returns how many."""
     seen[start], dist[start] = True, np.inf
     queue[0], head, tail = start, 0, 1
     while head < tail:
@@ -138,6 +137,27 @@ def _dial(w, dist, queue, sizes, k, target, left, mode):
     return k, left
 
 
+class Scratch:
+    """The buffers of a :class:`Paths` search, reused by the next search of a grid of the same shape made with them
+    (page faults on fresh arrays cost as much as the search): a Paths is not to be asked again once the next one is
+    made with the same Scratch."""
+
+    def __init__(self):
+        self.size = -1
+
+    def take(self, size: int) -> tuple:
+        """(padded passable, dist, seen, target, queue) of ``size`` cells: all False, -1, False, False, any."""
+        if size != self.size:
+            self.size = size
+            self.arrays = (np.zeros(size, dtype=np.bool_), np.empty(size), np.empty(size, dtype=np.bool_),
+                           np.zeros(size, dtype=np.bool_), np.empty(3 * size + 3, dtype=np.int32))  # fmt: skip
+        padded, dist, seen, target, queue = self.arrays
+        dist.fill(-1.0)
+        seen.fill(False)
+        target.fill(False)
+        return self.arrays
+
+
 class Paths:
     """Shortest 8-connected path lengths (m) from ``start_cell`` over ``passable`` (H, W) bool, no corner
     cutting, computed as far as asked. A start outside ``passable`` is moved to the nearest passable cell
@@ -148,29 +168,27 @@ class Paths:
     to the farthest (or with ``nearest``, to the nearest one: the others then a lower bound). ``dense()``: the
     whole (H, W) array (also what ``np.asarray`` and indexing give)."""
 
-    def __init__(self, passable, start_cell, resolution: float, snap_cells: int = 10, allowed=None):
+    def __init__(self, passable, start_cell, resolution: float, snap_cells: int = 10, allowed=None,
+                 scratch: Scratch | None = None):
         passable = np.asarray(passable, dtype=np.bool_)
         self.shape = passable.shape
         self.resolution = float(resolution)
         h, w = self.shape
         self._w = w + 2  # the search runs on the grid framed by a border of cells it never enters
-        padded = np.zeros((h + 2, w + 2), dtype=np.bool_)
-        padded[1:-1, 1:-1] = passable
-        self._dist = np.full(padded.size, -1.0)  # -1: not reached by the breadth-first pass, never entered
-        seen = np.zeros(padded.size, dtype=np.bool_)
+        padded, self._dist, seen, self._target, queue = (scratch or Scratch()).take((h + 2) * self._w)
+        padded.reshape(h + 2, w + 2)[1:-1, 1:-1] = passable  # the frame stays False
         start = _snap(passable, np.asarray(start_cell, dtype=np.int64), snap_cells)
         self._extra, self._k, self._left = 0.0, 0, 0
         self._sizes = np.zeros(3, dtype=np.int64)
         if start is not None:
             cell, self._extra = start
             s = (int(cell[0]) + 1) * self._w + int(cell[1]) + 1
-            n = _reach(padded.ravel(), self._w, s, seen, self._dist)
+            n = _reach(padded, self._w, s, seen, self._dist, queue)
             self._dist[s] = 0.0
-            self._queue = np.empty((3, n + 1), dtype=np.int32)
+            self._queue = queue[: 3 * (n + 1)].reshape(3, n + 1)
             self._queue[0, 0], self._sizes[0] = s, 1
         seen = seen.reshape(h + 2, w + 2)[1:-1, 1:-1]
         self.reach = seen.copy() if allowed is None else seen & np.asarray(allowed, dtype=bool)
-        self._target = np.zeros(padded.size, dtype=np.bool_)
 
     def _run(self, mode: int) -> None:
         if self._sizes.sum():
