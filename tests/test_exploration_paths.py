@@ -411,3 +411,20 @@ def test_searches_reusing_one_scratch_equal_searches_on_fresh_arrays():
         cells = np.argwhere(fresh.reach)[:: 7]
         assert np.array_equal(kept.reach, fresh.reach)
         assert np.array_equal(kept.lengths(cells), fresh.lengths(cells)) and np.array_equal(kept.dense(), fresh.dense())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_entry_cells_refreshed_where_the_grid_changed_equal_a_full_pass(seed):
+    """The cells rays enter the hidden cells by (``entry_mask``), kept between grids and recomputed round the cells
+    that changed, list the full pass's ``unknown_cells`` after every change, near the grid's edge too."""
+    from slam2d.exploration.gains import entry_mask
+    from slam2d.exploration.gridops import unknown_cells
+
+    rng = np.random.default_rng(1600 + seed)
+    state = random_map(rng)
+    kept = LocalRefresh(entry_mask, 1)
+    for _ in range(8):
+        r, c = rng.integers(-5, state.shape[0]), rng.integers(-5, state.shape[1])
+        patch = state[max(r, 0) : r + rng.integers(2, 30), max(c, 0) : c + rng.integers(2, 30)]
+        patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.5, 0.2, 0.3])
+        assert np.array_equal(np.argwhere(kept(state)), unknown_cells(GridView(state, 0.05, (0.0, 0.0))))

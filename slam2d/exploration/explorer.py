@@ -30,7 +30,7 @@ from slam2d.exploration.frontiers import (
     find_frontiers,
     frontier_mask,
 )
-from slam2d.exploration.gains import RayRecords
+from slam2d.exploration.gains import RayRecords, entry_mask
 from slam2d.exploration.gridops import (
     FREE,
     OCCUPIED,
@@ -40,7 +40,6 @@ from slam2d.exploration.gridops import (
     information_gain,
     inside_polygon,
     straight_reachable,
-    unknown_cells,
 )
 from slam2d.exploration.hybrid import FINAL, HybridMap
 from slam2d.exploration.paths import Paths, Scratch, path_lengths
@@ -102,7 +101,8 @@ class Explorer:
         self._hidden_grid = None  # the hidden-cell grid, kept between views
         self._frontier_grid = None  # the frontier cells, kept between views
         self._scratch = Scratch()  # the buffers of the path search, one decision's level at a time
-        self._rays = RayRecords()  # the gains' rays on it, kept where it did not change
+        self._rays = RayRecords()
+        self._entries = LocalRefresh(entry_mask, 1)  # where the rays enter the hidden cells  # the gains' rays on it, kept where it did not change
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
         self._gains_of: tuple = (None,) * 5  # (pocket grid, its places' gains, hidden cells, reach table, frame)
@@ -270,10 +270,11 @@ class Explorer:
         return self._hidden_of[1]
 
     def _hidden_entries(self, view: GridView) -> np.ndarray:
-        """The ``unknown_cells`` (K, 2) of :meth:`_hidden`'s grid, listed once a view."""
+        """The ``unknown_cells`` (K, 2) of :meth:`_hidden`'s grid, listed once a view (kept between views, refreshed
+        where the grid changed)."""
         hidden = self._hidden(view)
         if self._hidden_of[2] is None:
-            self._hidden_of = view, hidden, unknown_cells(hidden)
+            self._hidden_of = view, hidden, np.argwhere(self._entries(hidden.state))
         return self._hidden_of[2]
 
     def _outside(self, view: GridView) -> np.ndarray | None:

@@ -20,18 +20,34 @@ from slam2d.exploration.gridops import (
     _trace,
 )
 
-__all__ = ["RayRecords"]
+__all__ = ["RayRecords", "entry_mask"]
 
 TILE = 8  # cells: the changed cells are binned in squares this wide to find the records they touch
 
 
+def entry_mask(state: np.ndarray) -> np.ndarray:
+    """The cells (H, W) bool of ``unknown_cells``: UNKNOWN with a FREE 4-neighbour (a function of the cells within
+    one of each, for :class:`~slam2d.exploration.pockets.LocalRefresh`)."""
+    return _entry_mask(np.ascontiguousarray(state))
+
+
 @njit(cache=True)
-def _record(state, gxy, n_rays, max_t, unknown):
+def _entry_mask(state):
+    h, w = state.shape
+    out = np.zeros((h, w), dtype=np.bool_)
+    for r in range(h):
+        for c in range(w):
+            out[r, c] = state[r, c] == 2 and ((r > 0 and state[r - 1, c] == 0) or (r < h - 1 and state[r + 1, c] == 0)
+                                              or (c > 0 and state[r, c - 1] == 0) or (c < w - 1 and state[r, c + 1] == 0))
+    return out
+
+
+@njit(cache=True)
+def _record(state, gxy, n_rays, max_t, unknown, mark):
     """Rays from each point (P, 2) grid units, aimed as ``_cast`` aims them: the unknown cells each counts (P,),
     and what its rays met in order (``_trace``'s record: flat cell index, -1 a step beyond the map), point p's from
-    ``first[p]`` to ``first[p + 1]``."""
+    ``first[p]`` to ``first[p + 1]``. ``mark`` (H, W) int32, all 0 (and so again after)."""
     n = gxy.shape[0]
-    mark = np.zeros(state.shape, dtype=np.int32)
     seers = np.zeros((1, 1), dtype=np.int32)
     need = np.ones(n_rays, dtype=np.bool_)
     size = int(np.ceil(max_t + 1.0))
@@ -47,14 +63,18 @@ def _record(state, gxy, n_rays, max_t, unknown):
             ev = grown
         own[p], n_ev = _trace(state, gxy[p, 0], gxy[p, 1], n_rays, max_t, need, mark, p + 1, seers, ev, n_ev)
         first[p + 1] = n_ev
+    flat = mark.ravel()
+    for k in range(n_ev):
+        if ev[k] >= 0:
+            flat[ev[k]] = 0
     return own, ev[:n_ev], first
 
 
 @njit(cache=True)
-def _shares(ev, first, cells):
-    """Each point's share (P,) of the unknown cells its record ``ev`` (``first``) holds, over a grid of ``cells``:
-    a cell met by k of the points counts 1/k, a step beyond the map 1 (summed in the order met, as ``_cast``)."""
-    seers = np.zeros(cells, dtype=np.int32)
+def _shares(ev, first, seers):
+    """Each point's share (P,) of the unknown cells its record ``ev`` (``first``) holds, ``seers`` (H·W,) int32 all 0
+    (and so again after): a cell met by k of the points counts 1/k, a step beyond the map 1 (summed in the order
+    met, as ``_cast``)."""
     for k in range(first[-1]):
         if ev[k] >= 0:
             seers[ev[k]] += 1
@@ -65,6 +85,9 @@ def _shares(ev, first, cells):
         for k in range(first[p], first[p + 1]):
             total += 1.0 if ev[k] < 0 else 1.0 / seers[ev[k]]
         shares[p] = total
+    for k in range(first[-1]):
+        if ev[k] >= 0:
+            seers[ev[k]] = 0
     return shares
 
 
@@ -94,6 +117,8 @@ class RayRecords:
                     c0, c1 = max(int((gx - reach) // TILE), 0), max(int((gx + reach) // TILE) + 1, 0)
                     if tiles[r0:r1, c0:c1].any():
                         del kept[key]
+        if frame != self._frame:
+            self._mark = np.zeros(view.shape, dtype=np.int32)  # all 0 between calls
         self._state, self._frame, self._kept, self._used = view.state, frame, kept, set()
 
     def _records(self, view: GridView, points, max_range: float, rays: int, unknown):
@@ -105,7 +130,7 @@ class RayRecords:
         if new:
             at = gxy[list(new.values())]
             own, ev, first = _record(np.ascontiguousarray(view.state), np.ascontiguousarray(at), int(rays), max_t,
-                                     _cells_near(view, at, max_range, unknown))  # fmt: skip
+                                     _cells_near(view, at, max_range, unknown), self._mark)  # fmt: skip
             for j, key in enumerate(new):
                 self._kept[key] = own[j], ev[first[j] : first[j + 1]].copy()
         self._used.update(keys)
@@ -123,4 +148,4 @@ class RayRecords:
         """:func:`~slam2d.exploration.gridops.shared_gain` (gains (P,), shares (P,)) of ``points`` (P, 2) m on
         ``view`` (the grid of the last update); ``unknown``: its ``unknown_cells``."""
         own, ev, first = self._records(view, points, max_range, rays, unknown)
-        return own, _shares(ev, first, view.state.size)
+        return own, _shares(ev, first, self._mark.ravel())
