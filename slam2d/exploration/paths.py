@@ -151,7 +151,7 @@ class Scratch:
             self.size = size
             self.arrays = (np.zeros(size, dtype=np.bool_), np.empty(size), np.empty(size, dtype=np.bool_),
                            np.zeros(size, dtype=np.bool_), np.empty(3 * size + 3, dtype=np.int32))  # fmt: skip
-        padded, dist, seen, target, queue = self.arrays
+        _, dist, seen, target, _ = self.arrays
         dist.fill(-1.0)
         seen.fill(False)
         target.fill(False)
