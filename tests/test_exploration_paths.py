@@ -322,3 +322,109 @@ def test_shares_split_each_cell_a_point_sees_among_the_points_seeing_it(seed):
     assert np.array_equal(own, [s.sum() for s in seen]) and own.max() > 0
     assert np.allclose(shares, [(1.0 / seers[s]).sum() for s in seen])
     assert np.isclose(shares.sum(), np.count_nonzero(seers))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_ray_records_kept_between_grids_give_the_gains_and_shares_cast_anew(seed):
+    """``RayRecords``: after random local changes of the hidden grid (near the edge too) and points that come and go,
+    the kept records give bit for bit the gains and shares of every point's rays cast anew, and points far from the
+    changes are not cast again."""
+    from slam2d.exploration.gains import RayRecords
+    from slam2d.exploration.gridops import shared_gain, unknown_cells
+
+    rng = np.random.default_rng(1100 + seed)
+    state = random_map(rng, (120, 150))
+    records, recast = RayRecords(), 0
+    pool = rng.uniform([0.0, 0.0], [150 * 0.05, 120 * 0.05], size=(40, 2))
+    for step in range(10):
+        if step:
+            r, c = rng.integers(-5, state.shape[0]), rng.integers(-5, state.shape[1])
+            patch = state[max(r, 0) : r + rng.integers(2, 12), max(c, 0) : c + rng.integers(2, 12)]
+            patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.5, 0.2, 0.3])
+        view = GridView(state.copy(), 0.05, (0.0, 0.0))
+        records.update(view)
+        pts = pool[rng.random(len(pool)) < 0.7]
+        before = len(records._kept)
+        own, shares = records.shared(view, pts, 1.5, 120, unknown_cells(view))
+        recast += len(records._kept) - before
+        fresh_own, fresh_shares = shared_gain(view, pts, 1.5, 120)
+        assert np.array_equal(own, fresh_own) and np.array_equal(shares, fresh_shares)
+        assert np.array_equal(records.gains(view, pts[::2], 1.5, 120, unknown_cells(view)), fresh_own[::2])
+    assert 0 < recast < 0.8 * 10 * len(pool)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_frontier_cells_refreshed_where_the_map_changed_equal_a_full_pass(seed):
+    """The frontier cells (``frontier_mask`` with the depth the explorer uses), kept between views and recomputed round
+    the cells that changed, are the full pass's after every change, near the grid's edge too."""
+    from slam2d.exploration.frontiers import WALL_GAP, frontier_mask
+
+    rng = np.random.default_rng(1300 + seed)
+    state = random_map(rng)
+    kept = LocalRefresh(lambda st: frontier_mask(st, depth=8), max(8 + 1, WALL_GAP))
+    for _ in range(8):
+        r, c = rng.integers(-5, state.shape[0]), rng.integers(-5, state.shape[1])
+        patch = state[max(r, 0) : r + rng.integers(2, 30), max(c, 0) : c + rng.integers(2, 30)]
+        patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.6, 0.1, 0.3])
+        assert np.array_equal(kept(state), frontier_mask(state, depth=8))
+
+
+@pytest.mark.parametrize("strategy", ["nearest_frontier", "utility"])
+def test_decisions_of_an_explorer_kept_over_changing_maps_equal_those_made_from_nothing(strategy):
+    """One explorer deciding on a map that changes here and there between decisions (its frontier cells, hidden
+    cells and gains' rays kept where nothing changed) chooses the goals, with the scores, of a new explorer each time."""
+    cfg = ExplorationConfig(strategy=strategy)
+    rng = np.random.default_rng(1400)
+    state = random_map(rng, (120, 150))
+    kept = Explorer(cfg, 0.2, 0.05, 12.0)
+    chosen = 0
+    for _ in range(12):
+        for _ in range(rng.integers(1, 4)):
+            r, c = rng.integers(-3, state.shape[0]), rng.integers(-3, state.shape[1])
+            patch = state[max(r, 0) : r + rng.integers(2, 15), max(c, 0) : c + rng.integers(2, 15)]
+            patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.6, 0.1, 0.3])
+        view = GridView(state.copy(), 0.05, (0.0, 0.0))
+        pose = random_start(rng, view)
+        goal = kept.decide(pose, view)
+        fresh = Explorer(cfg, 0.2, 0.05, 12.0).decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+        assert (goal is None) == (fresh is None)
+        if goal is not None:
+            assert goal.kind == fresh.kind and np.array_equal(goal.position, fresh.position)
+            assert goal.score == fresh.score
+            chosen += 1
+    assert chosen >= 8
+
+
+def test_searches_reusing_one_scratch_equal_searches_on_fresh_arrays():
+    """Paths made one after another with the same ``Scratch`` (grids of two shapes, starts anywhere) give the lengths
+    and reach of searches on fresh arrays."""
+    from slam2d.exploration.paths import Scratch
+
+    rng = np.random.default_rng(1500)
+    scratch = Scratch()
+    for k in range(12):
+        view = GridView(random_map(rng, (90, 110) if k % 3 else (100, 80)), 0.05, (0.0, 0.0))
+        passable = view.traversable(0.2)
+        start = np.argwhere(passable)[rng.integers(np.count_nonzero(passable))]
+        kept = Paths(passable, start, 0.05, scratch=scratch)
+        fresh = Paths(passable, start, 0.05)
+        cells = np.argwhere(fresh.reach)[:: 7]
+        assert np.array_equal(kept.reach, fresh.reach)
+        assert np.array_equal(kept.lengths(cells), fresh.lengths(cells)) and np.array_equal(kept.dense(), fresh.dense())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_entry_cells_refreshed_where_the_grid_changed_equal_a_full_pass(seed):
+    """The cells rays enter the hidden cells by (``entry_mask``), kept between grids and recomputed round the cells
+    that changed, list the full pass's ``unknown_cells`` after every change, near the grid's edge too."""
+    from slam2d.exploration.gains import entry_mask
+    from slam2d.exploration.gridops import unknown_cells
+
+    rng = np.random.default_rng(1600 + seed)
+    state = random_map(rng)
+    kept = LocalRefresh(entry_mask, 1)
+    for _ in range(8):
+        r, c = rng.integers(-5, state.shape[0]), rng.integers(-5, state.shape[1])
+        patch = state[max(r, 0) : r + rng.integers(2, 30), max(c, 0) : c + rng.integers(2, 30)]
+        patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.5, 0.2, 0.3])
+        assert np.array_equal(np.argwhere(kept(state)), unknown_cells(GridView(state, 0.05, (0.0, 0.0))))

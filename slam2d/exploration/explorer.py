@@ -30,6 +30,7 @@ from slam2d.exploration.frontiers import (
     find_frontiers,
     frontier_mask,
 )
+from slam2d.exploration.gains import RayRecords, entry_mask
 from slam2d.exploration.gridops import (
     FREE,
     OCCUPIED,
@@ -38,12 +39,10 @@ from slam2d.exploration.gridops import (
     cells_inside_polygon,
     information_gain,
     inside_polygon,
-    shared_gain,
     straight_reachable,
-    unknown_cells,
 )
 from slam2d.exploration.hybrid import FINAL, HybridMap
-from slam2d.exploration.paths import Paths, path_lengths
+from slam2d.exploration.paths import Paths, Scratch, path_lengths
 from slam2d.exploration.pockets import (
     POCKET_RAYS,
     LocalRefresh,
@@ -100,6 +99,10 @@ class Explorer:
         self._hidden_of: tuple = (None, None, None)  # (view, its hidden-cell grid, its entry cells) counted on last
         self._maintained: tuple = (None, -1, [])  # (view, inaccessible goals, its open candidates) of the last upkeep
         self._hidden_grid = None  # the hidden-cell grid, kept between views
+        self._frontier_grid = None  # the frontier cells, kept between views
+        self._scratch = Scratch()  # the buffers of the path search, one decision's level at a time
+        self._rays = RayRecords()
+        self._entries = LocalRefresh(entry_mask, 1)  # where the rays enter the hidden cells  # the gains' rays on it, kept where it did not change
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
         self._gains_of: tuple = (None,) * 5  # (pocket grid, its places' gains, hidden cells, reach table, frame)
@@ -155,7 +158,7 @@ class Explorer:
         if not live:
             return []
         pts = np.array([c.position for c in live])
-        gain = information_gain(self._hidden(view), pts, self.cfg.gain_range, self.cfg.gain_rays,
+        gain = self._rays.gains(self._hidden(view), pts, self.cfg.gain_range, self.cfg.gain_rays,
                                 self._hidden_entries(view))  # fmt: skip
         floor = self.cfg.min_gain / view.resolution**2
         out = []
@@ -196,7 +199,8 @@ class Explorer:
     def _decide(self, pose, view: GridView, clearance: float) -> Goal | None:
         """The next goal over paths keeping ``clearance`` m from obstacles."""
         roomy = view.traversable(self.radius + self.cfg.goal_clearance)  # goals only where the robot has room
-        distance = Paths(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution, allowed=roomy)
+        distance = Paths(view.traversable(clearance), view.to_cell(pose[:2]), view.resolution, allowed=roomy,
+                         scratch=self._scratch)  # fmt: skip
         goal = self.strategy.choose(self, pose, view, distance)
         if goal is None and self.cfg.pockets:
             goal = pocket_goal(self, pose, view, distance)
@@ -207,8 +211,12 @@ class Explorer:
         """The frontier regions the robot can reach (``find_frontiers``), away from visited and inaccessible goals;
         with ``nearest`` only the nearest one's ``path`` is exact (the others' a lower bound above it)."""
         avoid = self.visited + self.inaccessible
+        depth = depth_cells(self.width, view.resolution)
+        if self._frontier_grid is None or self._frontier_grid.depth != depth:  # refreshed where the map changed
+            self._frontier_grid = LocalRefresh(lambda st: frontier_mask(st, depth=depth), max(depth + 1, WALL_GAP))
+            self._frontier_grid.depth = depth
         return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
-                              self.cfg.avoid_radius, self.width, nearest)  # fmt: skip
+                              self.cfg.avoid_radius, self.width, nearest, self._frontier_grid(view.state))  # fmt: skip
 
     def frontier_goal(self, pose, view, distance, cost=None) -> Goal | None:
         """The goal of the frontier region of lowest ``cost`` (a function of a region; default its path length, and
@@ -230,8 +238,8 @@ class Explorer:
         fronts = np.array([f.goal for f in found]).reshape(-1, 2)
         points = np.concatenate([pts, fronts])
         goals = np.concatenate([target, fronts])
-        own, shares = shared_gain(self._hidden(view), points, self.cfg.gain_range, self.cfg.gain_rays,
-                                  self._hidden_entries(view))  # fmt: skip
+        own, shares = self._rays.shared(self._hidden(view), points, self.cfg.gain_range, self.cfg.gain_rays,
+                                        self._hidden_entries(view))  # fmt: skip
         gain = np.concatenate([[c.gain for c in live], own[len(live) :]])
         path = np.concatenate([path, [f.path for f in found]])
         score, length, gamma = self.utility_terms(pose, points, gain, path, goals, shares)
@@ -258,13 +266,15 @@ class Explorer:
             outside = self._outside(view)
             state = self._hidden_grid(view.state, *(() if outside is None else (outside,)))
             self._hidden_of = view, GridView(state, view.resolution, view.origin), None
+            self._rays.update(self._hidden_of[1])
         return self._hidden_of[1]
 
     def _hidden_entries(self, view: GridView) -> np.ndarray:
-        """The ``unknown_cells`` (K, 2) of :meth:`_hidden`'s grid, listed once a view."""
+        """The ``unknown_cells`` (K, 2) of :meth:`_hidden`'s grid, listed once a view (kept between views, refreshed
+        where the grid changed)."""
         hidden = self._hidden(view)
         if self._hidden_of[2] is None:
-            self._hidden_of = view, hidden, unknown_cells(hidden)
+            self._hidden_of = view, hidden, np.argwhere(self._entries(hidden.state))
         return self._hidden_of[2]
 
     def _outside(self, view: GridView) -> np.ndarray | None:

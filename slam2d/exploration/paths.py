@@ -13,44 +13,43 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["Paths", "as_paths", "path_lengths"]
+__all__ = ["Paths", "Scratch", "as_paths", "path_lengths"]
 
 RUN_ALL, RUN_UNTIL_ALL, RUN_UNTIL_ANY = 0, 1, 2  # how far :func:`_dial` runs
 
 
 @njit(cache=True)
-def _reach(flat, h, w, start, out):
-    """Mark ``out`` (H·W,) the cells 4-connected to ``start`` over ``flat`` (H·W,) bool (breadth first)."""
-    queue = np.empty(h * w, dtype=np.int32)
-    out[start] = True
+def _reach(flat, w, start, seen, dist, queue):
+    """Mark ``seen`` the cells 4-connected to ``start`` over ``flat`` (bool, a grid of rows ``w`` cells long whose
+    border cells are all False, so that no step leaves it), breadth first (``queue``: room for every cell), and set
+    their ``dist`` inf. Returns how many."""
+    seen[start], dist[start] = True, np.inf
     queue[0], head, tail = start, 0, 1
     while head < tail:
         v = queue[head]
         head += 1
-        r, c = v // w, v % w
-        if r > 0 and flat[v - w] and not out[v - w]:
-            out[v - w], queue[tail], tail = True, v - w, tail + 1
-        if r < h - 1 and flat[v + w] and not out[v + w]:
-            out[v + w], queue[tail], tail = True, v + w, tail + 1
-        if c > 0 and flat[v - 1] and not out[v - 1]:
-            out[v - 1], queue[tail], tail = True, v - 1, tail + 1
-        if c < w - 1 and flat[v + 1] and not out[v + 1]:
-            out[v + 1], queue[tail], tail = True, v + 1, tail + 1
+        for u in (v - w, v + w, v - 1, v + 1):
+            if flat[u] and not seen[u]:
+                seen[u], dist[u] = True, np.inf
+                queue[tail] = u
+                tail += 1
+    return tail
 
 
 @njit(cache=True)
-def _dial(flat, h, w, dist, queue, sizes, k, target, left, mode):
-    """Process buckets from ``k`` (cells nearer than k are final) of the search held in ``dist`` (H·W,) cells,
-    ``queue`` (3, cap) of three buckets in turn with their ``sizes`` (a cell is queued in the bucket of
-    its tentative length). ``target`` (H·W,) bool marks cells asked for, ``left`` of them not yet final. ``mode``: to the end
-    (RUN_ALL), until no target is left (RUN_UNTIL_ALL) or one is final (RUN_UNTIL_ANY); a bucket is always
-    finished. Returns (k, left)."""
+def _dial(w, dist, queue, sizes, k, target, left, mode):
+    """Process buckets from ``k`` (cells nearer than k are final) of the search held in ``dist`` cells (rows of ``w``
+    cells; -1 in cells it never enters: not passable, or not 4-connected to the start, and the grid's frame), ``queue`` (3, cap) of three buckets in turn with their
+    ``sizes`` (a cell is queued in the bucket of its tentative length). ``target`` (bool) marks cells asked for,
+    ``left`` of them not yet final. ``mode``: to the end (RUN_ALL), until no target is left (RUN_UNTIL_ALL) or one
+    is final (RUN_UNTIL_ANY); a bucket is always finished. Returns (k, left)."""
     diag = 1.4142135623730951
     start_left = left
     while sizes[0] + sizes[1] + sizes[2] > 0:
         if (mode == RUN_UNTIL_ALL and left == 0) or (mode == RUN_UNTIL_ANY and left < start_left):
             break
-        b = k % 3
+        b, b1, b2 = k % 3, (k + 1) % 3, (k + 2) % 3
+        n1, n2 = sizes[b1], sizes[b2]  # a step of 1 or sqrt(2) from bucket k lands in bucket k + 1 or k + 2
         for i in range(sizes[b]):
             v = queue[b, i]
             d = dist[v]
@@ -58,35 +57,105 @@ def _dial(flat, h, w, dist, queue, sizes, k, target, left, mode):
                 continue
             if target[v]:
                 left -= 1
-            r, c = v // w, v % w
-            up, dn = r > 0 and flat[v - w], r < h - 1 and flat[v + w]
-            lf, rt = c > 0 and flat[v - 1], c < w - 1 and flat[v + 1]
-            for j in range(8):
-                if j == 0:
-                    ok, u, nd = up, v - w, d + 1.0
-                elif j == 1:
-                    ok, u, nd = dn, v + w, d + 1.0
-                elif j == 2:
-                    ok, u, nd = lf, v - 1, d + 1.0
-                elif j == 3:
-                    ok, u, nd = rt, v + 1, d + 1.0
-                elif j == 4:
-                    ok, u, nd = up and lf and flat[v - w - 1], v - w - 1, d + diag
-                elif j == 5:
-                    ok, u, nd = up and rt and flat[v - w + 1], v - w + 1, d + diag
-                elif j == 6:
-                    ok, u, nd = dn and lf and flat[v + w - 1], v + w - 1, d + diag
-                else:
-                    ok, u, nd = dn and rt and flat[v + w + 1], v + w + 1, d + diag
-                if ok and nd < dist[u]:
-                    old, dist[u] = dist[u], nd
-                    nb = int(nd)
-                    if old == np.inf or int(old) != nb:  # else queued in that bucket already: each cell once a bucket
-                        queue[nb % 3, sizes[nb % 3]] = u
-                        sizes[nb % 3] += 1
-        sizes[b] = 0
+            # blocked cells hold -1: no step enters them; corners are not cut
+            up, dn, lf, rt = dist[v - w] >= 0.0, dist[v + w] >= 0.0, dist[v - 1] >= 0.0, dist[v + 1] >= 0.0
+            d1, d2 = d + 1.0, d + diag
+            if dist[v - w] > d1:
+                old, dist[v - w] = dist[v - w], d1
+                if int(d1) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v - w
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v - w
+                    n2 += 1
+            if dist[v + w] > d1:
+                old, dist[v + w] = dist[v + w], d1
+                if int(d1) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v + w
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v + w
+                    n2 += 1
+            if dist[v - 1] > d1:
+                old, dist[v - 1] = dist[v - 1], d1
+                if int(d1) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v - 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v - 1
+                    n2 += 1
+            if dist[v + 1] > d1:
+                old, dist[v + 1] = dist[v + 1], d1
+                if int(d1) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v + 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v + 1
+                    n2 += 1
+            if up and lf and dist[v - w - 1] > d2:
+                old, dist[v - w - 1] = dist[v - w - 1], d2
+                if int(d2) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v - w - 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v - w - 1
+                    n2 += 1
+            if up and rt and dist[v - w + 1] > d2:
+                old, dist[v - w + 1] = dist[v - w + 1], d2
+                if int(d2) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v - w + 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v - w + 1
+                    n2 += 1
+            if dn and lf and dist[v + w - 1] > d2:
+                old, dist[v + w - 1] = dist[v + w - 1], d2
+                if int(d2) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v + w - 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v + w - 1
+                    n2 += 1
+            if dn and rt and dist[v + w + 1] > d2:
+                old, dist[v + w + 1] = dist[v + w + 1], d2
+                if int(d2) == k + 1:
+                    if old == np.inf or int(old) != k + 1:  # else queued in that bucket already
+                        queue[b1, n1] = v + w + 1
+                        n1 += 1
+                elif old == np.inf or int(old) != k + 2:
+                    queue[b2, n2] = v + w + 1
+                    n2 += 1
+        sizes[b], sizes[b1], sizes[b2] = 0, n1, n2
         k += 1
     return k, left
+
+
+class Scratch:
+    """The buffers of a :class:`Paths` search, reused by the next search of a grid of the same shape made with them
+    (page faults on fresh arrays cost as much as the search): a Paths is not to be asked again once the next one is
+    made with the same Scratch."""
+
+    def __init__(self):
+        self.size = -1
+
+    def take(self, size: int) -> tuple:
+        """(padded passable, dist, seen, target, queue) of ``size`` cells: all False, -1, False, False, any."""
+        if size != self.size:
+            self.size = size
+            self.arrays = (np.zeros(size, dtype=np.bool_), np.empty(size), np.empty(size, dtype=np.bool_),
+                           np.zeros(size, dtype=np.bool_), np.empty(3 * size + 3, dtype=np.int32))  # fmt: skip
+        _, dist, seen, target, _ = self.arrays
+        dist.fill(-1.0)
+        seen.fill(False)
+        target.fill(False)
+        return self.arrays
 
 
 class Paths:
@@ -99,31 +168,31 @@ class Paths:
     to the farthest (or with ``nearest``, to the nearest one: the others then a lower bound). ``dense()``: the
     whole (H, W) array (also what ``np.asarray`` and indexing give)."""
 
-    def __init__(self, passable, start_cell, resolution: float, snap_cells: int = 10, allowed=None):
-        self._flat = np.ascontiguousarray(passable, dtype=np.bool_).ravel()
-        self.shape = np.shape(passable)
+    def __init__(self, passable, start_cell, resolution: float, snap_cells: int = 10, allowed=None,
+                 scratch: Scratch | None = None):
+        passable = np.asarray(passable, dtype=np.bool_)
+        self.shape = passable.shape
         self.resolution = float(resolution)
         h, w = self.shape
-        self._dist = np.full(h * w, np.inf)
-        seen = np.zeros(h * w, dtype=np.bool_)
-        start = _snap(self._flat.reshape(self.shape), np.asarray(start_cell, dtype=np.int64), snap_cells)
+        self._w = w + 2  # the search runs on the grid framed by a border of cells it never enters
+        padded, self._dist, seen, self._target, queue = (scratch or Scratch()).take((h + 2) * self._w)
+        padded.reshape(h + 2, w + 2)[1:-1, 1:-1] = passable  # the frame stays False
+        start = _snap(passable, np.asarray(start_cell, dtype=np.int64), snap_cells)
         self._extra, self._k, self._left = 0.0, 0, 0
         self._sizes = np.zeros(3, dtype=np.int64)
         if start is not None:
             cell, self._extra = start
-            s = int(cell[0]) * w + int(cell[1])
-            _reach(self._flat, h, w, s, seen)
+            s = (int(cell[0]) + 1) * self._w + int(cell[1]) + 1
+            n = _reach(padded, self._w, s, seen, self._dist, queue)
             self._dist[s] = 0.0
-            self._queue = np.empty((3, int(np.count_nonzero(seen)) + 1), dtype=np.int32)
+            self._queue = queue[: 3 * (n + 1)].reshape(3, n + 1)
             self._queue[0, 0], self._sizes[0] = s, 1
-        seen = seen.reshape(self.shape)
-        self.reach = seen if allowed is None else seen & np.asarray(allowed, dtype=bool)
-        self._target = np.zeros(h * w, dtype=np.bool_)
+        seen = seen.reshape(h + 2, w + 2)[1:-1, 1:-1]
+        self.reach = seen.copy() if allowed is None else seen & np.asarray(allowed, dtype=bool)
 
     def _run(self, mode: int) -> None:
         if self._sizes.sum():
-            h, w = self.shape
-            self._k, self._left = _dial(self._flat, h, w, self._dist, self._queue, self._sizes, self._k,
+            self._k, self._left = _dial(self._w, self._dist, self._queue, self._sizes, self._k,
                                         self._target, self._left, mode)  # fmt: skip
 
     def _metres(self, cells_dist) -> np.ndarray:
@@ -139,24 +208,24 @@ class Paths:
         h, w = self.shape
         ok = (cells[:, 0] >= 0) & (cells[:, 0] < h) & (cells[:, 1] >= 0) & (cells[:, 1] < w)
         ok[ok] = self.reach[cells[ok, 0], cells[ok, 1]]
-        flat = cells[ok, 0] * w + cells[ok, 1]
+        flat = (cells[ok, 0] + 1) * self._w + cells[ok, 1] + 1
         out = np.full(len(cells), np.inf)
         pending = flat[self._dist[flat] >= self._k]  # not final yet
         if len(pending):
-            self._target[:] = False
             self._target[pending] = True
-            self._left = int(np.count_nonzero(self._target))
+            self._left = int(np.count_nonzero(self._target[pending]))  # each cell once
             self._run(RUN_UNTIL_ANY if nearest else RUN_UNTIL_ALL)
+            self._target[pending] = False
         d = self._dist[flat]
         out[ok] = self._metres(np.where(d < self._k, d, self._k))  # beyond the buckets done: the lower bound
         return out
 
     def dense(self) -> np.ndarray:
         """The path length (H, W) m to every cell, inf out of ``reach``."""
-        self._target[:] = False
         self._left = 0
         self._run(RUN_ALL)
-        out = self._metres(self._dist).reshape(self.shape)
+        h, w = self.shape
+        out = self._metres(self._dist.reshape(h + 2, w + 2)[1:-1, 1:-1])
         out[~self.reach] = np.inf
         return out
 
