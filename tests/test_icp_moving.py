@@ -26,9 +26,12 @@ def scan_at(world: World, pose, stamp: float, person=None) -> Scan:
                 odom=np.asarray(pose, float), ground_truth=np.asarray(pose, float))
 
 
-def drive(world, poses, people, options=None):
+ON = {"moving_margin": 0.1}
+
+
+def drive(world, poses, people, options=ON):
     """The frontend over scans at ``poses`` (N, 3) with a person at ``people[i]`` (or None); its last pose."""
-    fe = create_frontend("icp", options or {})
+    fe = create_frontend("icp", options)
     for i, (pose, person) in enumerate(zip(poses, people)):
         delta = np.zeros(3) if i == 0 else geometry.between(poses[i - 1], pose)
         fe.process(scan_at(world, pose, 0.1 * i, person), delta)

@@ -45,7 +45,7 @@ correction in that direction is dropped and the prediction stands there (solutio
 remapping, Zhang et al. ICRA 2016): along a corridor the distance comes from odometry,
 position across and heading from the walls. Counted under ``DEGENERATE_EVENT``.
 
-Moving points (``moving``; ``moving_margin``): a scan point that two of the last scans of the
+Moving points (``moving``; ``moving_margin``, off by default): a scan point that two of the last scans of the
 local map saw through (their beams either side of its bearing all reached beyond it by the
 margin) was not there then: a person walking. After the match, such points are left out,
 the scan is matched again from the result, and they are kept out of the local map (counted
