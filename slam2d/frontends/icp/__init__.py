@@ -45,6 +45,13 @@ correction in that direction is dropped and the prediction stands there (solutio
 remapping, Zhang et al. ICRA 2016): along a corridor the distance comes from odometry,
 position across and heading from the walls. Counted under ``DEGENERATE_EVENT``.
 
+Moving points (``moving``; ``moving_margin``, off by default): a scan point that two of the last scans of the
+local map saw through (their beams either side of its bearing all reached beyond it by the
+margin) was not there then: a person walking. After the match, such points are left out,
+the scan is matched again from the result, and they are kept out of the local map (counted
+under ``MOVING_EVENT``). A person walking beside the robot along a corridor otherwise drags
+the pose along with them: lengthwise nothing else fixes it.
+
 Odometry that lies (frozen then jumping, a wild step, slip): when the match
 from the odometry prediction diverges from it, the constant-velocity and the
 no-motion predictions are tried as starts and priors of their own; a match
@@ -68,6 +75,7 @@ that freezes while the robot moves says "still", the scan does not
 from slam2d.frontends.icp.config import IcpConfig
 from slam2d.frontends.icp.frontend import (
     DEGENERATE_EVENT,
+    MOVING_EVENT,
     ODOMETRY_OVERRULED_EVENT,
     STILL_EVENT,
     STILL_SCAN_MOVED_EVENT,
@@ -76,6 +84,7 @@ from slam2d.frontends.icp.frontend import (
 
 __all__ = [
     "DEGENERATE_EVENT",
+    "MOVING_EVENT",
     "ODOMETRY_OVERRULED_EVENT",
     "STILL_EVENT",
     "STILL_SCAN_MOVED_EVENT",

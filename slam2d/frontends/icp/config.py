@@ -63,6 +63,11 @@ class IcpConfig(Section):
         0.0, ge=0, description="a direction where the scan's information is below this x the odometry's "
         "(odom_sigma_*) is taken from the prediction, not the match (0: never; no Radish log gains from it)"
     )
+    moving_margin: float = Field(
+        0.0, ge=0, description="m; a point two earlier scans of the local map saw this far through is moving: "
+        "matched again without it, kept out of the map (0: never; 0.1 in the simulator with people; the "
+        "clinic, ACES, FR079 and MIT-CSAIL lose by it)"
+    )
     point_sigma: float = Field(0.03, gt=0, description="m; std of one point residual: prior weight vs points")
     inlier_distance: float = Field(0.1, gt=0, description="m; residual of a point counted as matched")
     retry_below: float = Field(0.6, ge=0, le=1, description="matched fraction below which other guesses are tried")

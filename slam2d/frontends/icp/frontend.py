@@ -14,6 +14,7 @@ from slam2d.frontends.icp.config import IcpConfig
 from slam2d.frontends.icp.degeneracy import remap
 from slam2d.frontends.icp.grid import SearchGrid
 from slam2d.frontends.icp.mapping import get_local_map
+from slam2d.frontends.icp.moving import Views
 from slam2d.frontends.icp.point_to_line import scan_normals
 from slam2d.frontends.icp.registration import Fit, get_registration
 from slam2d.frontends.icp.threshold import get_threshold_estimator
@@ -29,8 +30,10 @@ STILL_TRUST_THETA = np.deg2rad(1.0)  # ... this) lets the motion filter skip the
 STILL_RANGE_CHANGE = 2.0  # a scan whose median range change exceeds this x still_distance is registered
 STILL_SCAN_MOVED_EVENT = "scans registered though odometry said still (the scan changed)"  # key in ``events``
 DEGENERATE_EVENT = "scans with directions left to odometry (degenerate)"  # key in ``events``
+MOVING_EVENT = "scans matched again without moving points (seen through before)"  # key in ``events``
+VIEWS = 30  # earlier scans the see-through test looks at when the local map keeps every scan (map_window 0)
 
-__all__ = ["DEGENERATE_EVENT", "ODOMETRY_OVERRULED_EVENT", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "IcpFrontend"]
+__all__ = ["DEGENERATE_EVENT", "MOVING_EVENT", "ODOMETRY_OVERRULED_EVENT", "STILL_EVENT", "STILL_SCAN_MOVED_EVENT", "IcpFrontend"]
 
 
 @register_frontend("icp")
@@ -48,6 +51,7 @@ class IcpFrontend:
     def __init__(self, config: IcpConfig | None = None):
         self.config = cfg = config or self.Config()
         self.map = get_local_map(cfg)
+        self.views = Views(cfg.map_window or VIEWS)  # the scans the see-through test looks at
         self._threshold = get_threshold_estimator(cfg)
         self.registration = get_registration(cfg)
         self._odom_information = odometry_information(cfg.odom_sigma_xy, cfg.odom_sigma_theta_deg)
@@ -59,6 +63,7 @@ class IcpFrontend:
         self._trust_still = False  # the last registration agreed with odometry (see STILL_TRUST_*)
         self._reference_ranges: np.ndarray | None = None  # ranges (n,) m of the last registered scan
         self._last_delta = np.zeros(3)
+        self._scan: Scan | None = None  # the scan being processed
         self._started = False
 
     # ------------------------------------------------------------------ public
@@ -73,6 +78,7 @@ class IcpFrontend:
             odom_delta = np.zeros(3)
         guess = geometry.compose(self.pose, odom_delta)
         points = scan.points_in_base(cfg.min_range, cfg.max_range)
+        self._scan = scan  # the views keep it once registered (``_step``)
         if not self._started:
             self._reference_ranges = scan.ranges
             return self._first(points, guess, odom_delta)
@@ -98,6 +104,7 @@ class IcpFrontend:
             return self._fallback("registration failed (non-finite, non-planar or < 3 matches)", guess, odom_delta,
                                   points)
         pose, fit, start = found
+        pose, fit, points = self._without_moving(points, pose, fit, start, threshold, grid)
         reason = self._diverged(pose, start)
         if reason:
             return self._fallback(reason, guess, odom_delta, points)
@@ -193,6 +200,21 @@ class IcpFrontend:
             return max(overruling, key=lambda r: r[1].matched)
         return None if best is None else (*best, guess)
 
+    def _without_moving(self, points, pose, fit: Fit, start, threshold, grid):
+        """(pose, fit, points) matched again from ``pose`` without the points earlier scans saw
+        through there (``moving``, ``moving_margin``), when there are such points and enough others;
+        else as given."""
+        cfg = self.config
+        moving = self.views.moving(geometry.transform_points(pose, points), cfg.moving_margin)
+        static = points[~moving]
+        if not moving.any() or len(static) < cfg.min_points:
+            return pose, fit, points
+        again = self.registration.match(self._source(static), pose, start, threshold, grid, self.map)
+        if again is None:
+            return pose, fit, points
+        self.events[MOVING_EVENT] += 1
+        return again[0], again[1], static
+
     def _scan_information(self, fit: Fit) -> np.ndarray:
         """The scan's information (3, 3) over the pose in the local frame: J^T W J / sigma^2 of the
         match, sigma^2 from its residuals."""
@@ -231,10 +253,11 @@ class IcpFrontend:
     # ------------------------------------------------------------------ results
 
     def _step(self, pose, points) -> np.ndarray:
-        """Move to ``pose``, add the scan to the map; the delta from the previous pose."""
+        """Move to ``pose``, add ``points`` to the map and the scan to the views; the delta from the previous pose."""
         delta = geometry.between(self.pose, pose)
         self.pose, self._last_delta = pose, delta
         self.map.add(pose, points)
+        self.views.add(pose, self._scan)
         return delta
 
     def _accept(self, pose, points, information, confidence) -> FrontendResult:
