@@ -9,8 +9,9 @@ differing). So when random particles first come after tracking (or an initial po
 sweeps the map once: ``global_candidates`` x ``max_particles`` poses uniform over the free space (as
 many as a global start weighs) are scored by the scan on the smooth field, the best of each place
 (MAX_HYPOTHESES places at most) refined by a few local rounds, and every place within the evidence
-threshold of the best refined one gets ``hypothesis_particles`` particles, weighted as the best
-hypothesis times their likelihood ratio to it (at most 1). The scans that follow tell them apart.
+threshold of the best refined one gets ``hypothesis_particles`` particles, each weighing as one of
+the random particles drawn with it (a place the map's imperfection makes fit better than the tracked
+one must not outweigh it at once); the floors keep them until the scans that follow tell them apart.
 """
 
 from __future__ import annotations
@@ -35,17 +36,14 @@ SPREAD = np.array([0.05, 0.05, 0.02])  # m, m, rad: sd of the particles given to
 def add_swept(pf, est, scan: Scan) -> int:
     """Give filter ``pf`` (its estimate ``est``) ``hypothesis_particles`` round every place a global
     sweep finds fitting ``scan`` within ``pf.evidence_threshold`` (log) of the best place found, but
-    the best hypothesis's: each weighs the best hypothesis's weight times its likelihood ratio to it
-    (at most 1); how many places."""
+    the best hypothesis's, each weighing as a random particle (one over the particles); how many places."""
     best = est.hypotheses[0]
     pool = pf.random_poses(pf.cfg.global_candidates * pf.cfg.max_particles)
-    ll = pf.coarse.log_likelihood(np.vstack([best.pose, pool]), scan)[0]
-    places = _places(pool, ll[1:], best.pose)
+    places = _places(pool, pf.coarse.log_likelihood(pool, scan)[0], best.pose)
     if not places:
         return 0
     found, fit = _refine(pf, np.array(places), scan)
-    n = max(pf.cfg.hypothesis_particles, 1)
-    mass = float(logsumexp(pf.log_w[pf._labels == pf._best_label]))
+    n, share = max(pf.cfg.hypothesis_particles, 1), -math.log(len(pf.particles))
     added: list = []
     for i in np.argsort(-fit, kind="stable"):
         if fit[i] < fit.max() - pf.evidence_threshold:
@@ -56,7 +54,7 @@ def add_swept(pf, est, scan: Scan) -> int:
         cloud = found[i] + pf.rng.standard_normal((n, 3)) * SPREAD
         cloud[:, 2] = geometry.wrap_angle(cloud[:, 2])
         pf.particles = np.concatenate([pf.particles, cloud])
-        pf.log_w = np.concatenate([pf.log_w, np.full(n, mass + min(0.0, float(fit[i] - ll[0])) - math.log(n))])
+        pf.log_w = np.concatenate([pf.log_w, np.full(n, share)])
     if added:
         pf.log_w -= logsumexp(pf.log_w)
     return len(added)
