@@ -273,7 +273,7 @@ def test_walls_missing_from_the_map_do_not_pass_for_a_kidnapping():
     injected, worst = outcomes[MclConfig().recovery_best_beams]
     assert MclConfig().recovery_best_beams < 1.0 and injected == 0 and worst < 0.2
     injected, worst = outcomes[1.0]
-    assert injected > 1000 and worst > 5.0
+    assert injected > 100 and worst > 5.0  # random particles, the global sweep, and a place 5 m off
 
 
 def worn_office(radius: float):
@@ -325,7 +325,7 @@ def test_a_far_place_is_not_claimed_while_the_map_only_lacks_what_the_laser_sees
         assert pf.injected > 1000 and tracks[name].position_error.max() > 3.0  # the jump
     kept, lost = tracks["kept"], tracks["not kept"]
     assert not (kept.tracking() & (kept.position_error > 0.5)).any()
-    assert false_convergence(lost) and lost.tracking()[-1] and lost.position_error[-1] > 5.0
+    assert false_convergence(lost) and lost.tracking()[-1] and lost.position_error[-1] > 3.0
 
 
 def _square_room(half: float, size: float = 12.0) -> KnownMap:
