@@ -17,8 +17,8 @@ particles (connected histogram bins), with its covariance; between updates it
 follows the odometry. Once it jumps away from the place it tracked, that place is
 kept (:mod:`slam2d.localization.home`): the new one is claimed only while its recent
 evidence over the old one holds. A search from random particles begins with one global sweep
-(:mod:`slam2d.localization.sweep`): the places anywhere that fit the scan join as hypotheses. Vectorised over particles (numba for the sensor
-models); the same seed gives the same particles.
+(:mod:`slam2d.localization.sweep`): the places anywhere that fit the scan join as hypotheses.
+Vectorised over particles (numba for the sensor models); the same seed gives the same particles.
 """
 
 from __future__ import annotations
