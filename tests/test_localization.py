@@ -273,7 +273,7 @@ def test_walls_missing_from_the_map_do_not_pass_for_a_kidnapping():
     injected, worst = outcomes[MclConfig().recovery_best_beams]
     assert MclConfig().recovery_best_beams < 1.0 and injected == 0 and worst < 0.2
     injected, worst = outcomes[1.0]
-    assert injected > 1000 and worst > 5.0
+    assert injected > 100 and worst > 5.0  # random particles, the global sweep, and a place 5 m off
 
 
 def worn_office(radius: float):
@@ -325,7 +325,7 @@ def test_a_far_place_is_not_claimed_while_the_map_only_lacks_what_the_laser_sees
         assert pf.injected > 1000 and tracks[name].position_error.max() > 3.0  # the jump
     kept, lost = tracks["kept"], tracks["not kept"]
     assert not (kept.tracking() & (kept.position_error > 0.5)).any()
-    assert false_convergence(lost) and lost.tracking()[-1] and lost.position_error[-1] > 5.0
+    assert false_convergence(lost) and lost.tracking()[-1] and lost.position_error[-1] > 3.0
 
 
 def _square_room(half: float, size: float = 12.0) -> KnownMap:
@@ -502,9 +502,11 @@ def test_navigation_drives_on_the_mcl_pose():
 # --------------------------------------------------------------------------- hypotheses and look-alikes
 
 
-def _two_rooms(folder) -> str:
+def _two_rooms(folder, closets: bool = False) -> str:
     """A plan (0.05 m/px) of two identical, unconnected 5 m x 4 m rooms 10 m apart along x, each with
-    a partition and a box that make it look different under any turn (nothing tells the rooms apart)."""
+    a partition and a box that make it look different under any turn (nothing tells the rooms apart);
+    with ``closets`` the west room has a closet behind its west and east walls, out of the laser's sight,
+    so that the look-alike analysis (the walls within 4 m) does not pair the rooms."""
     from PIL import Image
 
     grey = np.full((100, 320), 205, np.uint8)  # rows up in y
@@ -514,7 +516,10 @@ def _two_rooms(folder) -> str:
     room[10:30, 70:90] = 0  # a box 1 m x 1 m in a corner
     grey[10:90, 10:110] = room
     grey[10:90, 210:310] = room
-    path = folder / "two_rooms.png"
+    if closets:
+        grey[10:90, 0:11] = grey[10:90, 109:140] = 0
+        grey[11:89, 1:10] = grey[11:89, 110:139] = 255
+    path = folder / ("two_rooms_closets.png" if closets else "two_rooms.png")
     Image.fromarray(grey[::-1]).save(path)
     return str(path)
 
@@ -604,6 +609,27 @@ def test_two_identical_rooms_end_ambiguous_never_tracking_in_the_wrong_one(tmp_p
     held = [h for h in pf.estimate.hypotheses if h.weight > 0.05]
     assert len(held) == 2  # the true room and its copy
     assert min(np.hypot(*(h.pose[:2] - stream.truth[-1, :2])) for h in held) < 0.2
+
+
+def test_a_search_never_claims_the_twin_of_a_room_its_random_particles_missed(tmp_path):
+    """lab_a, kidnap seed 17, before the global sweep: the random particles drawn after the jump missed
+    the true room, the cloud settled in the room 8.4 m along the corridor (alike from inside; the
+    analysis does not pair them, what lies behind their walls differs) and claimed it. Here a search
+    whose cloud sits in the twin of the true room: the sweep finds the true room, nothing is claimed."""
+    from slam2d.localization.lookalike import look_alikes
+    from slam2d.sim.world import load_world
+
+    plan = _two_rooms(tmp_path, closets=True)
+    world, known = load_world(plan), KnownMap.load(plan)
+    assert not [a for a in look_alikes(known).items if a.transform[2] == 0], look_alikes(known).summary()
+    truth = np.array([12.5, 1.5, 0.3])
+    stream = wander(world, known, 8.0, seed=0, start=truth)
+    pf = ParticleFilter(known, MclConfig(max_particles=5000), stream.scans[0].range_max, seed=0)
+    pf.init_pose(truth - [10.0, 0.0, 0.0], 0.1, math.radians(3.0))  # the twin in the west room
+    pf._anchored, pf._searching = False, True  # as random particles leave it: a search
+    track = replay(pf, stream)
+    assert not (track.tracking() & (track.position_error > 0.5)).any()
+    assert min(np.hypot(*(h.pose[:2] - stream.truth[-1, :2])) for h in pf.estimate.hypotheses) < 0.2
 
 
 def test_navigation_on_mcl_turns_in_place_while_the_pose_is_ambiguous(tmp_path):

@@ -10,8 +10,9 @@ import numpy as np
 from scipy import ndimage
 
 from slam2d import geometry
+from slam2d.localization.sampling import low_variance_indices
 
-__all__ = ["Hypothesis", "cluster_means", "clusters", "hypotheses", "same_place", "weighted_pose"]
+__all__ = ["Hypothesis", "cluster_means", "clusters", "hypotheses", "same_place", "weighted_pose", "with_floors"]
 
 MAX_HYPOTHESES = 20  # clusters reported and kept alive at resampling, heaviest first
 SAME_PLACE = (1.0, 0.5)  # m, rad: a look-alike image this close to a hypothesis is already held
@@ -116,3 +117,21 @@ def weighted_pose(poses: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, n
     d[:, 2] = geometry.wrap_angle(d[:, 2])
     wd = d * w[:, None]
     return mean, np.array([[np.sum(wd[:, i] * d[:, j]) for j in range(3)] for i in range(3)])
+
+
+def with_floors(kept: np.ndarray, weights: np.ndarray, labels: np.ndarray, keep: float, floor: int,
+                rng: np.random.Generator) -> np.ndarray:  # fmt: skip
+    """``kept`` indices plus, for each of the MAX_HYPOTHESES heaviest clusters (``labels``, particle
+    ``weights``) holding at least ``keep`` of the heaviest one's weight, particles drawn from it by weight
+    up to ``floor``: a look-alike place is not lost to sampling before the scans tell."""
+    mass = np.bincount(labels, weights=weights)
+    top = np.argsort(-mass, kind="stable")[:MAX_HYPOTHESES]
+    top = top[mass[top] >= keep * mass[top[0]]]
+    have = np.bincount(labels[kept], minlength=len(mass))
+    extra = [kept]
+    for c in top:
+        short = floor - int(have[c])
+        if short > 0:
+            members = np.flatnonzero(labels == c)
+            extra.append(members[low_variance_indices(weights[members] / mass[c], short, rng)])
+    return np.concatenate(extra)

@@ -16,8 +16,9 @@ sees does not pass for a kidnapping) and keeping as many particles as KLD sampli
 particles (connected histogram bins), with its covariance; between updates it
 follows the odometry. Once it jumps away from the place it tracked, that place is
 kept (:mod:`slam2d.localization.home`): the new one is claimed only while its recent
-evidence over the old one holds. Vectorised over particles (numba for the sensor
-models); the same seed gives the same particles.
+evidence over the old one holds. A search from random particles begins with one global sweep
+(:mod:`slam2d.localization.sweep`): the places anywhere that fit the scan join as hypotheses.
+Vectorised over particles (numba for the sensor models); the same seed gives the same particles.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from slam2d.localization.clusters import (
     clusters,
     hypotheses,
     same_place,
+    with_floors,
 )
 from slam2d.localization.config import MclConfig
 from slam2d.localization.home import Home
@@ -49,6 +51,7 @@ from slam2d.localization.lookalike import add_lookalikes, look_alikes
 from slam2d.localization.maps import KnownMap
 from slam2d.localization.sampling import kld_limit, low_variance_indices, sample_motion
 from slam2d.localization.sensor import LikelihoodField, seen_through, sensor_model
+from slam2d.localization.sweep import add_swept
 from slam2d.types import Scan
 
 __all__ = ["Estimate", "ParticleFilter", "kld_limit", "low_variance_indices", "sample_motion"]
@@ -124,6 +127,7 @@ class ParticleFilter:
         self._tested = False  # the compact best hypothesis's look-alike places were added
         self._anchored = False  # an initial pose rules look-alike places out
         self._searching = False  # no tracking since the global start or the last random particles
+        self._swept = False  # a global set was weighed since (the global start's, or add_swept's)
         self._estimate_odom: np.ndarray | None = None  # odometry at the last estimate
         self.lookalikes = None  # the map's look-alike places (slam2d.localization.lookalike), with hypotheses
         self.evidence_threshold = math.inf  # log weight ratio best / runner-up from which the state is tracking
@@ -185,7 +189,7 @@ class ParticleFilter:
         self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
         self.w_fit = self.through = 0.0
         self._estimate = self._labels = None
-        self._tested = self._anchored = self._searching = False
+        self._tested = self._anchored = self._searching = self._swept = False
         self.home = Home()
 
     # the filter ------------------------------------------------------------
@@ -212,7 +216,7 @@ class ParticleFilter:
     def _first_from_candidates(self, scan: Scan) -> None:
         """Weigh ``global_candidates`` x ``max_particles`` uniform poses by the first scan and keep
         ``max_particles`` of them drawn by weight (low variance): the first update."""
-        self._candidates = False
+        self._candidates, self._swept = False, True
         n = self.cfg.max_particles
         pool = np.concatenate([self.particles, self.random_poses(n * (self.cfg.global_candidates - 1))])
         ll, beams = self.coarse.log_likelihood(pool, scan)
@@ -223,7 +227,7 @@ class ParticleFilter:
             for i, (fit, counted) in enumerate(self._recovery_fits(pool, scan, ll, beams)):
                 self._average(i, float(logsumexp(fit) - math.log(len(pool))), counted)
                 self.w_slow[i] = max(self.w_slow[i], self._best_fit(fit, counted))
-        self._update_estimate()
+        self._update_estimate(scan)
 
     def _best_fit(self, loglik: np.ndarray, beams: int) -> float:
         """Mean likelihood (as :meth:`_average` scales it) of the best 1 % of ``loglik``: what a filter
@@ -266,7 +270,7 @@ class ParticleFilter:
             self.log_w = joint - logsumexp(joint)
         if self._resample_due() or (self.confident() and self.random_share() > 0):
             self._resample(scan)
-        self._update_estimate()
+        self._update_estimate(scan)
 
     def _weigh_home(self, home: np.ndarray, scan: Scan) -> None:
         """Weigh the old place's candidate poses ``home`` against as many of the best hypothesis's heaviest
@@ -359,7 +363,7 @@ class ParticleFilter:
         kept = low_variance_indices(weights, n - n_random, self.rng)
         per_cluster = cfg.hypotheses and self._labels is not None and len(self._labels) == len(weights)
         if per_cluster:
-            kept = self._with_floors(kept, weights)
+            kept = with_floors(kept, weights, self._labels, cfg.hypothesis_keep, cfg.hypothesis_particles, self.rng)
         self.particles = np.concatenate([self.particles[kept], self.guided_random_poses(n_random, scan)])
         n = len(self.particles)
         self.log_w = np.full(n, -math.log(n))
@@ -372,26 +376,9 @@ class ParticleFilter:
         if n_random:
             self.injected += n_random
             self._anchored = False  # the pose is searched for again: its look-alikes are hypotheses
-            self._searching = True
+            self._searching, self._swept = True, self._swept and self._searching  # a new search: sweep
             if cfg.combine == "amcl":  # amcl restarts its averages after injecting
                 self.w_slow, self.w_fast = np.zeros(2), np.zeros(2)
-
-    def _with_floors(self, kept: np.ndarray, weights: np.ndarray) -> np.ndarray:
-        """``kept`` indices plus, for each of the MAX_HYPOTHESES heaviest clusters holding at least
-        ``hypothesis_keep`` of the heaviest one's weight, particles drawn from it by weight up to
-        ``hypothesis_particles``: a look-alike place is not lost to sampling before the scans tell."""
-        cfg, labels = self.cfg, self._labels
-        mass = np.bincount(labels, weights=weights)
-        top = np.argsort(-mass, kind="stable")[:MAX_HYPOTHESES]
-        top = top[mass[top] >= cfg.hypothesis_keep * mass[top[0]]]
-        have = np.bincount(labels[kept], minlength=len(mass))
-        extra = [kept]
-        for c in top:
-            short = cfg.hypothesis_particles - int(have[c])
-            if short > 0:
-                members = np.flatnonzero(labels == c)
-                extra.append(members[low_variance_indices(weights[members] / mass[c], short, self.rng)])
-        return np.concatenate(extra)
 
     def kld_count(self, poses: np.ndarray) -> int:
         """The first n such that the n leading ``poses`` reach KLD's count for their bins (max if none)."""
@@ -434,14 +421,19 @@ class ParticleFilter:
         return (not self.cfg.hypotheses or not self._recovering() or self.w_slow[0] <= 0
                 or self.w_fit >= (1 - FIT_DEFICIT) * self.w_slow[0])  # fmt: skip
 
-    def _update_estimate(self) -> None:
+    def _update_estimate(self, scan: Scan) -> None:
         """The estimate; when the best hypothesis turns compact (or another one takes the lead), its
         look-alike places join as hypotheses of equal weight (its particles moved onto each place no
-        hypothesis holds yet), unless an initial pose rules them out and no random particle came since."""
+        hypothesis holds yet), unless an initial pose rules them out and no random particle came since.
+        A search from random particles begins with a global sweep (:func:`~slam2d.localization.sweep.add_swept`)."""
         before, odom_before = self._estimate, self._estimate_odom
         est = self._estimate = self._cluster_estimate()
         if self._follow_home(est):
             est = self._estimate = self._cluster_estimate()
+        if self._searching and not self._swept and self.cfg.hypotheses:
+            self._swept = True
+            if add_swept(self, est, scan):
+                est = self._estimate = self._cluster_estimate()
         self._searching = self._searching and est.state != "tracking"
         self._estimate_odom = self._odom.copy() if self._odom is not None else None
         if not self.cfg.hypotheses:
