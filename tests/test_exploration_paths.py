@@ -417,8 +417,7 @@ def test_searches_reusing_one_scratch_equal_searches_on_fresh_arrays():
 def test_entry_cells_refreshed_where_the_grid_changed_equal_a_full_pass(seed):
     """The cells rays enter the hidden cells by (``entry_mask``), kept between grids and recomputed round the cells
     that changed, list the full pass's ``unknown_cells`` after every change, near the grid's edge too."""
-    from slam2d.exploration.gains import entry_mask
-    from slam2d.exploration.gridops import unknown_cells
+    from slam2d.exploration.gridops import entry_mask, unknown_cells
 
     rng = np.random.default_rng(1600 + seed)
     state = random_map(rng)

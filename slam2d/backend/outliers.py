@@ -3,7 +3,8 @@
 ``pc_dcs`` screens the loops by pairwise consistency through the odometry
 (``consistency.pairwise_support``), solves DCS over the screened loops, brings back the
 loops that agree with that solution and ends with least squares over the loops within the
-chi-square gate. ``gnc`` is graduated non-convexity (Yang et al. 2020; TLS or
+chi-square gate, where a kept loop beyond one loop's gate must fit a solution it did not shape
+(``contest``). ``gnc`` is graduated non-convexity (Yang et al. 2020; TLS or
 Geman-McClure, odometry known inliers) written as a Python loop of weighted least-squares
 solves: it starts from ``pc_dcs``'s solution (or a given start), leaves loops of weight 0
 out of the linear system (no fill-in from false loops between random places) and
@@ -131,7 +132,8 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
     3. DCS from that solution over the odometry and every loop within ``READMIT_NOISE_CHI2`` times the
        noise ratio (the graph's noise units: the same loops at any scale of the information);
     4. least squares over the odometry and the loops within ``inlier_gate`` (``gate_scale``), judged
-       again at its solution (``least_squares_kept``);
+       again at its solution (``least_squares_kept``); the kept loops beyond one loop's gate re-enter only
+       by their innovation against the others (``contest``);
     5. the loops left out enter one by one while their innovation against the kept graph is within that
        gate (``admission.admit_consistent``: the loops the screen could not support, as on MIT)."""
     t0 = time.perf_counter()
@@ -165,12 +167,13 @@ def pc_dcs(graph: g2o.PoseGraphFile, plain: list, phi: float = 1.0, init: str | 
     keep = odometry | (edge_chi2(graph, poses) <= READMIT_NOISE_CHI2 * ratio)
     poses, n = _solve(graph, _pick(robust, keep), poses)
     iterations += n
-    keep, poses, n = least_squares_kept(graph, plain, poses, inlier_gate(graph, scale))
-    keep, poses, more = contest(graph, plain, keep, poses, inlier_gate(graph, scale), scale)
+    gate = inlier_gate(graph, scale)
+    keep, poses, n = least_squares_kept(graph, plain, poses, gate)
+    keep, poses, more = contest(graph, plain, keep, poses, gate, scale)
     iterations += more
     seconds["solve"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    keep, poses, more, _ = admission.admit_consistent(graph, plain, keep, poses, inlier_gate(graph, scale),
+    keep, poses, more, _ = admission.admit_consistent(graph, plain, keep, poses, gate,
                                                       lambda k, p: _solve(graph, _pick(plain, k), p))
     seconds["admit"] = time.perf_counter() - t0
     return Solution(poses, keep, iterations + n + more, 0, scale, name, seconds, phi_used)

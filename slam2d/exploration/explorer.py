@@ -30,13 +30,14 @@ from slam2d.exploration.frontiers import (
     find_frontiers,
     frontier_mask,
 )
-from slam2d.exploration.gains import RayRecords, entry_mask
+from slam2d.exploration.gains import RayRecords
 from slam2d.exploration.gridops import (
     FREE,
     OCCUPIED,
     UNKNOWN,
     GridView,
     cells_inside_polygon,
+    entry_mask,
     information_gain,
     inside_polygon,
     straight_reachable,
@@ -99,10 +100,10 @@ class Explorer:
         self._hidden_of: tuple = (None, None, None)  # (view, its hidden-cell grid, its entry cells) counted on last
         self._maintained: tuple = (None, -1, [])  # (view, inaccessible goals, its open candidates) of the last upkeep
         self._hidden_grid = None  # the hidden-cell grid, kept between views
-        self._frontier_grid = None  # the frontier cells, kept between views
+        self._frontier_grid: tuple = (None, None)  # (depth in cells, its frontier cells kept between views)
         self._scratch = Scratch()  # the buffers of the path search, one decision's level at a time
-        self._rays = RayRecords()
-        self._entries = LocalRefresh(entry_mask, 1)  # where the rays enter the hidden cells  # the gains' rays on it, kept where it did not change
+        self._rays = RayRecords()  # the gains' rays on the hidden-cell grid, kept where it did not change
+        self._entries = LocalRefresh(entry_mask, 1)  # where the rays enter the hidden cells, kept likewise
         self._outside_of: tuple = (None, None)  # (grid frame, its cells outside the bounds)
         self._pockets_of: tuple = (None, -1, None)  # (view, retired targets, its pocket grid) counted on last
         self._gains_of: tuple = (None,) * 5  # (pocket grid, its places' gains, hidden cells, reach table, frame)
@@ -212,11 +213,11 @@ class Explorer:
         with ``nearest`` only the nearest one's ``path`` is exact (the others' a lower bound above it)."""
         avoid = self.visited + self.inaccessible
         depth = depth_cells(self.width, view.resolution)
-        if self._frontier_grid is None or self._frontier_grid.depth != depth:  # refreshed where the map changed
-            self._frontier_grid = LocalRefresh(lambda st: frontier_mask(st, depth=depth), max(depth + 1, WALL_GAP))
-            self._frontier_grid.depth = depth
+        if self._frontier_grid[0] != depth:  # refreshed where the map changed
+            refresh = LocalRefresh(lambda st: frontier_mask(st, depth=depth), max(depth + 1, WALL_GAP))
+            self._frontier_grid = depth, refresh
         return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
-                              self.cfg.avoid_radius, self.width, nearest, self._frontier_grid(view.state))  # fmt: skip
+                              self.cfg.avoid_radius, self.width, nearest, self._frontier_grid[1](view.state))  # fmt: skip
 
     def frontier_goal(self, pose, view, distance, cost=None) -> Goal | None:
         """The goal of the frontier region of lowest ``cost`` (a function of a region; default its path length, and

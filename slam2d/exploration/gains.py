@@ -20,26 +20,9 @@ from slam2d.exploration.gridops import (
     _trace,
 )
 
-__all__ = ["RayRecords", "entry_mask"]
+__all__ = ["RayRecords"]
 
 TILE = 8  # cells: the changed cells are binned in squares this wide to find the records they touch
-
-
-def entry_mask(state: np.ndarray) -> np.ndarray:
-    """The cells (H, W) bool of ``unknown_cells``: UNKNOWN with a FREE 4-neighbour (a function of the cells within
-    one of each, for :class:`~slam2d.exploration.pockets.LocalRefresh`)."""
-    return _entry_mask(np.ascontiguousarray(state))
-
-
-@njit(cache=True)
-def _entry_mask(state):
-    h, w = state.shape
-    out = np.zeros((h, w), dtype=np.bool_)
-    for r in range(h):
-        for c in range(w):
-            out[r, c] = state[r, c] == 2 and ((r > 0 and state[r - 1, c] == 0) or (r < h - 1 and state[r + 1, c] == 0)
-                                              or (c > 0 and state[r, c - 1] == 0) or (c < w - 1 and state[r, c + 1] == 0))
-    return out
 
 
 @njit(cache=True)

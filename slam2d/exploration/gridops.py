@@ -307,33 +307,23 @@ def unknown_cells(view: GridView) -> np.ndarray:
     FREE 4-neighbour (a ray steps from cell to 4-neighbour and stops at an occupied one, so one that reaches an
     unknown cell from outside the unknown came from a free cell next to it); for :func:`information_gain` called
     on the view many times."""
-    return _entry_cells(np.ascontiguousarray(view.state))
+    return np.argwhere(entry_mask(view.state))
+
+
+def entry_mask(state: np.ndarray) -> np.ndarray:
+    """The cells (H, W) bool of :func:`unknown_cells`: UNKNOWN with a FREE 4-neighbour (a function of the cells
+    within one of each, for :class:`~slam2d.exploration.pockets.LocalRefresh`)."""
+    return _entry_mask(np.ascontiguousarray(state))
 
 
 @njit(cache=True)
-def _entry_cells(state):
+def _entry_mask(state):
     h, w = state.shape
-    entry = np.zeros((h, w), dtype=np.bool_)
-    n = 0
+    out = np.zeros((h, w), dtype=np.bool_)
     for r in range(h):
         for c in range(w):
-            if state[r, c] == 2 and ((r > 0 and state[r - 1, c] == 0) or (r < h - 1 and state[r + 1, c] == 0)
-                                     or (c > 0 and state[r, c - 1] == 0) or (c < w - 1 and state[r, c + 1] == 0)):
-                entry[r, c] = True
-                n += 1
-    return true_cells(entry, n, 0, 0)
-
-
-@njit(cache=True)
-def true_cells(mask, n, r0, c0):
-    """The ``n`` True cells of ``mask`` (h, w) in raster order, offset by (``r0``, ``c0``): (n, 2) (row, col)."""
-    out = np.empty((n, 2), dtype=np.int64)
-    k = 0
-    for r in range(mask.shape[0]):
-        for c in range(mask.shape[1]):
-            if mask[r, c]:
-                out[k, 0], out[k, 1] = r + r0, c + c0
-                k += 1
+            out[r, c] = state[r, c] == 2 and ((r > 0 and state[r - 1, c] == 0) or (r < h - 1 and state[r + 1, c] == 0)
+                                              or (c > 0 and state[r, c - 1] == 0) or (c < w - 1 and state[r, c + 1] == 0))
     return out
 
 

@@ -51,7 +51,7 @@ class IcpFrontend:
     def __init__(self, config: IcpConfig | None = None):
         self.config = cfg = config or self.Config()
         self.map = get_local_map(cfg)
-        self.views = Views(cfg.map_window or VIEWS)  # the scans the see-through test looks at
+        self.views = Views(cfg.map_window or VIEWS) if cfg.moving_margin > 0 else None  # the see-through test's scans
         self._threshold = get_threshold_estimator(cfg)
         self.registration = get_registration(cfg)
         self._odom_information = odometry_information(cfg.odom_sigma_xy, cfg.odom_sigma_theta_deg)
@@ -205,6 +205,8 @@ class IcpFrontend:
         through there (``moving``, ``moving_margin``), when there are such points and enough others;
         else as given."""
         cfg = self.config
+        if self.views is None:
+            return pose, fit, points
         moving = self.views.moving(geometry.transform_points(pose, points), cfg.moving_margin)
         static = points[~moving]
         if not moving.any() or len(static) < cfg.min_points:
@@ -257,7 +259,8 @@ class IcpFrontend:
         delta = geometry.between(self.pose, pose)
         self.pose, self._last_delta = pose, delta
         self.map.add(pose, points)
-        self.views.add(pose, self._scan)
+        if self.views is not None:
+            self.views.add(pose, self._scan)
         return delta
 
     def _accept(self, pose, points, information, confidence) -> FrontendResult:
