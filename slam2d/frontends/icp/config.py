@@ -65,8 +65,8 @@ class IcpConfig(Section):
     )
     moving_margin: float = Field(
         0.0, ge=0, description="m; a point two earlier scans of the local map saw this far through is moving: "
-        "matched again without it, kept out of the map (0: never; 0.1 in the simulator with people; the "
-        "clinic, ACES, FR079 and MIT-CSAIL lose by it)"
+        "matched again without it, kept out of the map (0: never; 0.1 helps the simulator with people walking; "
+        "the clinic, ACES, FR079 and MIT-CSAIL lose by it)"
     )
     point_sigma: float = Field(0.03, gt=0, description="m; std of one point residual: prior weight vs points")
     inlier_distance: float = Field(0.1, gt=0, description="m; residual of a point counted as matched")
