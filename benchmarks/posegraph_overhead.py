@@ -15,6 +15,13 @@ process's wall time not in a step: interpreter start, imports, the results folde
     SLAM2D_DATA=... nice .venv/bin/python benchmarks/posegraph_overhead.py --graphs intel CSAIL M3500 --repeats 3 \
         --outliers 100 1000 --kinds random local group --methods pc_dcs gnc
 
+Every process reads and writes its bytecode under a temporary ``PYTHONPYCACHEPREFIX`` (warmed by one untimed
+run of each), as an installed package runs: where ``PYTHONDONTWRITEBYTECODE`` is set, slam2d's modules would
+be compiled anew in every run (+0.1-0.2 s), the bare script's gtsam and numpy not.
+
+``--against DIR`` also runs another checkout's command (``PYTHONPATH=DIR``, from DIR), interleaved with
+the others, for before / after figures measured in one run.
+
 With ``--outliers`` every robust command (``--robust METHOD --outliers N --outlier-kind KIND --seed 1``)
 runs interleaved with the clean command (plain least squares, the defaults); the table gives each one's
 median wall time, its ratio to the clean command's median (issue 54's bound: 10 x), and from its
@@ -44,21 +51,32 @@ print(graph.error(result))
 """
 
 
-def wall(cmd: list[str]) -> float:
-    """Wall time (s) of a process; raises if it fails."""
-    t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    return time.perf_counter() - t0
-
-
 def spread(xs: list[float]) -> str:
     return f"{statistics.median(xs):.2f} ({min(xs):.2f}-{max(xs):.2f})"
 
 
-def command(path: str, out: Path, extra: list[str]) -> tuple[float, dict]:
+def wall(cmd: list[str], checkout: Path | None = None) -> float:
+    """Wall time (s) of a process (with ``checkout``: its slam2d, run from there); raises if it fails."""
+    env = None if checkout is None else {**os.environ, "PYTHONPATH": str(checkout)}
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=checkout)
+    return time.perf_counter() - t0
+
+
+def command(path: str, out: Path, extra: list[str], checkout: Path | None = None) -> tuple[float, dict]:
     """Wall time (s) and metrics.json of ``slam2d optimize PATH`` with ``extra`` options into ``out``."""
-    took = wall([sys.executable, "-m", "slam2d.cli", "optimize", path, "--out", str(out), "-q", *extra])
+    took = wall([sys.executable, "-m", "slam2d.cli", "optimize", path, "--out", str(out), "-q", *extra], checkout)
     return took, json.loads(next(out.glob("*/metrics.json")).read_text())
+
+
+def warm_up(tmp: str, path: str, checkouts) -> None:
+    """Bytecode under ``tmp`` for every process of this run (see the module), compiled by one untimed run of the
+    bare script and of each checkout's command."""
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+    os.environ["PYTHONPYCACHEPREFIX"] = str(Path(tmp) / "pycache")
+    wall([sys.executable, "-c", BARE, path])
+    for k, checkout in enumerate(checkouts):
+        command(path, Path(tmp) / f"warm-{k}", [], checkout)
 
 
 def under_outliers(args) -> None:
@@ -67,6 +85,7 @@ def under_outliers(args) -> None:
     print("| graph | method | false loops | wall s | x clean command | false rejected | true kept | verified, certified |")
     print("|---|---|---|---:|---:|---:|---:|---|")
     with tempfile.TemporaryDirectory() as tmp:
+        warm_up(tmp, str(DATA / "posegraphs" / f"{args.graphs[0]}.g2o"), [None])
         for name in args.graphs:
             path = str(DATA / "posegraphs" / f"{name}.g2o")
             times: dict = {case: [] for case in [None, *cases]}
@@ -94,25 +113,30 @@ def main() -> None:
     ap.add_argument("--outliers", type=int, nargs="+", help="false loops injected: the robust commands' table")
     ap.add_argument("--kinds", nargs="+", default=["random"])
     ap.add_argument("--methods", nargs="+", default=["pc_dcs", "gnc"])
+    ap.add_argument("--against", type=Path, help="another checkout whose command runs interleaved (before / after)")
     args = ap.parse_args()
     if args.outliers:
         return under_outliers(args)
     rows = []
+    checkouts = [None] + ([args.against.resolve()] if args.against else [])
     with tempfile.TemporaryDirectory() as tmp:
+        warm_up(tmp, str(DATA / "posegraphs" / f"{args.graphs[0]}.g2o"), checkouts)
         for name in args.graphs:
             path = str(DATA / "posegraphs" / f"{name}.g2o")
-            bare, ours, steps = [], [], []
+            bare, runs = [], {c: ([], []) for c in checkouts}
             for r in range(args.repeats):
                 bare.append(wall([sys.executable, "-c", BARE, path]))
-                took, metrics = command(path, Path(tmp) / f"{name}-{r}", [])
-                ours.append(took)
-                assert metrics["verified"] and metrics["certified"], metrics
-                steps.append(metrics["timings"])
-            names = list(steps[0])
-            median = {k: statistics.median(s[k] for s in steps) for k in names}
-            other = statistics.median(w - sum(s.values()) for w, s in zip(ours, steps))
-            rows.append((name, spread(bare), spread(ours), statistics.median(ours) / statistics.median(bare),
-                         " ".join(f"{k} {v:.2f}" for k, v in median.items()) + f" other {other:.2f}"))
+                for k, (checkout, (ours, steps)) in enumerate(runs.items()):
+                    took, metrics = command(path, Path(tmp) / f"{name}-{r}-{k}", [], checkout)
+                    ours.append(took)
+                    assert metrics["verified"] and metrics["certified"], metrics
+                    steps.append(metrics["timings"])
+            for checkout, (ours, steps) in runs.items():
+                median = {k: statistics.median(s[k] for s in steps) for k in steps[0]}
+                other = statistics.median(w - sum(s.values()) for w, s in zip(ours, steps))
+                rows.append((name if checkout is None else f"{name} ({checkout})", spread(bare), spread(ours),
+                             statistics.median(ours) / statistics.median(bare),
+                             " ".join(f"{k} {v:.2f}" for k, v in median.items()) + f" other {other:.2f}"))
             print(f"{name}: done", file=sys.stderr, flush=True)
     print(f"\n{args.repeats} repeats, median (min-max) wall s\n")
     print("| graph | bare GTSAM LM script | slam2d optimize (verified, certified) | x bare | command's steps (median s) |")

@@ -1,5 +1,5 @@
 """``python -m slam2d``: the slam2d command (as ``python -m slam2d.cli``)."""
 
-from slam2d.cli import main
+from slam2d.cli import entry
 
-main()
+entry()

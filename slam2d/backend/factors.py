@@ -89,8 +89,8 @@ def g2o_values(ids, poses):
     if len(poses) != len(ids):
         raise InputError("g2o graph", f"{len(ids)} vertices but {len(poses)} poses")
     values = gtsam.Values()
-    for k, p in zip(np.asarray(ids).tolist(), poses):
-        values.insert(pose_key(k), gtsam_pose(p))
+    for k, (x, y, t) in zip(np.asarray(ids).tolist(), poses.tolist()):
+        values.insert(gtsam.symbol("x", k), gtsam.Pose2(x, y, t))
     return values
 
 

@@ -1,5 +1,5 @@
 """``python -m slam2d.cli``: the slam2d command."""
 
-from slam2d.cli import main
+from slam2d.cli import entry
 
-main()
+entry()

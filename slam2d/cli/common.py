@@ -43,16 +43,28 @@ def _main(
     """2D laser SLAM research framework."""
 
 
+class _LogHandler(logging.Handler):
+    """The log on stderr through rich's handler, made (and rich imported) at the first record shown: a quiet
+    command that warns of nothing does not load rich."""
+
+    def __init__(self, level: int) -> None:
+        super().__init__(level)
+        self._rich = None
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if self._rich is None:
+            from rich.console import Console
+            from rich.logging import RichHandler
+
+            self._rich = RichHandler(console=Console(stderr=True), show_path=False, show_time=False, level=self.level)
+        self._rich.handle(record)
+
+
 def _setup_logging(quiet: bool) -> None:
     """The log on stderr (stdout carries the results only)."""
-    from rich.console import Console
-    from rich.logging import RichHandler
-
     logger = logging.getLogger("slam2d")
-    logger.handlers[:] = [h for h in logger.handlers if not isinstance(h, RichHandler)]
-    handler = RichHandler(console=Console(stderr=True), show_path=False, show_time=False,
-                          level=logging.WARNING if quiet else logging.INFO)
-    logger.addHandler(handler)
+    logger.handlers[:] = [h for h in logger.handlers if not isinstance(h, _LogHandler)]
+    logger.addHandler(_LogHandler(logging.WARNING if quiet else logging.INFO))
     logger.setLevel(logging.INFO)
     logger.propagate = False
 
