@@ -21,7 +21,9 @@ truth) and replays it through every filter, so that all see the same data:
 - tracking: from the true pose with the rough initial spread (0.5 m, 15 deg), 60 s;
   RMSE and median particle count from convergence on.
 Filters: slam2d (defaults), amcl (ROS 1 defaults, recovery off as shipped),
-amcl_recovery (recovery_alpha_slow / fast 0.001 / 0.1). Rows go to runs.jsonl, the
+amcl_recovery (recovery_alpha_slow / fast 0.001 / 0.1). Each row also has, at the end, the rank of the
+hypothesis holding the true pose (truth_rank, null: none does), the number of hypotheses and the evidence
+of the best over the runner-up (null: none). Rows go to runs.jsonl, the
 summary (medians and rates per world and filter) to table.md.
 """
 
@@ -113,6 +115,11 @@ def _load(spec: str):
     return world, (KnownMap.from_world(world) if spec == "office" else KnownMap.load(spec))
 
 
+def _finite(x: float) -> float | None:
+    """``x``, None when infinite (JSON has no infinity)."""
+    return float(x) if math.isfinite(x) else None
+
+
 def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) -> list[dict]:
     """One seeded stream of ``scenario`` in world ``spec`` replayed through its filters (those of them
     in ``filters`` if given); one row per filter."""
@@ -124,6 +131,7 @@ def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) 
         false_convergence,
         final_state,
         replay,
+        truth_rank,
         wander,
     )
 
@@ -150,7 +158,9 @@ def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) 
                "seed": seed, "wall_s": time.perf_counter() - t0,
                "update_ms": float(np.median(track.update_ms)) if len(track.update_ms) else None,
                "false": bool(false_convergence(track)), "end_state": final_state(track),
-               "lookalikes_at_end": None if pf.lookalikes is None else len(pf.lookalikes.at(stream.truth[-1]))}  # fmt: skip
+               "lookalikes_at_end": None if pf.lookalikes is None else len(pf.lookalikes.at(stream.truth[-1])),
+               "truth_rank": truth_rank(pf.estimate.hypotheses, stream.truth[-1]),
+               "hypotheses": len(pf.estimate.hypotheses), "evidence": _finite(pf.estimate.evidence)}  # fmt: skip
         if kind == "global":
             c = converged_at(track)
             row.update(converged=bool(c is not None and stream.travelled[c] <= GLOBAL_TRAVEL),

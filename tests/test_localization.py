@@ -566,6 +566,24 @@ def test_hypotheses_of_a_known_particle_set():
     assert pf.state == "lost"
 
 
+def test_the_rank_of_the_hypothesis_holding_the_truth():
+    """The benchmark tells a filter that holds the true place among others (rank > 0) from one that lost it
+    (None): the heaviest hypothesis within 0.5 m and 10 degrees of the truth counts, whatever its weight."""
+    from slam2d.localization.clusters import Hypothesis
+    from slam2d.localization.scenario import truth_rank
+
+    def hyp(x, y, theta, weight):
+        return Hypothesis(np.array([x, y, theta]), np.eye(3) * 0.01, weight, 100)
+
+    truth = np.array([5.0, 2.0, math.pi - 0.05])
+    twins = (hyp(13.3, 2.0, math.pi - 0.05, 0.8), hyp(5.3, 2.2, -math.pi + 0.05, 0.15), hyp(5.1, 2.0, 0.0, 0.05))
+    assert truth_rank(twins, truth) == 1  # the runner-up holds it (heading across the wrap)
+    assert truth_rank(twins[::-1], truth) == 1  # not the one facing the other way
+    assert truth_rank((twins[0], twins[2]), truth) is None  # 0.1 m off but turned: not held
+    assert truth_rank((hyp(5.6, 2.0, math.pi, 1.0),), truth) is None  # 0.6 m off
+    assert truth_rank((), truth) is None
+
+
 def test_look_alike_analysis_finds_the_turns_of_a_square_ring():
     from slam2d.localization.lookalike import look_alikes
 

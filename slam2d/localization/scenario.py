@@ -279,3 +279,18 @@ def false_convergence(track: Track, from_index: int = 0) -> bool:
 def final_state(track: Track) -> str:
     """The filter's state at the last scan."""
     return "tracking" if track.state is None else str(track.state[-1])
+
+
+HELD_HEADING = math.radians(10.0)  # rad: a hypothesis's mean this close to the true heading (and WRONG m) holds it
+
+
+def truth_rank(hypotheses, truth) -> int | None:
+    """Rank (0: the best) of the heaviest hypothesis whose mean lies within WRONG m and HELD_HEADING of the
+    true pose ``truth`` (3,), None when none does: tells a run whose filter holds the true place but has not
+    told it from the others (rank > 0, or 0 below the evidence threshold) from one that lost or never
+    found it."""
+    for i, h in enumerate(hypotheses):
+        if (math.hypot(h.pose[0] - truth[0], h.pose[1] - truth[1]) < WRONG
+                and abs(float(geometry.wrap_angle(h.pose[2] - truth[2]))) < HELD_HEADING):  # fmt: skip
+            return i
+    return None
