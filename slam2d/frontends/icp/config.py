@@ -35,6 +35,11 @@ class IcpConfig(Section):
     map_voxel_size: Resolution = Field(0.2, description="m; voxel of the local map")
     map_max_points_per_voxel: int = Field(20, gt=0, le=10_000, description="points kept per map voxel")
     map_window: int = Field(30, ge=0, description="scans kept in the local map (0: all within map_radius)")
+    map_order: Literal["beam", "random"] = Field(
+        "beam", description="order a scan's points go into the map's voxels, first come first kept: beam order "
+        "turns the map against the scan (-0.5 mdeg a scan in the simulator), random does not (the clinic, Intel "
+        "and MIT-CSAIL lose by it)"
+    )
     map_radius: float = Field(30.0, gt=0, description="m; map voxels farther than this from the robot are dropped")
     initial_threshold: float = Field(0.5, gt=0, description="m; correspondence scale before any motion statistics")
     min_motion: float = Field(0.02, ge=0, description="m; odometry deviation that updates the adaptive threshold")
