@@ -30,13 +30,14 @@ from slam2d.exploration.frontiers import (
     find_frontiers,
     frontier_mask,
 )
-from slam2d.exploration.gains import RayRecords
+from slam2d.exploration.gains import RayRecords, _changed_tiles
 from slam2d.exploration.gridops import (
     FREE,
     OCCUPIED,
     UNKNOWN,
     GridView,
     cells_inside_polygon,
+    cells_of,
     entry_mask,
     information_gain,
     inside_polygon,
@@ -275,7 +276,7 @@ class Explorer:
         where the grid changed)."""
         hidden = self._hidden(view)
         if self._hidden_of[2] is None:
-            self._hidden_of = view, hidden, np.argwhere(self._entries(hidden.state))
+            self._hidden_of = view, hidden, cells_of(self._entries(hidden.state))
         return self._hidden_of[2]
 
     def _outside(self, view: GridView) -> np.ndarray | None:
@@ -474,6 +475,7 @@ def _warm_up(explorer: Explorer) -> None:
     throwaway.decide(pose, GridView(state, 0.05, (0.0, 0.0)))
     straight_reachable(state == OCCUPIED, 0.05, (0.0, 0.0), pose, pose + 1.0, 0.4)  # a way back over the graph
     _goal_cell(np.array([[0, 0]]), ~np.eye(3, dtype=bool), 1.5)  # a frontier's goal off its own cells
+    _changed_tiles(state, state, 8)  # the rays' records checked against a changed grid
 
 
 def _option(goal, candidate: bool, terms) -> dict:

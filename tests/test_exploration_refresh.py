@@ -1,0 +1,73 @@
+"""The grids kept between decisions (``LocalRefresh``'s inputs and output, the rays' changed tiles) equal what is
+computed from nothing after random sequences of local changes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slam2d.exploration.gains import TILE, _changed_tiles
+from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, cells_of
+from slam2d.exploration.pockets import LocalRefresh, _changed_box, pocket_state
+
+
+def changed_here_and_there(rng, state, outside):
+    """Random patches of ``state`` redrawn (near the edges too), now and then a row of ``outside`` flipped only."""
+    for _ in range(rng.integers(0, 3)):
+        r, c = rng.integers(-5, state.shape[0]), rng.integers(-5, state.shape[1])
+        patch = state[max(r, 0) : r + rng.integers(1, 20), max(c, 0) : c + rng.integers(1, 20)]
+        patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.5, 0.2, 0.3])
+    if rng.random() < 0.3:
+        outside[rng.integers(state.shape[0]), : rng.integers(1, state.shape[1])] ^= True
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_refreshed_grid_over_two_inputs_equals_the_full_pass_after_every_change(seed):
+    """A LocalRefresh of two grids (int8 and bool) keeps only the changed box of its inputs: after a sequence of
+    changes (in one input, the other, both or none) its output is the function's on the whole grid every time, and
+    it recomputes only round the changes since the last call (none, none)."""
+    rng = np.random.default_rng(2000 + seed)
+    state = rng.choice([FREE, OCCUPIED, UNKNOWN], size=(70, 90), p=[0.6, 0.15, 0.25]).astype(np.int8)
+    outside = rng.random(state.shape) < 0.05
+    windows = []
+
+    def fn(st, out):
+        windows.append(st.size)
+        return pocket_state(st, 3, out)
+
+    kept = LocalRefresh(fn, 2 * 3 + 4)
+    for _ in range(25):
+        last = state.copy(), outside.copy()
+        changed_here_and_there(rng, state, outside)
+        out = kept(state, outside)
+        assert np.array_equal(out, pocket_state(state, 3, outside))
+        out[...] = OCCUPIED  # the caller's copy: changing it changes nothing kept
+        rows, cols = np.nonzero((last[0] != state) | (last[1] != outside))
+        if len(windows) > 1 and len(rows):  # the window: the changes since the last call, 2 radii round
+            span = (np.ptp(rows) + 1 + 4 * kept.radius) * (np.ptp(cols) + 1 + 4 * kept.radius)
+            assert windows.pop() <= span
+        elif len(windows) > 1:
+            assert False, "recomputed with nothing changed"
+    assert np.array_equal(kept(state, outside), pocket_state(state, 3, outside))
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_changed_box_and_tiles_hold_exactly_the_changed_cells(seed):
+    """The box round the changed cells and the changed tiles equal those found from the list of changed cells."""
+    rng = np.random.default_rng(2100 + seed)
+    a = rng.integers(0, 3, size=(rng.integers(1, 60), rng.integers(1, 60))).astype(np.int8)
+    b = a.copy()
+    flip = rng.random(a.shape) < rng.choice([0.0, 0.002, 0.05])
+    b[flip] = (b[flip] + 1) % 3
+    cells = np.argwhere(a != b)
+    assert np.array_equal(cells_of(a != b), cells)
+    box = np.array([a.shape[0], 0, a.shape[1], 0])
+    _changed_box(a, b, box)
+    if len(cells):
+        assert box.tolist() == [cells[:, 0].min(), cells[:, 0].max() + 1, cells[:, 1].min(), cells[:, 1].max() + 1]
+    else:
+        assert box[0] >= box[1] and box[2] >= box[3]
+    tiles, any_changed = _changed_tiles(a, b, TILE)
+    expected = np.zeros_like(tiles)
+    expected[cells[:, 0] // TILE, cells[:, 1] // TILE] = True
+    assert any_changed == bool(len(cells)) and np.array_equal(tiles, expected)
