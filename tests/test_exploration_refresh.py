@@ -71,3 +71,34 @@ def test_changed_box_and_tiles_hold_exactly_the_changed_cells(seed):
     expected = np.zeros_like(tiles)
     expected[cells[:, 0] // TILE, cells[:, 1] // TILE] = True
     assert any_changed == bool(len(cells)) and np.array_equal(tiles, expected)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_ray_records_outlive_grids_nothing_was_asked_on(seed):
+    """The rays' records of a decision's points outlive the grids of the checks before the next decision (nothing
+    asked on them): only the points with a changed cell within reach on one of those grids are cast again, and the
+    gains and shares equal those cast anew."""
+    from slam2d.exploration.gains import RayRecords
+    from slam2d.exploration.gridops import GridView, shared_gain, unknown_cells
+
+    rng = np.random.default_rng(2200 + seed)
+    state = rng.choice([FREE, OCCUPIED, UNKNOWN], size=(200, 260), p=[0.7, 0.05, 0.25]).astype(np.int8)
+    records = RayRecords()
+    pts = rng.uniform([0.0, 0.0], [260 * 0.05, 200 * 0.05], size=(30, 2))
+    for decision in range(4):
+        touched = np.zeros(len(pts), dtype=bool)
+        for _ in range(2 if decision else 0):  # the checks between two decisions: a changed patch each
+            r, c = rng.integers(0, 194), rng.integers(0, 254)
+            state[r : r + 6, c : c + 6] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=(6, 6))
+            cx, cy = (c + 3) * 0.05, (r + 3) * 0.05
+            near = 1.5 + 0.1 + 2 * 0.4 + 0.15  # reach + 2 cells, a tile each side, half the patch (m)
+            touched |= np.maximum(np.abs(pts[:, 0] - cx), np.abs(pts[:, 1] - cy)) <= near
+            records.update(GridView(state.copy(), 0.05, (0.0, 0.0)))
+        view = GridView(state.copy(), 0.05, (0.0, 0.0))
+        records.update(view)
+        before = len(records._kept)
+        own, shares = records.shared(view, pts, 1.5, 120, unknown_cells(view))
+        fresh_own, fresh_shares = shared_gain(view, pts, 1.5, 120)
+        assert np.array_equal(own, fresh_own) and np.array_equal(shares, fresh_shares)
+        if decision:
+            assert len(records._kept) - before <= np.count_nonzero(touched) < len(pts)
