@@ -12,7 +12,8 @@ Each run explores one world from the seed's start with the slam2d of ``TREE`` (a
 ``git worktree add /tmp/old <commit>``) in a process of its own, and records for every decision
 (``Explorer.decide``) the wall clock and the CPU time of the deciding thread (``time.thread_time``: what
 the decision itself cost, little changed by other jobs on the machine), the known area of the map (m²),
-the grid's size, the kind of goal chosen, its position and score. The numba kernels and the strategy's libraries
+the grid's size, the kind of goal chosen, its position and score, and the CPU time of each upkeep of the
+decisions' grids at the goal's checks between decisions (``Explorer.keep_up``, where the code has it). The numba kernels and the strategy's libraries
 are loaded before the run (as ``Explorer`` does at its first construction). The distance driven and the coverage
 are logged too: code that is only faster drives the same route, and the table counts the decisions whose goal
 and score equal, to the last bit, those of the first code logged for the same world and strategy.
@@ -62,6 +63,14 @@ def dumped(self, pose, view):  # the inputs of every k-th decision saved (their 
     records.append([None, None, None, int(view.state.size), None if goal is None else goal.kind,
                     None if goal is None else [*map(float, goal.position), float(goal.score)]])
     return goal
+upkeep = []  # thread CPU (ms) of each upkeep of the decisions' grids between decisions, where the code has one
+if hasattr(E.Explorer, "keep_up"):
+    kept_up = E.Explorer.keep_up
+    def keep_up(self, view):
+        c = time.thread_time()
+        kept_up(self, view)
+        upkeep.append(round(1000 * (time.thread_time() - c), 3))
+    E.Explorer.keep_up = keep_up
 dump, every = sys.argv[6], int(sys.argv[7])
 if dump:
     import cloudpickle
@@ -69,7 +78,7 @@ E.Explorer.decide = dumped if dump else decide
 m = explore(cfg).metrics
 keep = ("world", "strategy", "seed", "coverage", "distance", "distance_to_90", "distance_to_99", "time", "wall_s",
         "decision_ms_median", "decision_ms_p95", "stop_reason", "collisions", "map_iou")
-print(json.dumps({"metrics": {k: m[k] for k in keep}, "decisions": records}))
+print(json.dumps({"metrics": {k: m[k] for k in keep}, "decisions": records, "upkeep": upkeep}))
 """
 REPLAY = """
 import copy, json, pickle, sys, time
@@ -135,19 +144,21 @@ def same_goals(run: dict, first: dict) -> str:
 
 def table(runs: list[dict]) -> str:
     head = ("| world | strategy | code | decisions | CPU median / p95 (ms) | wall median / p95 (ms) | target "
-            "(CPU ≤ 20 / 100) | same goals as the first code | distance to 99 % (m) | in all (m) | coverage | "
-            "sim time (s) |")
-    lines = [head, "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+            "(CPU ≤ 20 / 100) | same goals as the first code | upkeep between decisions: median / p95 (ms), count | "
+            "distance to 99 % (m) | in all (m) | coverage | sim time (s) |")
+    lines = [head, "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     first = {}
     for r in runs:
         first.setdefault((r["metrics"]["world"], r["metrics"]["strategy"]), r)
     for r in sorted(runs, key=lambda r: (r["metrics"]["world"], r["metrics"]["strategy"], r["label"])):
         m, s = r["metrics"], stats(r)
         same = same_goals(r, first[m["world"], m["strategy"]])
+        up = r.get("upkeep") or []
+        up = f"{np.median(up):.1f} / {np.percentile(up, 95):.1f}, {len(up)}" if up else "–"
         met = "met" if s["cpu_med"] <= 20 and s["cpu_p95"] <= 100 else "**not met**"
         d99 = "–" if m["distance_to_99"] is None or not np.isfinite(m["distance_to_99"]) else f"{m['distance_to_99']:.1f}"
         lines.append(f"| {m['world']} | {m['strategy']} | {r['label']} | {s['n']} | {s['cpu_med']:.1f} / "
-                     f"{s['cpu_p95']:.1f} | {s['wall_med']:.1f} / {s['wall_p95']:.1f} | {met} | {same} | {d99} | "
+                     f"{s['cpu_p95']:.1f} | {s['wall_med']:.1f} / {s['wall_p95']:.1f} | {met} | {same} | {up} | {d99} | "
                      f"{m['distance']:.1f} | {100 * m['coverage']:.2f} % | {m['time']:.0f} |")  # fmt: skip
     return "\n".join(lines)
 

@@ -213,12 +213,25 @@ class Explorer:
         """The frontier regions the robot can reach (``find_frontiers``), away from visited and inaccessible goals;
         with ``nearest`` only the nearest one's ``path`` is exact (the others' a lower bound above it)."""
         avoid = self.visited + self.inaccessible
+        return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
+                              self.cfg.avoid_radius, self.width, nearest, self._frontier_cells(view))  # fmt: skip
+
+    def _frontier_cells(self, view: GridView) -> np.ndarray:
+        """The view's ``frontier_mask`` (H, W) bool of the robot's width, kept between views and refreshed where the
+        map changed (a copy of its own)."""
         depth = depth_cells(self.width, view.resolution)
-        if self._frontier_grid[0] != depth:  # refreshed where the map changed
+        if self._frontier_grid[0] != depth:
             refresh = LocalRefresh(lambda st: frontier_mask(st, depth=depth), max(depth + 1, WALL_GAP))
             self._frontier_grid = depth, refresh
-        return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
-                              self.cfg.avoid_radius, self.width, nearest, self._frontier_grid[1](view.state))  # fmt: skip
+        return self._frontier_grid[1](view.state)
+
+    def keep_up(self, view: GridView) -> None:
+        """Bring the grids kept between decisions (frontier cells; once the strategy has used them, the hidden cells,
+        their entry cells and the rays' records) up to ``view``, as the map is updated while the robot drives: the next
+        decision then refreshes them only where the map changed since. Changes no decision."""
+        self._frontier_cells(view)
+        if self._hidden_grid is not None:
+            self._hidden_entries(view)
 
     def frontier_goal(self, pose, view, distance, cost=None) -> Goal | None:
         """The goal of the frontier region of lowest ``cost`` (a function of a region; default its path length, and
