@@ -109,7 +109,8 @@ def run(tree: str, world: str, strategy: str, max_time: float, seed: int, dump: 
 def replay(tree: str, folder: str) -> None:
     """Decide again on a --dump folder's inputs with the slam2d of ``tree``: thread CPU (ms, least of 3) and whether
     goal and score equal the dumped run's, one line each, then how many did."""
-    goals = [d[4:6] for d in json.load(open(os.path.join(folder, "run.json")))["decisions"]]
+    with open(os.path.join(folder, "run.json")) as f:
+        goals = [d[4:6] for d in json.load(f)["decisions"]]
     inputs = sorted((int(n[9:-4]), os.path.join(folder, n)) for n in os.listdir(folder) if n.startswith("decision_"))
     out = subprocess.run([sys.executable, "-c", REPLAY, os.path.abspath(tree), *[p for _, p in inputs]],
                          capture_output=True, text=True, check=False)  # fmt: skip
