@@ -13,7 +13,8 @@ Each run explores one world from the seed's start with the slam2d of ``TREE`` (a
 (``Explorer.decide``) the wall clock and the CPU time of the deciding thread (``time.thread_time``: what
 the decision itself cost, little changed by other jobs on the machine), the known area of the map (m²),
 the grid's size, the kind of goal chosen, its position and score, and the CPU time of each upkeep of the
-decisions' grids at the goal's checks between decisions (``Explorer.keep_up``, where the code has it). The numba kernels and the strategy's libraries
+decisions' grids at the goal's checks between decisions (``Explorer.keep_up``, where the code has it) and of
+each check itself (``Explorer.spent``), kept in the log (``upkeep``, ``checks``). The numba kernels and the strategy's libraries
 are loaded before the run (as ``Explorer`` does at its first construction). The distance driven and the coverage
 are logged too: code that is only faster drives the same route, and the table counts the decisions whose goal
 and score equal, to the last bit, those of the first code logged for the same world and strategy.
@@ -71,6 +72,13 @@ if hasattr(E.Explorer, "keep_up"):
         kept_up(self, view)
         upkeep.append(round(1000 * (time.thread_time() - c), 3))
     E.Explorer.keep_up = keep_up
+checks, check = [], E.Explorer.spent  # thread CPU (ms) of each check whether the goal is still worth reaching
+def spent(self, goal, view):
+    c = time.thread_time()
+    out = check(self, goal, view)
+    checks.append(round(1000 * (time.thread_time() - c), 3))
+    return out
+E.Explorer.spent = spent
 dump, every = sys.argv[6], int(sys.argv[7])
 if dump:
     import cloudpickle
@@ -78,7 +86,7 @@ E.Explorer.decide = dumped if dump else decide
 m = explore(cfg).metrics
 keep = ("world", "strategy", "seed", "coverage", "distance", "distance_to_90", "distance_to_99", "time", "wall_s",
         "decision_ms_median", "decision_ms_p95", "stop_reason", "collisions", "map_iou")
-print(json.dumps({"metrics": {k: m[k] for k in keep}, "decisions": records, "upkeep": upkeep}))
+print(json.dumps({"metrics": {k: m[k] for k in keep}, "decisions": records, "upkeep": upkeep, "checks": checks}))
 """
 REPLAY = """
 import copy, json, pickle, sys, time
