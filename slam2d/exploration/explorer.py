@@ -30,13 +30,14 @@ from slam2d.exploration.frontiers import (
     find_frontiers,
     frontier_mask,
 )
-from slam2d.exploration.gains import RayRecords
+from slam2d.exploration.gains import RayRecords, _changed_tiles
 from slam2d.exploration.gridops import (
     FREE,
     OCCUPIED,
     UNKNOWN,
     GridView,
     cells_inside_polygon,
+    cells_of,
     entry_mask,
     information_gain,
     inside_polygon,
@@ -212,12 +213,25 @@ class Explorer:
         """The frontier regions the robot can reach (``find_frontiers``), away from visited and inaccessible goals;
         with ``nearest`` only the nearest one's ``path`` is exact (the others' a lower bound above it)."""
         avoid = self.visited + self.inaccessible
+        return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
+                              self.cfg.avoid_radius, self.width, nearest, self._frontier_cells(view))  # fmt: skip
+
+    def _frontier_cells(self, view: GridView) -> np.ndarray:
+        """The view's ``frontier_mask`` (H, W) bool of the robot's width, kept between views and refreshed where the
+        map changed (a copy of its own)."""
         depth = depth_cells(self.width, view.resolution)
-        if self._frontier_grid[0] != depth:  # refreshed where the map changed
+        if self._frontier_grid[0] != depth:
             refresh = LocalRefresh(lambda st: frontier_mask(st, depth=depth), max(depth + 1, WALL_GAP))
             self._frontier_grid = depth, refresh
-        return find_frontiers(view, pose[:2], distance, self.min_frontier, self.radius + 0.3, self.cfg.bounds, avoid,
-                              self.cfg.avoid_radius, self.width, nearest, self._frontier_grid[1](view.state))  # fmt: skip
+        return self._frontier_grid[1](view.state)
+
+    def keep_up(self, view: GridView) -> None:
+        """Bring the grids kept between decisions (frontier cells; once the strategy has used them, the hidden cells,
+        their entry cells and the rays' records) up to ``view``, as the map is updated while the robot drives: the next
+        decision then refreshes them only where the map changed since. Changes no decision."""
+        self._frontier_cells(view)
+        if self._hidden_grid is not None:
+            self._hidden_entries(view)
 
     def frontier_goal(self, pose, view, distance, cost=None) -> Goal | None:
         """The goal of the frontier region of lowest ``cost`` (a function of a region; default its path length, and
@@ -275,7 +289,7 @@ class Explorer:
         where the grid changed)."""
         hidden = self._hidden(view)
         if self._hidden_of[2] is None:
-            self._hidden_of = view, hidden, np.argwhere(self._entries(hidden.state))
+            self._hidden_of = view, hidden, cells_of(self._entries(hidden.state))
         return self._hidden_of[2]
 
     def _outside(self, view: GridView) -> np.ndarray | None:
@@ -474,6 +488,7 @@ def _warm_up(explorer: Explorer) -> None:
     throwaway.decide(pose, GridView(state, 0.05, (0.0, 0.0)))
     straight_reachable(state == OCCUPIED, 0.05, (0.0, 0.0), pose, pose + 1.0, 0.4)  # a way back over the graph
     _goal_cell(np.array([[0, 0]]), ~np.eye(3, dtype=bool), 1.5)  # a frontier's goal off its own cells
+    _changed_tiles(state, state, 8)  # the rays' records checked against a changed grid
 
 
 def _option(goal, candidate: bool, terms) -> dict:

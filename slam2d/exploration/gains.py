@@ -74,25 +74,41 @@ def _shares(ev, first, seers):
     return shares
 
 
+@njit(cache=True)
+def _changed_tiles(a, b, tile):
+    """The squares of ``tile`` cells (H // tile + 1, W // tile + 1) bool holding a cell where the grids ``a`` and
+    ``b`` (H, W) differ, and whether any does: one pass, no list of the changed cells."""
+    h, w = a.shape
+    out = np.zeros((h // tile + 1, w // tile + 1), dtype=np.bool_)
+    any_changed = False
+    for r in range(h):
+        for c in range(w):
+            if a[r, c] != b[r, c]:
+                out[r // tile, c // tile] = any_changed = True
+    return out, any_changed
+
+
 class RayRecords:
     """The rays' records of the points asked for on successive hidden-cell grids of one map: :meth:`update` with each
     new grid drops the records a changed cell is within reach of (all of them when the frame changed, and those not
-    asked for since the last grid); :meth:`gains` and :meth:`shared` cast only the points without a record."""
+    asked for on the last grid anything was asked on: the grids of the goal's checks between two decisions keep
+    the points of the first); :meth:`gains` and :meth:`shared` cast only the points without a record."""
 
     def __init__(self):
         self._state = self._frame = None
         self._kept: dict = {}  # (gx, gy, max_t, rays) -> (gain, record)
-        self._used: set = set()
+        self._used: set = set()  # the points asked for on the current grid
+        self._asked: set = set()  # those of the last grid anything was asked on
 
     def update(self, view: GridView) -> None:
         """A new hidden-cell grid ``view`` (its ``state`` is kept, not copied: not to be changed after)."""
         frame = view.shape, view.resolution, tuple(np.asarray(view.origin, dtype=float))
-        kept = {key: self._kept[key] for key in self._used} if frame == self._frame else {}
+        if self._used:  # grids nothing was asked on (the goal's checks between decisions) drop no record
+            self._asked = self._used
+        kept = {key: self._kept[key] for key in self._asked if key in self._kept} if frame == self._frame else {}
         if kept:
-            changed = np.argwhere(self._state != view.state) // TILE
-            if len(changed):
-                tiles = np.zeros((view.shape[0] // TILE + 1, view.shape[1] // TILE + 1), dtype=bool)
-                tiles[changed[:, 0], changed[:, 1]] = True
+            tiles, changed = _changed_tiles(self._state, view.state, TILE)
+            if changed:
                 for key in list(kept):
                     gx, gy, max_t, _ = key
                     reach = max_t + 2.0  # a ray stops before max_t: its cells lie within max_t + 1 of the point

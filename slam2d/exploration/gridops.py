@@ -307,7 +307,13 @@ def unknown_cells(view: GridView) -> np.ndarray:
     FREE 4-neighbour (a ray steps from cell to 4-neighbour and stops at an occupied one, so one that reaches an
     unknown cell from outside the unknown came from a free cell next to it); for :func:`information_gain` called
     on the view many times."""
-    return np.argwhere(entry_mask(view.state))
+    return cells_of(entry_mask(view.state))
+
+
+def cells_of(mask: np.ndarray) -> np.ndarray:
+    """``np.argwhere`` of an (H, W) mask: its set cells (K, 2) (row, col) in raster order (a flat listing: 2-D
+    ``argwhere`` costs ~25 × more a cell)."""
+    return np.column_stack(np.divmod(np.flatnonzero(mask), mask.shape[1]))
 
 
 def entry_mask(state: np.ndarray) -> np.ndarray:

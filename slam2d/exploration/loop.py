@@ -225,7 +225,9 @@ def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
             break
         if loop.goal is not None and now >= next_check:
             next_check = now + ecfg.check_period
-            if loop.explorer.spent(loop.goal, loop.view()):
+            checked = loop.view()
+            loop.explorer.keep_up(checked)  # the decision's grids kept up with the map while the robot drives
+            if loop.explorer.spent(loop.goal, checked):
                 loop.close_goal("spent")
             elif loop.goal.tight:
                 loop.widen(pose)

@@ -14,6 +14,7 @@ from slam2d.exploration.gridops import (
     OCCUPIED,
     UNKNOWN,
     GridView,
+    cells_of,
     first_seeing,
     inside_polygon,
     reach_table,
@@ -144,25 +145,43 @@ class LocalRefresh:
         self._inputs = self._out = None
 
     def __call__(self, *grids) -> np.ndarray:
-        grids = tuple(np.asarray(g) for g in grids)
+        grids = tuple(np.ascontiguousarray(g) for g in grids)
         last = self._inputs
-        if last is None or any(a.shape != b.shape for a, b in zip(last, grids)):
+        if last is None or any(a.shape != b.shape or a.dtype != b.dtype for a, b in zip(last, grids)):
             self._out = self.fn(*grids)
-        else:
-            changed = np.zeros(grids[0].shape, dtype=bool)
-            for a, b in zip(last, grids):
-                changed |= a != b
-            if changed.any():
-                rows, cols = np.nonzero(changed.any(axis=1))[0], np.nonzero(changed.any(axis=0))[0]
-                lo, hi = np.array([rows[0], cols[0]]), np.array([rows[-1], cols[-1]]) + 1
-                shape = np.array(changed.shape)
-                inner_lo, inner_hi = np.maximum(lo - self.radius, 0), np.minimum(hi + self.radius, shape)
-                win_lo, win_hi = np.maximum(lo - 2 * self.radius, 0), np.minimum(hi + 2 * self.radius, shape)
-                part = self.fn(*(g[win_lo[0] : win_hi[0], win_lo[1] : win_hi[1]] for g in grids))
-                a, b = inner_lo - win_lo, inner_hi - win_lo
-                self._out[inner_lo[0] : inner_hi[0], inner_lo[1] : inner_hi[1]] = part[a[0] : b[0], a[1] : b[1]]
-        self._inputs = tuple(g.copy() for g in grids)
+            self._inputs = tuple(g.copy() for g in grids)
+            return self._out.copy()
+        box = np.array([grids[0].shape[0], 0, grids[0].shape[1], 0])  # rows r0:r1, cols c0:c1 of the changes
+        for a, b in zip(last, grids):
+            _changed_box(a.view(np.int8), b.view(np.int8), box)
+        if box[0] < box[1]:
+            lo, hi, shape = box[[0, 2]], box[[1, 3]], np.array(grids[0].shape)
+            inner_lo, inner_hi = np.maximum(lo - self.radius, 0), np.minimum(hi + self.radius, shape)
+            win_lo, win_hi = np.maximum(lo - 2 * self.radius, 0), np.minimum(hi + 2 * self.radius, shape)
+            part = self.fn(*(g[win_lo[0] : win_hi[0], win_lo[1] : win_hi[1]] for g in grids))
+            a, b = inner_lo - win_lo, inner_hi - win_lo
+            self._out[inner_lo[0] : inner_hi[0], inner_lo[1] : inner_hi[1]] = part[a[0] : b[0], a[1] : b[1]]
+            for kept, g in zip(last, grids):  # outside the box the inputs are unchanged
+                kept[lo[0] : hi[0], lo[1] : hi[1]] = g[lo[0] : hi[0], lo[1] : hi[1]]
         return self._out.copy()
+
+
+@njit(cache=True)
+def _changed_box(a, b, box):
+    """Grow ``box`` [r0, r1, c0, c1] (rows r0:r1, cols c0:c1) to hold every cell where the (H, W) int8 grids ``a``
+    and ``b`` differ; each row read from both ends to its first and last change, no temporary grid."""
+    h, w = a.shape
+    for r in range(h):
+        c = 0
+        while c < w and a[r, c] == b[r, c]:
+            c += 1
+        if c == w:
+            continue
+        e = w - 1
+        while a[r, e] == b[r, e]:
+            e -= 1
+        box[0], box[1] = min(box[0], r), max(box[1], r + 1)
+        box[2], box[3] = min(box[2], c), max(box[3], e + 1)
 
 
 def pocket_goal(explorer, pose, view: GridView, distance):
@@ -184,7 +203,7 @@ def pocket_goal(explorer, pose, view: GridView, distance):
     inner = inner[:-2, 1:-1] & inner[2:, 1:-1] & inner[1:-1, :-2] & inner[1:-1, 2:]
     tried = room & ~inner  # the edge of the room: views along walls and furniture
     tried[::k, ::k] = True
-    cells = np.argwhere(tried & room)
+    cells = cells_of(tried & room)
     xy = view.to_world(cells)
     keep = np.ones(len(xy), dtype=bool)
     if explorer.cfg.bounds is not None:
@@ -227,7 +246,7 @@ def _gains(explorer, view: GridView, state: np.ndarray) -> tuple[np.ndarray, np.
         if last is None or last_frame != frame:
             gains = np.full(state.size, np.nan)
         else:
-            changed = np.argwhere(last != state)
+            changed = cells_of(last != state)
             if len(changed):
                 m = int(np.ceil(explorer.cfg.gain_range / view.resolution)) + 2
                 lo, hi = np.maximum(changed.min(axis=0) - m, 0), changed.max(axis=0) + m + 1
