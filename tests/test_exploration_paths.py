@@ -45,6 +45,25 @@ def random_start(rng, view: GridView) -> np.ndarray:
     return np.array([*view.to_world(np.array([rows[k], cols[k]])), rng.uniform(-np.pi, np.pi)])
 
 
+def change_a_patch(rng, state: np.ndarray) -> None:
+    """Overwrite a random patch of ``state`` (possibly cut by its edges) with free, occupied and unknown cells."""
+    r, c = rng.integers(-3, state.shape[0]), rng.integers(-3, state.shape[1])
+    patch = state[max(r, 0) : r + rng.integers(2, 15), max(c, 0) : c + rng.integers(2, 15)]
+    patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.6, 0.1, 0.3])
+
+
+def same_decision(kept: Explorer, cfg: ExplorationConfig, pose: np.ndarray, state: np.ndarray) -> bool:
+    """Whether ``kept`` decides at ``pose`` on ``state`` as a new explorer does (goal, kind and score);
+    asserts it. True if there was a goal."""
+    goal = kept.decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+    fresh = Explorer(cfg, 0.2, 0.05, 12.0).decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
+    assert (goal is None) == (fresh is None)
+    if goal is not None:
+        assert goal.kind == fresh.kind and np.array_equal(goal.position, fresh.position)
+        assert goal.score == fresh.score
+    return goal is not None
+
+
 @pytest.mark.parametrize("seed", range(40))
 def test_paths_settled_as_far_as_asked_equal_a_full_search(seed):
     rng = np.random.default_rng(seed)
@@ -380,18 +399,9 @@ def test_decisions_of_an_explorer_kept_over_changing_maps_equal_those_made_from_
     chosen = 0
     for _ in range(12):
         for _ in range(rng.integers(1, 4)):
-            r, c = rng.integers(-3, state.shape[0]), rng.integers(-3, state.shape[1])
-            patch = state[max(r, 0) : r + rng.integers(2, 15), max(c, 0) : c + rng.integers(2, 15)]
-            patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.6, 0.1, 0.3])
-        view = GridView(state.copy(), 0.05, (0.0, 0.0))
-        pose = random_start(rng, view)
-        goal = kept.decide(pose, view)
-        fresh = Explorer(cfg, 0.2, 0.05, 12.0).decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
-        assert (goal is None) == (fresh is None)
-        if goal is not None:
-            assert goal.kind == fresh.kind and np.array_equal(goal.position, fresh.position)
-            assert goal.score == fresh.score
-            chosen += 1
+            change_a_patch(rng, state)
+        pose = random_start(rng, GridView(state.copy(), 0.05, (0.0, 0.0)))
+        chosen += same_decision(kept, cfg, pose, state)
     assert chosen >= 8
 
 

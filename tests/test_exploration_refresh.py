@@ -108,7 +108,12 @@ def test_ray_records_outlive_grids_nothing_was_asked_on(seed):
 def test_decisions_after_keeping_up_with_the_map_equal_those_made_from_nothing(strategy):
     """An explorer kept up with the map at every check between decisions (``keep_up``: frontier cells, hidden cells,
     entry cells, rays' records refreshed where the map changed) chooses the goals, with the scores, of a new explorer."""
-    from test_exploration_paths import random_map, random_start
+    from test_exploration_paths import (
+        change_a_patch,
+        random_map,
+        random_start,
+        same_decision,
+    )
 
     from slam2d.exploration.config import ExplorationConfig
     from slam2d.exploration.explorer import Explorer
@@ -120,18 +125,9 @@ def test_decisions_after_keeping_up_with_the_map_equal_those_made_from_nothing(s
     kept, chosen = Explorer(cfg, 0.2, 0.05, 12.0), 0
     for _ in range(10):
         for _ in range(rng.integers(1, 4)):  # the checks while the robot drives: the map changes, the grids kept up
-            r, c = rng.integers(-3, state.shape[0]), rng.integers(-3, state.shape[1])
-            patch = state[max(r, 0) : r + rng.integers(2, 15), max(c, 0) : c + rng.integers(2, 15)]
-            patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.6, 0.1, 0.3])
+            change_a_patch(rng, state)
             kept.keep_up(GridView(state.copy(), 0.05, (0.0, 0.0)))
         state[rng.integers(state.shape[0]), rng.integers(state.shape[1])] = UNKNOWN  # and once more before deciding
-        view = GridView(state.copy(), 0.05, (0.0, 0.0))
-        pose = random_start(rng, view)
-        goal = kept.decide(pose, view)
-        fresh = Explorer(cfg, 0.2, 0.05, 12.0).decide(pose, GridView(state.copy(), 0.05, (0.0, 0.0)))
-        assert (goal is None) == (fresh is None)
-        if goal is not None:
-            assert goal.kind == fresh.kind and np.array_equal(goal.position, fresh.position)
-            assert goal.score == fresh.score
-            chosen += 1
+        pose = random_start(rng, GridView(state.copy(), 0.05, (0.0, 0.0)))
+        chosen += same_decision(kept, cfg, pose, state)
     assert chosen >= 6
