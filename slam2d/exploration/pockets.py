@@ -135,10 +135,10 @@ def _window_any(mask, before, after, outside, axis):
 
 
 class LocalRefresh:
-    """``fn`` of (H, W) grids whose every output cell depends only on the inputs within ``radius`` cells of it (and
-    on the grid's edge), kept between calls: where the inputs changed since the last call (of the same shape), it is
-    recomputed in a box round the changes only, on a window reaching ``radius`` beyond it; the same result as
-    ``fn`` on the whole grid."""
+    """``fn`` of (H, W) grids of one-byte cells (int8, uint8, bool) whose every output cell depends only on the
+    inputs within ``radius`` cells of it (and on the grid's edge), kept between calls: where the inputs changed since
+    the last call (of the same shape), it is recomputed in a box round the changes only, on a window reaching
+    ``radius`` beyond it; the same result as ``fn`` on the whole grid."""
 
     def __init__(self, fn, radius: int):
         self.fn, self.radius = fn, int(radius)
@@ -146,6 +146,8 @@ class LocalRefresh:
 
     def __call__(self, *grids) -> np.ndarray:
         grids = tuple(np.ascontiguousarray(g) for g in grids)
+        if any(g.ndim != 2 or g.dtype.itemsize != 1 for g in grids):
+            raise TypeError(f"LocalRefresh takes (H, W) grids of one-byte cells, not {[g.dtype.name for g in grids]}")
         last = self._inputs
         if last is None or any(a.shape != b.shape or a.dtype != b.dtype for a, b in zip(last, grids)):
             self._out = self.fn(*grids)
