@@ -14,7 +14,7 @@ updates: the time from one keyframe's arrival to the next's), its median, p90, p
 all keyframes and ``--repeat`` runs, and the final estimate's error against the batch optimum's.
 
     nice .venv/bin/python benchmarks/posegraph_incremental.py [--graph M3500] [--every 1 10] [--repeat 3]
-    nice .venv/bin/python benchmarks/posegraph_incremental.py --latency --graph M3500 intel MIT CSAIL
+    nice .venv/bin/python benchmarks/posegraph_incremental.py --latency --graph M3500 intel MIT CSAIL [--partial-check]
 """
 
 from __future__ import annotations
@@ -119,7 +119,13 @@ def main() -> None:
     ap.add_argument("--latency", action="store_true", help="per-keyframe latency table instead")
     ap.add_argument("--every", type=int, nargs="+", default=[1, 10], help="keyframes per PoseGraph.update")
     ap.add_argument("--repeat", type=int, default=3, help="runs of each, medians reported")
+    ap.add_argument("--partial-check", action="store_true",
+                    help="iSAM2 checks only the cliques an update touches for relinearisation")
     args = ap.parse_args()
+    if args.partial_check:
+        from slam2d.backend import pose_graph as pgm
+
+        pgm.PARTIAL_RELINEARIZATION_CHECK = True
     if args.latency:
         return latency_table(args.graph, args.repeat)
     if len(args.graph) > 1:
