@@ -22,13 +22,13 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-import navigation as bench  # noqa: E402  the benchmark's pairs
+import navigation as bench  # the benchmark's pairs
 
-from slam2d import config, geometry  # noqa: E402
-from slam2d.frontends import create_frontend  # noqa: E402
-from slam2d.frontends.icp import STILL_EVENT  # noqa: E402
-from slam2d.frontends.icp.mapping import LocalMap  # noqa: E402
-from slam2d.runs import navigate  # noqa: E402
+from slam2d import config, geometry
+from slam2d.frontends import create_frontend
+from slam2d.frontends.icp import STILL_EVENT
+from slam2d.frontends.icp.mapping import LocalMap
+from slam2d.runs import navigate
 
 MIRROR = np.diag([1.0, -1.0, -1.0])  # (x, y, theta) -> (x, -y, -theta)
 VARIANTS = {
