@@ -90,7 +90,7 @@ def g2o_values(ids, poses):
         raise InputError("g2o graph", f"{len(ids)} vertices but {len(poses)} poses")
     values = gtsam.Values()
     for k, (x, y, t) in zip(np.asarray(ids).tolist(), poses.tolist()):
-        values.insert(gtsam.symbol("x", k), gtsam.Pose2(x, y, t))
+        values.insert(pose_key(k), gtsam.Pose2(x, y, t))
     return values
 
 
