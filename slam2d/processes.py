@@ -70,23 +70,135 @@ def _child(read: int, write: int, parent: int, fn, args) -> None:
     """In :func:`call_forked`'s child: compute, send ``(ok, result or exception)``, exit without clean-up."""
     try:
         os.close(read)
-        for sig in (signal.SIGINT, signal.SIGTERM):  # the parent's Python handlers would wait for the solve
-            if signal.getsignal(sig) not in (signal.SIG_IGN, signal.SIG_DFL):  # an ignored signal stays ignored
-                signal.signal(sig, signal.SIG_DFL)
-        die_with_parent(parent)
-        gc.disable()
+        _detach(parent)
         try:
             out = (True, fn(*args))
         except BaseException as err:  # noqa: BLE001 (raised again in the parent)
             out = (False, err)
-        try:
-            data = pickle.dumps(out)
-        except Exception:  # noqa: BLE001 (an exception that does not pickle)
-            data = pickle.dumps((False, RuntimeError(repr(out[1]))))
         with os.fdopen(write, "wb") as pipe:
-            pipe.write(data)
+            pipe.write(_pickled(out))
     finally:
         os._exit(0)
+
+
+class Worker:
+    """A forked child process that computes the calls sent to it (``call``), one at a time, after ``prepare()``,
+    which runs there while this process goes on (an import it would otherwise wait for). Calls and results go
+    through pipes, pickled: a call's function must be importable by name. As in :func:`call_forked`, whatever
+    interrupts a call's wait kills the child at once, an exception there is raised here, and the child dies with
+    this process; ``close`` (the end of a with block) kills and reaps it. Where ``os.fork`` is missing, ``prepare``
+    and the calls run here."""
+
+    def __init__(self, prepare=None) -> None:
+        self.pid = None
+        if not hasattr(os, "fork"):
+            if prepare is not None:
+                prepare()
+            return
+        parent = os.getpid()
+        down, up = os.pipe(), os.pipe()  # (read, write) of the calls, of the results
+        gc.freeze()
+        try:
+            pid = os.fork()
+        finally:
+            if os.getpid() == parent:
+                gc.unfreeze()
+        if pid == 0:
+            os.close(down[1])
+            os.close(up[0])
+            _serve(down[0], up[1], parent, prepare)
+        os.close(down[0])
+        os.close(up[1])
+        self.pid, self._calls, self._results = pid, os.fdopen(down[1], "wb"), os.fdopen(up[0], "rb")
+
+    def call(self, fn, *args):
+        """``fn(*args)`` computed in the child (here once it is closed or where there is no fork)."""
+        if self.pid is None:
+            return fn(*args)
+        try:
+            _send(self._calls, pickle.dumps((fn, args)))
+            data = _receive(self._results)
+        except BaseException:
+            self.close()
+            raise
+        if data is None:
+            self.close()
+            raise RuntimeError(f"the worker process of {getattr(fn, '__qualname__', fn)} died without a result")
+        ok, value = pickle.loads(data)
+        if not ok:
+            raise value
+        return value
+
+    def close(self) -> None:
+        if self.pid is None:
+            return
+        pid, self.pid = self.pid, None
+        os.kill(pid, signal.SIGKILL)
+        for pipe in (self._calls, self._results):
+            try:
+                pipe.close()
+            except OSError:
+                pass
+        os.waitpid(pid, 0)
+
+    def __enter__(self) -> Worker:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _send(pipe, data: bytes) -> None:
+    pipe.write(len(data).to_bytes(8, "little") + data)
+    pipe.flush()
+
+
+def _receive(pipe) -> bytes | None:
+    """The next message of ``pipe``; None at its end (the other process has gone)."""
+    head = pipe.read(8)
+    if len(head) < 8:
+        return None
+    data = pipe.read(int.from_bytes(head, "little"))
+    return data if len(data) == int.from_bytes(head, "little") else None
+
+
+def _serve(read: int, write: int, parent: int, prepare) -> None:
+    """In a :class:`Worker`'s child: ``prepare()``, then compute each call and send ``(ok, result or exception)``
+    until the calls' pipe closes; exit without clean-up."""
+    try:
+        _detach(parent)
+        try:
+            if prepare is not None:
+                prepare()
+        except Exception:  # noqa: BLE001 (the calls that need it fail, and say why)
+            pass
+        with os.fdopen(read, "rb") as calls, os.fdopen(write, "wb") as results:
+            while (data := _receive(calls)) is not None:
+                try:
+                    fn, args = pickle.loads(data)
+                    out = (True, fn(*args))
+                except BaseException as err:  # noqa: BLE001 (raised again in the parent)
+                    out = (False, err)
+                _send(results, _pickled(out))
+    finally:
+        os._exit(0)
+
+
+def _detach(parent: int) -> None:
+    """In a forked child: SIGINT / SIGTERM at their default (the parent's Python handlers would wait for a long
+    C++ call), death with ``parent``, no garbage collection (fewer pages copied on write)."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(sig) not in (signal.SIG_IGN, signal.SIG_DFL):  # an ignored signal stays ignored
+            signal.signal(sig, signal.SIG_DFL)
+    die_with_parent(parent)
+    gc.disable()
+
+
+def _pickled(out) -> bytes:
+    try:
+        return pickle.dumps(out)
+    except Exception:  # noqa: BLE001 (an exception that does not pickle)
+        return pickle.dumps((False, RuntimeError(repr(out[1]))))
 
 
 _REAPER = """

@@ -118,7 +118,9 @@ def test_the_program_exits_without_the_interpreters_teardown(tmp_path):
 
 def test_optimize_loads_only_what_a_clean_graph_needs(tmp_path):
     """Building the app imports no command's implementation; ``slam2d optimize -q`` on a clean graph loads no
-    plotting, learning, mesh or graph library, and, warning of nothing, not rich (the log's handler)."""
+    plotting, learning, mesh or graph library, and, warning of nothing, not rich (the log's handler); nor scipy,
+    with or without vertex lines: the start and the certificate run in a worker process that imports it
+    (``lm.sparse_worker``), an edges-only file's poses are chained by numpy."""
     from slam2d import geometry
     from slam2d.datasets.g2o import PoseGraphFile, write_g2o
 
@@ -128,20 +130,24 @@ def test_optimize_loads_only_what_a_clean_graph_needs(tmp_path):
     delta = geometry.between(poses[i], poses[j]) + np.random.default_rng(0).normal(0, 0.01, (len(i), 3))
     write_g2o(tmp_path / "ring.g2o", PoseGraphFile(np.arange(12), poses, i, j, delta,
                                                    np.broadcast_to(np.diag([100.0, 100.0, 400.0]), (len(i), 3, 3))))
-    argv = ["slam2d", "optimize", str(tmp_path / "ring.g2o"), "-q", "-o", str(tmp_path)]
+    edges = "".join(line for line in (tmp_path / "ring.g2o").open() if line.startswith("EDGE"))
+    (tmp_path / "edges.g2o").write_text(edges)  # no vertex lines: the poses chained along the edges
     code = ("import sys\nimport slam2d.cli\nloaded = lambda: {m.split('.')[0] for m in sys.modules}\n"
             "early = {'numpy', 'scipy', 'gtsam', 'pydantic', 'PIL', 'jinja2', 'rich', 'yaml'} & loaded()\n"
-            "assert not early, f'building the app loaded {early}'\n"
-            f"sys.argv = {argv!r}\n"
-            "try:\n    slam2d.cli.main()\nexcept SystemExit as done:\n    assert not done.code, done.code\n"
-            "late = {'matplotlib', 'sklearn', 'open3d', 'numba', 'networkx', 'rich'} & loaded()\n"
-            "assert not late, f'optimize loaded {late}'\n")
+            "assert not early, f'building the app loaded {early}'\n")
+    for name in ("ring", "edges"):
+        argv = ["slam2d", "optimize", str(tmp_path / f"{name}.g2o"), "-q", "-o", str(tmp_path)]
+        code += (f"sys.argv = {argv!r}\n"
+                 "try:\n    slam2d.cli.main()\nexcept SystemExit as done:\n    assert not done.code, done.code\n")
+    code += ("late = {'matplotlib', 'sklearn', 'open3d', 'numba', 'networkx', 'rich', 'scipy'} & loaded()\n"
+             "assert not late, f'optimize loaded {late}'\n")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300,
                           check=False)
     assert done.returncode == 0, done.stderr[-2000:]
-    (folder,) = tmp_path.glob("optimize-ring-*")
-    metrics = json.loads((folder / "metrics.json").read_text())
-    assert metrics["certified"] and metrics["verified"] and (folder / "overlay.png").is_file()
+    for name in ("ring", "edges"):
+        (folder,) = tmp_path.glob(f"optimize-{name}-*")
+        metrics = json.loads((folder / "metrics.json").read_text())
+        assert metrics["certified"] and metrics["verified"] and (folder / "overlay.png").is_file()
 
 
 class _Terminal(io.StringIO):

@@ -57,6 +57,26 @@ def test_edges_only_chain_poses(tmp_path):
     np.testing.assert_allclose(g.poses, [[0, 0, 0], [1, 0, np.pi / 2], [1, -1, np.pi / 2]], atol=1e-12)
 
 
+
+def test_the_chain_of_an_edges_only_file_is_scipys_breadth_first_tree(data_file):
+    """The breadth-first tree that chains an edges-only file's poses (numpy, no scipy import) is scipy's, vertex
+    for vertex and predecessor for predecessor: on CSAIL's edges and on random graphs with repeated edges, loops
+    and unreached vertices (the file's poses, hence the start's error and the figure, do not change)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import breadth_first_order
+
+    from slam2d.datasets import g2o
+
+    csail = read_g2o(data_file("posegraphs/CSAIL.g2o"))
+    rng = np.random.default_rng(0)
+    cases = [(len(csail.ids), np.searchsorted(csail.ids, csail.i), np.searchsorted(csail.ids, csail.j))]
+    cases += [(n, rng.integers(0, n, m), rng.integers(0, n, m)) for n, m in rng.integers(1, 40, (200, 2)) * [1, 2]]
+    for n, a, b in cases:
+        order, pred = breadth_first_order(coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)).tocsr(), 0, directed=False)
+        mine = g2o._breadth_first(n, a, b)
+        assert np.array_equal(mine[0], order) and np.array_equal(mine[1], pred), (n, a, b)
+
+
 GOOD = "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n"
 
 

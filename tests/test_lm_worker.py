@@ -21,7 +21,7 @@ from slam2d.backend.initialization import spanning_tree
 from slam2d.backend.replay import replay_g2o
 from slam2d.config import BackendConfig
 from slam2d.datasets.g2o import inject_outliers
-from slam2d.processes import call_forked
+from slam2d.processes import Worker, call_forked
 
 
 def _summary(values, iterations):
@@ -73,6 +73,46 @@ def test_an_interrupt_while_waiting_kills_the_worker_at_once():
         signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - t0 < 5
     assert _children() == before  # killed and reaped
+
+
+def _pid_and_scipy() -> tuple[int, bool]:
+    import sys
+
+    return os.getpid(), "scipy.sparse.linalg" in sys.modules
+
+
+def test_a_worker_prepares_while_this_process_goes_on_then_computes_each_call():
+    """``Worker``: its ``prepare`` (scipy's import for ``lm.sparse_worker``) runs in the child, calls run there one
+    after another, an error comes back as here, and closing it kills and reaps the child."""
+    before = _children()
+    with lm.sparse_worker() as worker:
+        assert worker.pid in _children()
+        pid, has_scipy = worker.call(_pid_and_scipy)
+        assert pid == worker.pid != os.getpid() and has_scipy
+        with pytest.raises(ValueError, match="bad graph"):
+            worker.call(_fails)
+        assert worker.call(sum, [1, 2, 3]) == 6 and worker.call(_pid_and_scipy)[0] == pid  # the same child
+    assert _children() == before and worker.call(sum, [1, 2]) == 3  # closed: a call runs here
+
+
+@pytest.mark.skipif(not hasattr(signal, "pthread_kill"), reason="needs pthread_kill")
+def test_an_interrupt_while_waiting_for_a_worker_kills_it_at_once():
+    before = _children()
+
+    def interrupt():
+        time.sleep(0.5)
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        threading.Thread(target=interrupt).start()
+        t0 = time.monotonic()
+        with pytest.raises(KeyboardInterrupt), Worker() as worker:
+            worker.call(time.sleep, 30)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert time.monotonic() - t0 < 5
+    assert _children() == before
 
 
 def _in_this_process(fn, *args):

@@ -27,7 +27,7 @@ from slam2d.backend.factors import (
     pose_key,
     prior_factor,
 )
-from slam2d.backend.lm import in_worker, levenberg_marquardt
+from slam2d.backend.lm import in_worker, levenberg_marquardt, sparse_worker
 from slam2d.datasets import g2o
 from slam2d.errors import InputError
 from slam2d.evaluation.trajectory import ate
@@ -123,24 +123,30 @@ class _Run:
     start_seconds: float = 0.0
 
 
-def _start(graph: g2o.PoseGraphFile, name: str) -> np.ndarray:
-    """The start ``name`` ("chordal_isotropic": chordal with unit weights), computed in a worker process."""
-    return in_worker(_start_here, graph, name)
+def _start(graph: g2o.PoseGraphFile, name: str, call=in_worker) -> np.ndarray:
+    """The start ``name`` ("chordal_isotropic": chordal with unit weights), computed in a worker process
+    (``call``: ``lm.in_worker`` or a ``lm.sparse_worker``'s ``call``)."""
+    return call(_start_here, graph, name)
 
 
 def _start_here(graph: g2o.PoseGraphFile, name: str) -> np.ndarray:
     return ini.chordal(graph, weighted=False) if name == "chordal_isotropic" else ini.initial_poses(graph, name)
 
 
-def _certified(graph: g2o.PoseGraphFile, poses) -> bool:
-    """Whether SE-Sync's certificate holds at ``poses`` (``certificate.certify``, in a worker process)."""
-    return in_worker(lambda: certificate.certify(graph, poses).certified)
+def _certified(graph: g2o.PoseGraphFile, poses, call=in_worker) -> bool:
+    """Whether SE-Sync's certificate holds at ``poses`` (``certificate.certify``, in a worker process: ``call``
+    as in ``_start``)."""
+    return call(_certified_here, graph, poses)
 
 
-def _run(graph: g2o.PoseGraphFile, fg, name: str) -> _Run:
-    """LM over ``fg`` from the start ``name``."""
+def _certified_here(graph: g2o.PoseGraphFile, poses) -> bool:
+    return certificate.certify(graph, poses).certified
+
+
+def _run(graph: g2o.PoseGraphFile, fg, name: str, call=in_worker) -> _Run:
+    """LM over ``fg`` from the start ``name`` (computed by ``call``, as in ``_start``)."""
     t0 = time.perf_counter()
-    start = _start(graph, name)
+    start = _start(graph, name, call)
     t1 = time.perf_counter()
     poses, iterations, cost = _lm(graph, fg, g2o_values(graph.ids, start))
     return _Run(name, start, poses, iterations, time.perf_counter() - t1, cost, t1 - t0)
@@ -228,22 +234,30 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     loss, screened = rb.gnc_loss(robust), rb.screened_kernel(robust)
     if loss or screened:
         return _solve_outliers(graph, robust, robust_param, init, verify)
+    with sparse_worker() as worker:  # scipy imported there while gtsam is imported here
+        return _least_squares(graph, robust, robust_param, init, verify, worker.call)
+
+
+def _least_squares(graph: g2o.PoseGraphFile, robust: str, robust_param: float, init: str | None, verify: bool,
+                   call) -> BatchResult:
+    """``solve_g2o`` without false-loop methods: plain least squares or an M-estimator; the starts and the
+    certificate computed by ``call`` (a ``lm.sparse_worker``'s)."""
     plain = robust == "none"
     first = str(init).lower() if init else (G2O_INIT if plain else G2O_ROBUST_INIT)
     fg = factor_graph(g2o_factor_list(graph, robust, robust_param))
-    runs = [_run(graph, fg, first)]
+    runs = [_run(graph, fg, first, call)]
     best, verified, certified = runs[0], None, None  # the first start's run unless another is clearly lower
     timings = {"start": best.start_seconds, "solve": best.seconds}
     poses = best.poses
     inlier = _classify(graph, poses)
     if verify and plain:  # on the edges within the gate: a solution bent by false loops is not worth a
         t0 = time.perf_counter()  # certificate of the whole graph's (M3500 + 1000 false loops: 450 s)
-        certified = _certified(consistency.subgraph(graph, inlier), poses)
+        certified = _certified(consistency.subgraph(graph, inlier), poses, call)
         timings["certify"] = time.perf_counter() - t0
         verified = True if certified and inlier.all() else None  # the optimum of every edge: no second start
     t0 = time.perf_counter()
     for name in [n for n in VERIFY_STARTS if n != first] if verify and verified is None else []:
-        runs.append(_run(graph, fg, name))
+        runs.append(_run(graph, fg, name, call))
         if runs[-1].cost < best.cost and not _agree(runs[-1].cost, best.cost):
             best = runs[-1]
         verified = any(_agree(r.cost, best.cost) for r in runs if r is not best)
@@ -257,7 +271,7 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
         poses = best.poses
         inlier = _classify(graph, poses)
         if certified is not None:
-            certified = _certified(consistency.subgraph(graph, inlier), poses)
+            certified = _certified(consistency.subgraph(graph, inlier), poses, call)
     cost = (lambda p: g2o_error(graph, p)) if plain else (lambda p: float(fg.error(g2o_values(graph.ids, p))))
     out = BatchResult(poses, cost(graph.poses), best.cost, best.iterations, best.seconds,
                       best.init, cost(best.start), verified, inlier, certified,

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 
 from slam2d.backend.factors import lm_params
-from slam2d.processes import call_forked
+from slam2d.processes import Worker, call_forked
 
 
 def levenberg_marquardt(fg, initial, summary, params=None):
@@ -33,6 +33,17 @@ def in_worker(fn, *args):
     import scipy.sparse.linalg  # noqa: F401
 
     return call_forked(fn, *args)
+
+
+def sparse_worker() -> Worker:
+    """A worker process (``processes.Worker``) that imports scipy's sparse solvers while this process goes on
+    (gtsam's import, the factors; 0.2-0.3 s each): a clean graph's starts and certificate run there
+    (``worker.call`` in place of ``in_worker``), and this process does not import scipy."""
+    return Worker(_import_sparse)
+
+
+def _import_sparse() -> None:
+    import scipy.sparse.linalg  # noqa: F401
 
 
 def _solve(fg, initial, summary, params):

@@ -172,12 +172,8 @@ def _chain_poses(ids, i, j, meas) -> np.ndarray:
 
     The first id sits at the origin; ids not connected to it stay at the origin.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import breadth_first_order
-
     a, b = np.searchsorted(ids, i), np.searchsorted(ids, j)
-    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(len(ids),) * 2).tocsr()
-    order, pred = breadth_first_order(graph, 0, directed=False)
+    order, pred = _breadth_first(len(ids), a, b)
     edge = {(x, y): k for k, (x, y) in enumerate(zip(a, b))}
     poses = np.zeros((len(ids), 3))
     for v in order[1:]:
@@ -189,6 +185,31 @@ def _chain_poses(ids, i, j, meas) -> np.ndarray:
     if len(order) < len(ids):
         log.warning("%d poses not connected to pose %d; left at the origin", len(ids) - len(order), ids[0])
     return poses
+
+
+def _breadth_first(n: int, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(order, predecessors) of a breadth-first search from vertex 0 over the undirected edges ``a`` - ``b`` of
+    ``n`` vertices, as scipy's ``csgraph.breadth_first_order(..., directed=False)`` gives them (each vertex's
+    successors ``b`` by rank, then its predecessors ``a``; -9999 for vertex 0 and those not reached): numpy
+    and a loop over the vertices, no scipy import."""
+    out = [_neighbours(n, a, b), _neighbours(n, b, a)]
+    pred = np.full(n, -9999, dtype=np.int32)
+    seen = np.zeros(n, bool)
+    seen[0] = True
+    order = [0]
+    for p in order:
+        for starts, ends in out:
+            new = [c for c in ends[starts[p]:starts[p + 1]] if not seen[c]]
+            seen[new] = True
+            pred[new] = p
+            order += new
+    return np.array(order, dtype=np.int32), pred
+
+
+def _neighbours(n: int, a: np.ndarray, b: np.ndarray) -> tuple[list, list]:
+    """The distinct ``b`` of each ``a``, ascending, as (row starts (n + 1,), ends) lists (a CSR pattern)."""
+    pairs = np.unique(np.column_stack([a, b]).astype(np.int64), axis=0)
+    return np.searchsorted(pairs[:, 0], np.arange(n + 1)).tolist(), pairs[:, 1].tolist()
 
 
 def write_g2o(path, graph: PoseGraphFile) -> None:
