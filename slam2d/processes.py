@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import gc
@@ -82,10 +83,10 @@ def _child(read: int, write: int, parent: int, fn, args) -> None:
 
 
 class Worker:
-    """A forked child process that computes the calls sent to it (``call``), one at a time, after ``prepare()``,
-    which runs there while this process goes on (an import it would otherwise wait for). Calls and results go
-    through pipes, pickled: a call's function must be importable by name. As in :func:`call_forked`, whatever
-    interrupts a call's wait kills the child at once, an exception there is raised here, and the child dies with
+    """A forked child process that computes the calls sent to it (``call``, ``submit``), one at a time, after
+    ``prepare()``, which runs there while this process goes on (an import it would otherwise wait for). Calls and
+    results go through pipes, pickled: a call's function must be importable by name. As in :func:`call_forked`,
+    whatever interrupts a wait kills the child at once, an exception there is raised here, and the child dies with
     this process; ``close`` (the end of a with block) kills and reaps it. Where ``os.fork`` is missing, ``prepare``
     and the calls run here."""
 
@@ -113,10 +114,23 @@ class Worker:
 
     def call(self, fn, *args):
         """``fn(*args)`` computed in the child (here once it is closed or where there is no fork)."""
+        return self.submit(fn, *args)()
+
+    def submit(self, fn, *args):
+        """Send ``fn(*args)`` to the child and return a function that waits for its result: this process goes
+        on meanwhile. One call at a time: wait for a result before the next call."""
         if self.pid is None:
-            return fn(*args)
+            value = fn(*args)
+            return lambda: value
         try:
             _send(self._calls, pickle.dumps((fn, args)))
+        except BaseException:
+            self.close()
+            raise
+        return lambda: self._result(fn)
+
+    def _result(self, fn):
+        try:
             data = _receive(self._results)
         except BaseException:
             self.close()
@@ -135,13 +149,11 @@ class Worker:
         pid, self.pid = self.pid, None
         os.kill(pid, signal.SIGKILL)
         for pipe in (self._calls, self._results):
-            try:
+            with contextlib.suppress(OSError):
                 pipe.close()
-            except OSError:
-                pass
         os.waitpid(pid, 0)
 
-    def __enter__(self) -> Worker:
+    def __enter__(self):
         return self
 
     def __exit__(self, *exc) -> None:
@@ -167,11 +179,9 @@ def _serve(read: int, write: int, parent: int, prepare) -> None:
     until the calls' pipe closes; exit without clean-up."""
     try:
         _detach(parent)
-        try:
-            if prepare is not None:
+        if prepare is not None:
+            with contextlib.suppress(Exception):  # the calls that need it fail, and say why
                 prepare()
-        except Exception:  # noqa: BLE001 (the calls that need it fail, and say why)
-            pass
         with os.fdopen(read, "rb") as calls, os.fdopen(write, "wb") as results:
             while (data := _receive(calls)) is not None:
                 try:

@@ -216,7 +216,7 @@ def _solve_outliers(graph: g2o.PoseGraphFile, robust: str, robust_param: float, 
 
 
 def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0,
-              init: str | None = None, verify: bool = False) -> BatchResult:
+              init: str | None = None, verify: bool = False, meanwhile=None) -> BatchResult:
     """Batch optimisation of a g2o graph, the first vertex held at its start pose by a
     tight prior; errors exclude the prior.
 
@@ -230,18 +230,22 @@ def solve_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: floa
     certified on every edge, it is verified. Otherwise (and under M-estimators) the other starts of
     ``VERIFY_STARTS`` run, in order, until one agrees with the kept run (verified; False when none
     does); of several runs the first is kept unless another reaches a lower cost beyond VERIFY_REL.
-    pc_dcs and GNC are certified and verified on the edges they keep (``_verify_kept``)."""
+    pc_dcs and GNC are certified and verified on the edges they keep (``_verify_kept``). ``meanwhile(result)``,
+    when given, runs while plain least squares is certified, with the result as it stands (``certified`` and
+    ``verified`` None): the result returned has the same poses, inliers and start unless the certificate
+    failed and another start reached a lower cost."""
     loss, screened = rb.gnc_loss(robust), rb.screened_kernel(robust)
     if loss or screened:
         return _solve_outliers(graph, robust, robust_param, init, verify)
     with sparse_worker() as worker:  # scipy imported there while gtsam is imported here
-        return _least_squares(graph, robust, robust_param, init, verify, worker.call)
+        return _least_squares(graph, robust, robust_param, init, verify, worker, meanwhile)
 
 
 def _least_squares(graph: g2o.PoseGraphFile, robust: str, robust_param: float, init: str | None, verify: bool,
-                   call) -> BatchResult:
+                   worker, meanwhile) -> BatchResult:
     """``solve_g2o`` without false-loop methods: plain least squares or an M-estimator; the starts and the
-    certificate computed by ``call`` (a ``lm.sparse_worker``'s)."""
+    certificate computed by ``worker`` (a ``lm.sparse_worker``), ``meanwhile`` run while it certifies."""
+    call = worker.call
     plain = robust == "none"
     first = str(init).lower() if init else (G2O_INIT if plain else G2O_ROBUST_INIT)
     fg = factor_graph(g2o_factor_list(graph, robust, robust_param))
@@ -252,8 +256,13 @@ def _least_squares(graph: g2o.PoseGraphFile, robust: str, robust_param: float, i
     inlier = _classify(graph, poses)
     if verify and plain:  # on the edges within the gate: a solution bent by false loops is not worth a
         t0 = time.perf_counter()  # certificate of the whole graph's (M3500 + 1000 false loops: 450 s)
-        certified = _certified(consistency.subgraph(graph, inlier), poses, call)
-        timings["certify"] = time.perf_counter() - t0
+        pending = worker.submit(_certified_here, consistency.subgraph(graph, inlier), poses)
+        t1 = time.perf_counter()
+        if meanwhile is not None:
+            meanwhile(_result(graph, fg, plain, best, poses, inlier, None, None, dict(timings)))
+        t2 = time.perf_counter()
+        certified = pending()
+        timings["certify"] = time.perf_counter() - t2 + t1 - t0  # the wait beyond ``meanwhile``
         verified = True if certified and inlier.all() else None  # the optimum of every edge: no second start
     t0 = time.perf_counter()
     for name in [n for n in VERIFY_STARTS if n != first] if verify and verified is None else []:
@@ -272,13 +281,20 @@ def _least_squares(graph: g2o.PoseGraphFile, robust: str, robust_param: float, i
         inlier = _classify(graph, poses)
         if certified is not None:
             certified = _certified(consistency.subgraph(graph, inlier), poses, call)
-    cost = (lambda p: g2o_error(graph, p)) if plain else (lambda p: float(fg.error(g2o_values(graph.ids, p))))
-    out = BatchResult(poses, cost(graph.poses), best.cost, best.iterations, best.seconds,
-                      best.init, cost(best.start), verified, inlier, certified,
-                      g2o_error(consistency.subgraph(graph, inlier), poses), timings=timings)
+    out = _result(graph, fg, plain, best, poses, inlier, verified, certified, timings)
     log.info("g2o %s from %s: error %.6g -> %.6g, %d iterations, %.3f s",
              robust, best.init, out.start_error, out.final_error, out.iterations, best.seconds)
     return out
+
+
+def _result(graph: g2o.PoseGraphFile, fg, plain: bool, best: _Run, poses, inlier, verified, certified,
+            timings) -> BatchResult:
+    """The BatchResult of the run ``best`` (``poses``, ``inlier``) of least squares (``plain``) or of the
+    M-estimator graph ``fg``."""
+    cost = (lambda p: g2o_error(graph, p)) if plain else (lambda p: float(fg.error(g2o_values(graph.ids, p))))
+    return BatchResult(poses, cost(graph.poses), best.cost, best.iterations, best.seconds,
+                       best.init, cost(best.start), verified, inlier, certified,
+                       g2o_error(consistency.subgraph(graph, inlier), poses), timings=timings)
 
 
 def optimize_g2o(graph: g2o.PoseGraphFile, robust: str = "none", robust_param: float = 1.0,

@@ -61,7 +61,8 @@ def run_optimize(cfg: OptimizeConfig, quiet: bool = False) -> Path:
 def _optimize_into(work: Path, cfg: OptimizeConfig, graph_path: Path, reference: Path | None) -> dict:
     """Read, inject, solve and write config.yaml, graph.g2o, edges.csv, overlay.png, metrics.json to ``work``;
     metrics.json's ``timings`` add the wall time (s) of reading (and injecting), writing and the figure to the
-    solve's steps."""
+    solve's steps. The files but metrics.json are written while the solution is certified (``solve_g2o``'s
+    ``meanwhile``), again after it only if the verification changed the solution."""
     t0 = time.perf_counter()
     graph = g2o.read_g2o(graph_path)
     injected = np.zeros(len(graph.i), bool)
@@ -69,7 +70,26 @@ def _optimize_into(work: Path, cfg: OptimizeConfig, graph_path: Path, reference:
         graph, injected = g2o.inject_outliers(graph, cfg.outliers, cfg.outlier_kind, cfg.seed)
     ref = batch.reference_poses(graph, g2o.read_g2o(reference)) if reference else None
     read_s = time.perf_counter() - t0
-    result = batch.solve_g2o(graph, cfg.robust, cfg.robust_param, cfg.init, cfg.verify)
+    written: dict = {}
+
+    def files(result) -> None:
+        written.update(_write_files(work, cfg, graph, injected, result, ref), result=result)
+
+    result = batch.solve_g2o(graph, cfg.robust, cfg.robust_param, cfg.init, cfg.verify, meanwhile=files)
+    if not _same_solution(written.get("result"), result):
+        files(result)
+    t0 = time.perf_counter()
+    metrics = batch.g2o_metrics(graph, result, injected if cfg.outliers else None, ref)
+    steps = {"read": read_s, **metrics["timings"], "write": written["write"] + time.perf_counter() - t0,
+             "figure": written["figure"]}
+    metrics["timings"] = {k: round(v, 6) for k, v in steps.items()}
+    (work / "metrics.json").write_text(json_text(metrics) + "\n")
+    return metrics
+
+
+def _write_files(work: Path, cfg: OptimizeConfig, graph, injected, result, ref) -> dict:
+    """Write config.yaml, graph.g2o, edges.csv and overlay.png of ``result``; wall times (s) of the files
+    (``write``) and of the figure."""
     t0 = time.perf_counter()
     (work / "config.yaml").write_text(config_mod.dump(cfg.model_copy(update={"init": result.init})))
     g2o.write_g2o(work / "graph.g2o", g2o.PoseGraphFile(graph.ids, result.poses, graph.i, graph.j,
@@ -79,14 +99,15 @@ def _optimize_into(work: Path, cfg: OptimizeConfig, graph_path: Path, reference:
         zip(graph.i.tolist(), graph.j.tolist(), (~g2o.odometry_mask(graph)).tolist(), injected.tolist(),
             result.inlier.tolist())]
     (work / "edges.csv").write_text("\n".join(rows) + "\n")
-    metrics = batch.g2o_metrics(graph, result, injected if cfg.outliers else None, ref)
-    write_s = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    t1 = time.perf_counter()
     _overlay_figure(work / "overlay.png", graph, result, ref)
-    steps = {"read": read_s, **metrics["timings"], "write": write_s, "figure": time.perf_counter() - t0}
-    metrics["timings"] = {k: round(v, 6) for k, v in steps.items()}
-    (work / "metrics.json").write_text(json_text(metrics) + "\n")
-    return metrics
+    return {"write": t1 - t0, "figure": time.perf_counter() - t1}
+
+
+def _same_solution(a, b) -> bool:
+    """Whether BatchResults ``a`` (None: none) and ``b`` have the same start, poses and inliers (the same files)."""
+    return (a is not None and a.init == b.init and np.array_equal(a.poses, b.poses)
+            and np.array_equal(a.inlier, b.inlier))
 
 
 FIGURE_PX = 960  # overlay.png: the longer side of the drawing (px)
