@@ -14,6 +14,7 @@ import psutil
 import pytest
 from test_pose_graph_global import manhattan
 
+from slam2d import processes
 from slam2d.backend import admission, batch, consistency, lm, outliers
 from slam2d.backend import initialization as ini
 from slam2d.backend.factors import g2o_factor_list, g2o_factors, g2o_values
@@ -21,7 +22,7 @@ from slam2d.backend.initialization import spanning_tree
 from slam2d.backend.replay import replay_g2o
 from slam2d.config import BackendConfig
 from slam2d.datasets.g2o import inject_outliers
-from slam2d.processes import Worker, call_forked
+from slam2d.processes import call_forked
 
 
 def _summary(values, iterations):
@@ -92,6 +93,8 @@ def test_a_worker_prepares_while_this_process_goes_on_then_computes_each_call():
         with pytest.raises(ValueError, match="bad graph"):
             worker.call(_fails)
         assert worker.call(sum, [1, 2, 3]) == 6 and worker.call(_pid_and_scipy)[0] == pid  # the same child
+        pending = worker.submit(sum, [4, 5])  # this process goes on until it asks for the result
+        assert pending() == 9
     assert _children() == before and worker.call(sum, [1, 2]) == 3  # closed: a call runs here
 
 
@@ -107,12 +110,24 @@ def test_an_interrupt_while_waiting_for_a_worker_kills_it_at_once():
     try:
         threading.Thread(target=interrupt).start()
         t0 = time.monotonic()
-        with pytest.raises(KeyboardInterrupt), Worker() as worker:
+        with pytest.raises(KeyboardInterrupt), processes.Worker() as worker:
             worker.call(time.sleep, 30)
     finally:
         signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - t0 < 5
     assert _children() == before
+
+
+def test_meanwhile_runs_while_the_certificate_is_computed_with_the_result_returned():
+    """``solve_g2o``'s ``meanwhile`` (the results folder's files) runs once, while the worker process computes the
+    certificate, with the poses, inliers and start of the result returned (not yet certified)."""
+    graph = manhattan(300, seed=3)
+    seen = []
+    out = batch.solve_g2o(graph, verify=True, meanwhile=lambda result: seen.append((result, _children())))
+    ((shown, workers),) = seen
+    assert workers and shown.certified is None and shown.verified is None and out.certified and out.verified
+    assert np.array_equal(shown.poses, out.poses) and np.array_equal(shown.inlier, out.inlier)
+    assert shown.init == out.init and shown.final_error == out.final_error
 
 
 def _in_this_process(fn, *args):
