@@ -147,7 +147,8 @@ class Worker:
         if self.pid is None:
             return
         pid, self.pid = self.pid, None
-        os.kill(pid, signal.SIGKILL)
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
         for pipe in (self._calls, self._results):
             with contextlib.suppress(OSError):
                 pipe.close()
