@@ -432,3 +432,46 @@ def test_entry_cells_refreshed_where_the_grid_changed_equal_a_full_pass(seed):
         patch = state[max(r, 0) : r + rng.integers(2, 30), max(c, 0) : c + rng.integers(2, 30)]
         patch[...] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=patch.shape, p=[0.5, 0.2, 0.3])
         assert np.array_equal(np.argwhere(kept(state)), unknown_cells(GridView(state, 0.05, (0.0, 0.0))))
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_a_search_grows_the_last_ones_component_and_equals_a_search_anew(seed):
+    """Successive searches with one Scratch over a changing grid (cells made passable or blocked, the start moved):
+    the reachable cells and the lengths equal a search anew every time, and the component is grown from the last
+    one's (not searched anew) exactly when none of its cells was blocked since and the start lies in it."""
+    from slam2d.exploration import paths as P
+
+    rng = np.random.default_rng(2500 + seed)
+    passable = rng.random((40, 50)) < 0.62
+    scratch, grown = P.Scratch(), []
+    inner = P._reach_grown
+
+    def watched(*args):
+        n = inner(*args)
+        grown.append(n >= 0)
+        return n
+
+    P._reach_grown = watched
+    try:
+        last = None
+        for _ in range(15):
+            flip = rng.random(passable.shape) < rng.choice([0.0, 0.01, 0.05])
+            if rng.random() < 0.5:
+                passable |= flip  # cells made passable only
+            else:
+                passable ^= flip
+            cells = np.argwhere(passable)
+            start = cells[rng.integers(len(cells))]
+            if last is not None and passable[tuple(last[1])] and rng.random() < 0.3:
+                start = last[1]  # the robot has not moved
+            fresh = P.Paths(passable, start, 0.05)
+            kept = P.Paths(passable, start, 0.05, scratch=scratch)
+            assert np.array_equal(kept.reach, fresh.reach)
+            assert np.array_equal(kept.dense(), fresh.dense())
+            if last is not None:
+                expected = bool(last[0][start[0], start[1]]) and not (last[0] & ~passable).any()
+                assert grown[-1] == expected
+            last = fresh.reach.copy(), start
+    finally:
+        P._reach_grown = inner
+    assert any(grown) and not all(grown)
