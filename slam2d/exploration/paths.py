@@ -37,42 +37,6 @@ def _reach(flat, w, start, seen, dist, queue):
 
 
 @njit(cache=True)
-def _reach_grown(flat, w, start, seen, dist, queue, kept):
-    """:func:`_reach` from the component ``kept`` (bool) of the last search with these buffers, when every cell of it
-    is still passable in ``flat`` and holds ``start``: the component now is ``kept`` and what the cells next to it
-    that were not in it reach (it is 4-connected and passable still, so it lies in the start's component; a way out of
-    it leaves by such a cell). Sets ``seen`` and ``dist`` (inf, else -1) over the whole grid. Returns how many, or -1
-    (buffers undefined) when a cell of ``kept`` is no longer passable or the start is not in it."""
-    if not kept[start]:
-        return -1
-    for v in range(flat.shape[0]):  # read only, first: a blocked cell is found before any buffer is written
-        if kept[v] and not flat[v]:
-            return -1
-    n, tail = 0, 0
-    for v in range(flat.shape[0]):
-        if kept[v]:
-            seen[v], dist[v] = True, np.inf
-            n += 1
-        else:
-            seen[v], dist[v] = False, -1.0
-    for v in range(w, flat.shape[0] - w):  # the cells next to it, not in it (the frame's cells are never passable)
-        if flat[v] and not kept[v] and (kept[v - w] or kept[v + w] or kept[v - 1] or kept[v + 1]):
-            seen[v], dist[v] = True, np.inf
-            queue[tail] = v
-            tail += 1
-    head = 0
-    while head < tail:
-        v = queue[head]
-        head += 1
-        for u in (v - w, v + w, v - 1, v + 1):
-            if flat[u] and not seen[u]:
-                seen[u], dist[u] = True, np.inf
-                queue[tail] = u
-                tail += 1
-    return n + tail
-
-
-@njit(cache=True)
 def _dial(w, dist, queue, sizes, k, target, left, mode):
     """Process buckets from ``k`` (cells nearer than k are final) of the search held in ``dist`` cells (rows of ``w``
     cells; -1 in cells it never enters: not passable, or not 4-connected to the start, and the grid's frame), ``queue`` (3, cap) of three buckets in turn with their
@@ -175,40 +139,23 @@ def _dial(w, dist, queue, sizes, k, target, left, mode):
 
 class Scratch:
     """The buffers of a :class:`Paths` search, reused by the next search of a grid of the same shape made with them
-    (page faults on fresh arrays cost as much as the search), and the last search's component: the next one grows
-    it where no cell of it was blocked since, rather than search it anew. A Paths is not to be asked again once the
-    next one is made with the same Scratch."""
+    (page faults on fresh arrays cost as much as the search): a Paths is not to be asked again once the next one is
+    made with the same Scratch."""
 
     def __init__(self):
-        self.shape = None
+        self.size = -1
 
-    def take(self, shape: tuple) -> tuple:
-        """(padded passable, dist, seen, target, queue, kept), flat, of a grid of ``shape`` (its frame included): all
-        False, any, any, False, any, and the component of the last search on a grid of that shape (or all False)."""
-        if shape != self.shape:
-            self.shape, size = shape, shape[0] * shape[1]
+    def take(self, size: int) -> tuple:
+        """(padded passable, dist, seen, target, queue) of ``size`` cells: all False, -1, False, False, any."""
+        if size != self.size:
+            self.size = size
             self.arrays = (np.zeros(size, dtype=np.bool_), np.empty(size), np.empty(size, dtype=np.bool_),
-                           np.zeros(size, dtype=np.bool_), np.empty(3 * size + 3, dtype=np.int32),
-                           np.zeros(size, dtype=np.bool_))  # fmt: skip
-        self.arrays[3].fill(False)
-        return self.arrays
-
-    def keep(self, seen) -> None:
-        """``seen`` (the buffer :meth:`take` gave) is the component of the search just made: kept for the next one,
-        the buffer it held given for the next search's ``seen``."""
-        padded, dist, old, target, queue, kept = self.arrays
-        self.arrays = padded, dist, kept, target, queue, seen
-
-
-def _component(padded, w: int, s: int, seen, dist, queue, kept) -> int:
-    """``seen`` and ``dist`` (inf; -1 elsewhere) of the cells 4-connected to ``s`` over ``padded``: grown from
-    ``kept`` where it can be (:func:`_reach_grown`), else searched anew. Returns how many."""
-    n = _reach_grown(padded, w, s, seen, dist, queue, kept)
-    if n < 0:
+                           np.zeros(size, dtype=np.bool_), np.empty(3 * size + 3, dtype=np.int32))  # fmt: skip
+        _, dist, seen, target, _ = self.arrays
         dist.fill(-1.0)
         seen.fill(False)
-        n = _reach(padded, w, s, seen, dist, queue)
-    return n
+        target.fill(False)
+        return self.arrays
 
 
 class Paths:
@@ -228,8 +175,7 @@ class Paths:
         self.resolution = float(resolution)
         h, w = self.shape
         self._w = w + 2  # the search runs on the grid framed by a border of cells it never enters
-        scratch = scratch or Scratch()
-        padded, self._dist, seen, self._target, queue, kept = scratch.take((h + 2, self._w))
+        padded, self._dist, seen, self._target, queue = (scratch or Scratch()).take((h + 2) * self._w)
         padded.reshape(h + 2, w + 2)[1:-1, 1:-1] = passable  # the frame stays False
         start = _snap(passable, np.asarray(start_cell, dtype=np.int64), snap_cells)
         self._extra, self._k, self._left = 0.0, 0, 0
@@ -237,14 +183,10 @@ class Paths:
         if start is not None:
             cell, self._extra = start
             s = (int(cell[0]) + 1) * self._w + int(cell[1]) + 1
-            n = _component(padded, self._w, s, seen, self._dist, queue, kept)
+            n = _reach(padded, self._w, s, seen, self._dist, queue)
             self._dist[s] = 0.0
             self._queue = queue[: 3 * (n + 1)].reshape(3, n + 1)
             self._queue[0, 0], self._sizes[0] = s, 1
-        else:
-            self._dist.fill(-1.0)
-            seen.fill(False)
-        scratch.keep(seen)
         seen = seen.reshape(h + 2, w + 2)[1:-1, 1:-1]
         self.reach = seen.copy() if allowed is None else seen & np.asarray(allowed, dtype=bool)
 
