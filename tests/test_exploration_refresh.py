@@ -104,39 +104,6 @@ def test_ray_records_outlive_grids_nothing_was_asked_on(seed):
             assert len(records._kept) - before <= np.count_nonzero(touched) < len(pts)
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_rays_recast_at_the_checks_leave_the_decision_none_to_cast(seed):
-    """A decision's points whose records a check's grid dropped are cast again on that grid (``recast``, the goal's
-    checks while the robot drives): the next decision on the same map casts no ray, and its gains and shares equal
-    those cast anew."""
-    from slam2d.exploration.gains import RayRecords
-    from slam2d.exploration.gridops import GridView, shared_gain, unknown_cells
-
-    rng = np.random.default_rng(2250 + seed)
-    state = rng.choice([FREE, OCCUPIED, UNKNOWN], size=(200, 260), p=[0.7, 0.05, 0.25]).astype(np.int8)
-    records = RayRecords()
-    pts = rng.uniform([0.0, 0.0], [260 * 0.05, 200 * 0.05], size=(30, 2))
-    view = GridView(state.copy(), 0.05, (0.0, 0.0))
-    records.update(view)
-    records.shared(view, pts, 1.5, 120, unknown_cells(view))  # a decision
-    dropped = 0
-    for _ in range(3):  # the checks: the map changed, the dropped records cast again
-        r, c = rng.integers(0, 180), rng.integers(0, 240)
-        state[r : r + 20, c : c + 20] = rng.choice([FREE, OCCUPIED, UNKNOWN], size=(20, 20))
-        check = GridView(state.copy(), 0.05, (0.0, 0.0))
-        records.update(check)
-        dropped += len(pts) - len(records._kept)
-        records.recast(check, unknown_cells(check))
-        assert len(records._kept) == len(pts)
-    view = GridView(state.copy(), 0.05, (0.0, 0.0))
-    records.update(view)
-    kept = dict(records._kept)
-    own, shares = records.shared(view, pts, 1.5, 120, unknown_cells(view))
-    assert dropped > 0 and records._kept.keys() == kept.keys() and all(records._kept[k] is kept[k] for k in kept)
-    fresh_own, fresh_shares = shared_gain(view, pts, 1.5, 120)
-    assert np.array_equal(own, fresh_own) and np.array_equal(shares, fresh_shares)
-
-
 @pytest.mark.parametrize("strategy", ["utility", "tour"])
 def test_decisions_after_keeping_up_with_the_map_equal_those_made_from_nothing(strategy):
     """An explorer kept up with the map at every check between decisions (``keep_up``: frontier cells, hidden cells,

@@ -231,10 +231,10 @@ class Explorer:
 
     def keep_up(self, view: GridView) -> None:
         """The grids kept between decisions (frontier cells; once used, the hidden cells, their entry cells, the rays'
-        records, recast) brought up to ``view`` while the robot drives: a decision refreshes only what changed since."""
+        records) brought up to ``view`` while the robot drives: the next decision refreshes only what changed since."""
         self._frontier_cells(view)
         if self._hidden_grid is not None:
-            self._rays.recast(self._hidden(view), self._hidden_entries(view))
+            self._hidden_entries(view)
 
     def frontier_goal(self, pose, view, distance, cost=None) -> Goal | None:
         """The goal of the frontier region of lowest ``cost`` (a function of a region; default its path length, and

@@ -96,7 +96,7 @@ class RayRecords:
 
     def __init__(self):
         self._state = self._frame = None
-        self._kept: dict = {}  # (gx, gy, max_range, rays) -> (gain, record)
+        self._kept: dict = {}  # (gx, gy, max_t, rays) -> (gain, record)
         self._used: set = set()  # the points asked for on the current grid
         self._asked: set = set()  # those of the last grid anything was asked on
 
@@ -110,8 +110,8 @@ class RayRecords:
             tiles, changed = _changed_tiles(self._state, view.state, TILE)
             if changed:
                 for key in list(kept):
-                    gx, gy, max_range, _ = key
-                    reach = max_range / view.resolution + 2.0  # a ray stops before max_t: its cells lie within max_t + 1 of the point
+                    gx, gy, max_t, _ = key
+                    reach = max_t + 2.0  # a ray stops before max_t: its cells lie within max_t + 1 of the point
                     r0, r1 = max(int((gy - reach) // TILE), 0), max(int((gy + reach) // TILE) + 1, 0)
                     c0, c1 = max(int((gx - reach) // TILE), 0), max(int((gx + reach) // TILE) + 1, 0)
                     if tiles[r0:r1, c0:c1].any():
@@ -120,32 +120,18 @@ class RayRecords:
             self._mark = np.zeros(view.shape, dtype=np.int32)  # all 0 between calls
         self._state, self._frame, self._kept, self._used = view.state, frame, kept, set()
 
-    def recast(self, view: GridView, unknown) -> None:
-        """Cast again, on ``view`` (the grid of the last update; ``unknown``: its ``unknown_cells``), the points of the
-        last grid anything was asked on whose records the update dropped: the next ask finds them kept (a record
-        depends on the grid only, so that the gains and shares are the same)."""
-        lost = sorted({key for key in self._asked if key not in self._kept})
-        for max_range, rays in sorted({key[2:] for key in lost}):
-            self._cast(view, [key for key in lost if key[2:] == (max_range, rays)], unknown)
-
-    def _cast(self, view: GridView, keys: list, unknown) -> None:
-        """The records of the points ``keys`` (gx, gy, max_range, rays), of one ``max_range`` and ``rays``, cast on
-        ``view`` and kept."""
-        keys = list(dict.fromkeys(keys))
-        if not keys:
-            return
-        at = np.array([key[:2] for key in keys], dtype=np.float64)
-        max_range, rays = keys[0][2:]
-        own, ev, first = _record(np.ascontiguousarray(view.state), at, rays, max_range / view.resolution,
-                                 _cells_near(view, at, max_range, unknown), self._mark)  # fmt: skip
-        for j, key in enumerate(keys):
-            self._kept[key] = own[j], ev[first[j] : first[j + 1]].copy()
-
     def _records(self, view: GridView, points, max_range: float, rays: int, unknown):
         """The gains (P,) and the records (``ev``, ``first``) of ``points`` (P, 2) m on the grid of the last update."""
         gxy = _grid_units(view, points)
-        keys = [(float(x), float(y), float(max_range), int(rays)) for x, y in gxy]
-        self._cast(view, [key for key in keys if key not in self._kept], unknown)
+        max_t = float(max_range) / view.resolution
+        keys = [(float(x), float(y), max_t, int(rays)) for x, y in gxy]
+        new = {key: i for i, key in enumerate(keys) if key not in self._kept}
+        if new:
+            at = gxy[list(new.values())]
+            own, ev, first = _record(np.ascontiguousarray(view.state), np.ascontiguousarray(at), int(rays), max_t,
+                                     _cells_near(view, at, max_range, unknown), self._mark)  # fmt: skip
+            for j, key in enumerate(new):
+                self._kept[key] = own[j], ev[first[j] : first[j + 1]].copy()
         self._used.update(keys)
         records = [self._kept[key] for key in keys]
         first = np.concatenate([[0], np.cumsum([len(r[1]) for r in records])]).astype(np.int64)
