@@ -22,6 +22,7 @@ import numpy as np
 from slam2d import geometry
 from slam2d.exploration.base import EXPLORATION_STRATEGIES
 from slam2d.exploration.candidates import Candidate, CandidateParams, scan_candidates
+from slam2d.exploration.collection import paused, resume
 from slam2d.exploration.config import ExplorationConfig
 from slam2d.exploration.frontiers import (
     WALL_GAP,
@@ -183,19 +184,23 @@ class Explorer:
         so, the radius + the safety margin; then the radius alone, and the goal is ``tight`` (the navigator takes a
         gap that tight as a last resort: the robot may have come in through one, or the map draws a door narrower
         than it is)."""
-        t0, c0 = time.perf_counter(), time.thread_time()
-        pose = np.asarray(pose, dtype=np.float64)
-        keep = self.radius + self.cfg.safety_margin
-        goal = self._decide(pose, view, keep + self.inflation)
-        if goal is None and self.inflation > 0:
-            goal = self._decide(pose, view, keep)
-        if goal is None and self.cfg.safety_margin > 0:
-            goal = self._decide(pose, view, self.radius)
-            if goal is not None:
-                goal.tight = True
-        self.tight_goals += goal is not None and goal.tight
-        self.decision_seconds.append(time.perf_counter() - t0)
-        self.decision_cpu_seconds.append(time.thread_time() - c0)
+        collecting = paused()  # no garbage collection in a decision: the one owed falls after it
+        try:
+            t0, c0 = time.perf_counter(), time.thread_time()
+            pose = np.asarray(pose, dtype=np.float64)
+            keep = self.radius + self.cfg.safety_margin
+            goal = self._decide(pose, view, keep + self.inflation)
+            if goal is None and self.inflation > 0:
+                goal = self._decide(pose, view, keep)
+            if goal is None and self.cfg.safety_margin > 0:
+                goal = self._decide(pose, view, self.radius)
+                if goal is not None:
+                    goal.tight = True
+            self.tight_goals += goal is not None and goal.tight
+            self.decision_seconds.append(time.perf_counter() - t0)
+            self.decision_cpu_seconds.append(time.thread_time() - c0)
+        finally:
+            resume(collecting)
         return goal
 
     def _decide(self, pose, view: GridView, clearance: float) -> Goal | None:
@@ -217,8 +222,7 @@ class Explorer:
                               self.cfg.avoid_radius, self.width, nearest, self._frontier_cells(view))  # fmt: skip
 
     def _frontier_cells(self, view: GridView) -> np.ndarray:
-        """The view's ``frontier_mask`` (H, W) bool of the robot's width, kept between views and refreshed where the
-        map changed (a copy of its own)."""
+        """The view's ``frontier_mask`` (H, W) bool of the robot's width, kept, refreshed where the map changed (a copy)."""
         depth = depth_cells(self.width, view.resolution)
         if self._frontier_grid[0] != depth:
             refresh = LocalRefresh(lambda st: frontier_mask(st, depth=depth), max(depth + 1, WALL_GAP))
@@ -226,9 +230,8 @@ class Explorer:
         return self._frontier_grid[1](view.state)
 
     def keep_up(self, view: GridView) -> None:
-        """Bring the grids kept between decisions (frontier cells; once the strategy has used them, the hidden cells,
-        their entry cells and the rays' records) up to ``view``, as the map is updated while the robot drives: the next
-        decision then refreshes them only where the map changed since. Changes no decision."""
+        """The grids kept between decisions (frontier cells; once used, the hidden cells, their entry cells, the rays'
+        records) brought up to ``view`` while the robot drives: the next decision refreshes only what changed since."""
         self._frontier_cells(view)
         if self._hidden_grid is not None:
             self._hidden_entries(view)

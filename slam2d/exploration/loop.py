@@ -19,6 +19,7 @@ import numpy as np
 from slam2d import geometry
 from slam2d.errors import InputError
 from slam2d.evaluation.trajectory import ate
+from slam2d.exploration.collection import start_up_frozen
 from slam2d.exploration.config import ExploreConfig
 from slam2d.exploration.coverage import (
     Coverage,
@@ -195,7 +196,14 @@ def explore(cfg: ExploreConfig, progress=None, view=None) -> ExplorationRun:
     ``view`` (a :class:`slam2d.viz.ExploreView`) logs every control step."""
     t_wall = time.perf_counter()
     cfg = resolved(cfg)
-    loop, ecfg = _Loop(cfg), cfg.exploration
+    loop = _Loop(cfg)
+    with start_up_frozen():  # the objects of the start-up (libraries, warm-up, loop) walked by no collection
+        return _drive(loop, cfg, progress, view, t_wall)
+
+
+def _drive(loop: _Loop, cfg: ExploreConfig, progress, view, t_wall: float) -> ExplorationRun:
+    """:func:`explore` on its ``loop``, made."""
+    ecfg = cfg.exploration
     period = loop.options.period
     cover = Coverage(loop.reachable, loop.truth_frame, cfg.mapping, loop.ignored)
     step = loop.robot.step(0.0, 0.0, 0.0)
