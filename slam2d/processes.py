@@ -42,12 +42,7 @@ def call_forked(fn, *args):
         return fn(*args)
     parent = os.getpid()
     read, write = os.pipe()
-    gc.freeze()  # the child's collector then leaves the parent's objects alone: fewer pages copied on write
-    try:
-        pid = os.fork()
-    finally:
-        if os.getpid() == parent:
-            gc.unfreeze()
+    pid = _fork(parent)
     if pid == 0:
         _child(read, write, parent, fn, args)
     os.close(write)
@@ -65,6 +60,17 @@ def call_forked(fn, *args):
     if not ok:
         raise value
     return value
+
+
+def _fork(parent: int) -> int:
+    """``os.fork()`` from ``parent`` (this process), its objects frozen meanwhile: the child's collector then leaves
+    them alone, so fewer pages are copied on write."""
+    gc.freeze()
+    try:
+        return os.fork()
+    finally:
+        if os.getpid() == parent:
+            gc.unfreeze()
 
 
 def _child(read: int, write: int, parent: int, fn, args) -> None:
@@ -98,12 +104,7 @@ class Worker:
             return
         parent = os.getpid()
         down, up = os.pipe(), os.pipe()  # (read, write) of the calls, of the results
-        gc.freeze()
-        try:
-            pid = os.fork()
-        finally:
-            if os.getpid() == parent:
-                gc.unfreeze()
+        pid = _fork(parent)
         if pid == 0:
             os.close(down[1])
             os.close(up[0])
