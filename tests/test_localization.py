@@ -364,8 +364,9 @@ def test_a_kidnap_whose_best_half_still_fits_is_told_by_readings_beyond_the_wall
     stream = wander(world, known, 30.0, seed=5, kidnap_at=[10.0])
     k = stream.kidnaps[0]
     recovered = {}
-    for name, level in (("readings", mcl.SEEN_THROUGH), ("best half only", math.inf)):
+    for name, level, doubt in (("readings", mcl.SEEN_THROUGH, mcl.DOUBTED), ("best half only", math.inf, math.inf)):
         monkeypatch.setattr(mcl, "SEEN_THROUGH", level)
+        monkeypatch.setattr(mcl, "DOUBTED", doubt)
         pf = ParticleFilter(known, MclConfig(), 12.0, seed=5)
         pf.init_pose(stream.truth[0], 0.1, math.radians(3.0))
         back = converged_at(replay(pf, stream), k)
