@@ -61,8 +61,8 @@ CONFIDENT_NOISE = 0.4  # random share below which a confident filter draws no ra
 # walls the laser sees dims the best-fitting half of the beams by up to 30 % (ACES in its SLAM map), a kidnap by ~90 %
 SEEN_THROUGH = 0.4  # short-term average share of beams read beyond the map's walls from which the pose is doubted
 THROUGH_NOISE = 0.1  # random share below which a confident filter whose scans see through walls draws nothing
-DOUBTED = 0.15  # that average from which a confident filter whose whole scan fits worse than usual is judged on
-# every beam: a map lacking walls reads short (the worn office <= 0.05), a kidnap's old place beyond walls too
+DOUBTED = 0.15  # that average from which a confident filter whose every beam asks for random particles is judged
+# on every beam: a map lacking walls reads short (the worn office <= 0.05), a kidnap's old place also beyond walls
 LOCAL_SPREAD = np.array([0.3, 0.3, 0.1])  # m, m, rad: sd of recovery candidates around the current particles
 STATES = ("tracking", "ambiguous", "lost")
 FIT_DEFICIT = 0.1  # short-term average likelihood this far below the long-term one: the pose is not claimed
@@ -337,7 +337,9 @@ class ParticleFilter:
         least ``SEEN_THROUGH``) mean a wrong pose, and then a share above ``THROUGH_NOISE`` draws.
         A search (no ``tracking`` since the global start or the last random particles) whose cloud has
         settled where the scans fit worse than usual is not confident either: after a kidnap the cloud
-        can settle on a wrong place whose best half of the beams fits."""
+        can settle on a wrong place whose best half of the beams fits. Nor is a filter whose whole scan fits
+        worse than usual while reading beyond the map's walls (:meth:`contradicted`): after a kidnap the best
+        half can fit the old place as usual (office kidnap seed 3: 0.6-0.95 of it, the whole scan 0.2-0.4)."""
         confident = self.cfg.recovery_best_beams < 1.0 and self.confident() and not self.doubted()
         i = 1 if confident else 0
         if not self._recovering() or self.w_slow[i] <= 0:
@@ -348,13 +350,15 @@ class ParticleFilter:
 
     def doubted(self) -> bool:
         """Whether the scans fit worse than usual (every beam, :meth:`_fits`) while the filter searches (no
-        ``tracking`` since the global start or the last random particles) or :meth:`contradicted`."""
-        return not self._fits() and (self._searching or self.contradicted())
+        ``tracking`` since the global start or the last random particles), or they are :meth:`contradicted`."""
+        return (self._searching and not self._fits()) or self.contradicted()
 
     def contradicted(self) -> bool:
-        """Whether the scans fit worse than usual while they read beyond the map's walls at the estimate
+        """Whether every beam's averages ask for random particles as a confident filter's best half must
+        (a share above ``CONFIDENT_NOISE``) while the scans read beyond the map's walls at the estimate
         (``through`` at least ``DOUBTED``): a map lacking walls the laser sees reads short, a wrong pose long."""
-        return not self._fits() and self.through >= DOUBTED
+        w_slow, w_fast = self.w_slow[0], self.w_fast[0]
+        return self._recovering() and self.through >= DOUBTED and w_slow > 0 and 1 - w_fast / w_slow > CONFIDENT_NOISE
 
     def _resample(self, scan: Scan) -> None:
         """Low-variance resampling with random free-space poses, as many as KLD sampling asks.
@@ -466,7 +470,8 @@ class ParticleFilter:
     def _follow_home(self, est: Estimate) -> bool:
         """Move the place last tracked along with ``est`` (:class:`Home`), giving it back particles
         (``hypothesis_particles`` round it, exp(-evidence) times the best hypothesis's weight) once its
-        recent evidence over the best reaches the threshold; True when the estimate is to be made again."""
+        recent evidence over the best reaches the threshold; True when the estimate is to be made again.
+        A place not yet left whose scans are :meth:`contradicted` is forgotten: a wrong pose, no map defect."""
         if not self.cfg.hypotheses or self._odom is None:
             return False
         if self.contradicted() and not self.home.away:  # a wrong pose, not a map lacking walls: not kept
