@@ -61,8 +61,6 @@ CONFIDENT_NOISE = 0.4  # random share below which a confident filter draws no ra
 # walls the laser sees dims the best-fitting half of the beams by up to 30 % (ACES in its SLAM map), a kidnap by ~90 %
 SEEN_THROUGH = 0.4  # short-term average share of beams read beyond the map's walls from which the pose is doubted
 THROUGH_NOISE = 0.1  # random share below which a confident filter whose scans see through walls draws nothing
-DOUBTED = 0.15  # that average from which a confident filter whose every beam asks for random particles is judged
-# on every beam: a map lacking walls reads short (the worn office <= 0.05), a kidnap's old place also beyond walls
 LOCAL_SPREAD = np.array([0.3, 0.3, 0.1])  # m, m, rad: sd of recovery candidates around the current particles
 STATES = ("tracking", "ambiguous", "lost")
 FIT_DEFICIT = 0.1  # short-term average likelihood this far below the long-term one: the pose is not claimed
@@ -337,28 +335,14 @@ class ParticleFilter:
         least ``SEEN_THROUGH``) mean a wrong pose, and then a share above ``THROUGH_NOISE`` draws.
         A search (no ``tracking`` since the global start or the last random particles) whose cloud has
         settled where the scans fit worse than usual is not confident either: after a kidnap the cloud
-        can settle on a wrong place whose best half of the beams fits. Nor is a filter whose whole scan fits
-        worse than usual while reading beyond the map's walls (:meth:`contradicted`): after a kidnap the best
-        half can fit the old place as usual (office kidnap seed 3: 0.6-0.95 of it, the whole scan 0.2-0.4)."""
-        confident = self.cfg.recovery_best_beams < 1.0 and self.confident() and not self.doubted()
+        can settle on a wrong place whose best half of the beams fits."""
+        confident = self.cfg.recovery_best_beams < 1.0 and self.confident() and not (self._searching and not self._fits())
         i = 1 if confident else 0
         if not self._recovering() or self.w_slow[i] <= 0:
             return 0.0
         share = 1.0 - self.w_fast[i] / self.w_slow[i]
         noise = (THROUGH_NOISE if self.through >= SEEN_THROUGH else CONFIDENT_NOISE) if confident else 0.0
         return share if share > noise else 0.0
-
-    def doubted(self) -> bool:
-        """Whether the scans fit worse than usual (every beam, :meth:`_fits`) while the filter searches (no
-        ``tracking`` since the global start or the last random particles), or they are :meth:`contradicted`."""
-        return (self._searching and not self._fits()) or self.contradicted()
-
-    def contradicted(self) -> bool:
-        """Whether every beam's averages ask for random particles as a confident filter's best half must
-        (a share above ``CONFIDENT_NOISE``) while the scans read beyond the map's walls at the estimate
-        (``through`` at least ``DOUBTED``): a map lacking walls the laser sees reads short, a wrong pose long."""
-        w_slow, w_fast = self.w_slow[0], self.w_fast[0]
-        return self._recovering() and self.through >= DOUBTED and w_slow > 0 and 1 - w_fast / w_slow > CONFIDENT_NOISE
 
     def _resample(self, scan: Scan) -> None:
         """Low-variance resampling with random free-space poses, as many as KLD sampling asks.
@@ -470,12 +454,9 @@ class ParticleFilter:
     def _follow_home(self, est: Estimate) -> bool:
         """Move the place last tracked along with ``est`` (:class:`Home`), giving it back particles
         (``hypothesis_particles`` round it, exp(-evidence) times the best hypothesis's weight) once its
-        recent evidence over the best reaches the threshold; True when the estimate is to be made again.
-        A place not yet left whose scans are :meth:`contradicted` is forgotten: a wrong pose, no map defect."""
+        recent evidence over the best reaches the threshold; True when the estimate is to be made again."""
         if not self.cfg.hypotheses or self._odom is None:
             return False
-        if self.contradicted() and not self.home.away:  # a wrong pose, not a map lacking walls: not kept
-            self.home = Home()
         held, home = self.home.holds(self.evidence_threshold), self.home
         if not home.update(est.pose, est.state, self._odom, self.map, self.evidence_threshold, SEEN_THROUGH):
             return home.holds(self.evidence_threshold) != held
