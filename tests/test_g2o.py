@@ -57,7 +57,6 @@ def test_edges_only_chain_poses(tmp_path):
     np.testing.assert_allclose(g.poses, [[0, 0, 0], [1, 0, np.pi / 2], [1, -1, np.pi / 2]], atol=1e-12)
 
 
-
 def test_the_chain_of_an_edges_only_file_is_scipys_breadth_first_tree(data_file):
     """The breadth-first tree that chains an edges-only file's poses (numpy, no scipy import) is scipy's, vertex
     for vertex and predecessor for predecessor: on CSAIL's edges and on random graphs with repeated edges, loops

@@ -50,8 +50,8 @@ RELINEARIZE_POSE = (0.1, 0.1, 0.01)  # m, m, rad: iSAM2 relinearises a pose whos
 # estimates between batches within 2.5 cm of the optimum instead of 2 cm, docs/posegraphs.md)
 RELINEARIZE_LANDMARK = 0.01  # m: the same for a landmark's position
 RELINEARIZE_SKIP = 1  # iSAM2: check for relinearisation at every update
-PARTIAL_RELINEARIZATION_CHECK = False  # iSAM2: check only the cliques an update touches (docs/posegraphs.md: 15-29 %
-# less CPU on M3500 and city10000, p99 latency unchanged on city10000; not the default, it moves online estimates)
+PARTIAL_RELINEARIZATION_CHECK = False  # iSAM2: check only the cliques an update touches (docs/posegraphs.md, "Latency
+# per keyframe": M3500's p99 within 50 ms, city10000's not; off: it moves the online estimates, and Intel loses)
 ISAM2_FACTORIZATION = "CHOLESKY"  # faster; an ill-conditioned update falls back to "QR" (see update)
 DEFAULT_ODOMETRY_SIGMAS = np.array([0.05, 0.05, np.deg2rad(2.0)])  # m, m, rad, when no information is given
 CHI2_3DOF_99 = consistency.CHI2_3DOF_99  # chi-square 99% quantile, 3 degrees of freedom: loop residual / consistency gate
