@@ -81,6 +81,18 @@ def factor_graph(factors, keep=None):
     return fg
 
 
+def elimination_order(ids, fg) -> np.ndarray | None:
+    """The ranks (in sorted order) of the vertices ``ids`` (N,) in GTSAM's COLAMD elimination order of ``fg``, a
+    graph over exactly those vertices: a fill-reducing order for sparse factorisations outside GTSAM
+    (``certificate.certify``); None when ``fg`` leaves out a vertex."""
+    import gtsam
+
+    ordering = gtsam.Ordering.ColamdNonlinearFactorGraph(fg)
+    keyed = np.array([gtsam.Symbol(ordering.at(i)).index() for i in range(ordering.size())], dtype=np.int64)
+    ranked = np.sort(np.asarray(ids, dtype=np.int64))
+    return np.searchsorted(ranked, keyed) if len(keyed) == len(ranked) else None
+
+
 def g2o_values(ids, poses):
     """gtsam.Values with vertex ``ids[n]`` at ``poses[n]`` (N, 3)."""
     import gtsam
