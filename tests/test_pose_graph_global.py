@@ -14,7 +14,13 @@ from slam2d.backend import certificate, consistency
 from slam2d.backend import initialization as ini
 from slam2d.backend.batch import loop_metrics, solve_g2o
 from slam2d.backend.consistency import CHI2_3DOF_99
-from slam2d.backend.factors import elimination_order, factor_graph, g2o_factor_list, g2o_factors, g2o_values
+from slam2d.backend.factors import (
+    elimination_order,
+    factor_graph,
+    g2o_factor_list,
+    g2o_factors,
+    g2o_values,
+)
 from slam2d.datasets.g2o import PoseGraphFile, inject_outliers, odometry_mask, read_g2o
 from slam2d.errors import InputError
 
