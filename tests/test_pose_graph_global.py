@@ -300,3 +300,22 @@ def test_certificate_in_gtsams_elimination_order(data_file):
     assert np.abs(matrix @ lu.solve(rhs) - rhs).max() < 1e-8
     natural = certificate._SymmetricLU(matrix, np.arange(matrix.shape[0]))
     assert lu.lu.L.nnz + lu.lu.U.nnz < 0.5 * (natural.lu.L.nnz + natural.lu.U.nnz)
+
+
+def test_factors_keyed_and_weighted_as_gtsam_reads_them(data_file):
+    """``g2o_factor_list`` (keys without a call into gtsam, one noise model per distinct information) gives
+    GTSAM's own reading of the file its error, at the file's poses and at the optimum."""
+    import gtsam
+
+    from slam2d.backend.factors import pose_key
+
+    assert [pose_key(k) for k in (0, 7, 2**40)] == [gtsam.symbol("x", k) for k in (0, 7, 2**40)]
+    path = data_file("posegraphs/intel.g2o")
+    graph = read_g2o(path)
+    ours = factor_graph(g2o_factor_list(graph))
+    theirs, _ = gtsam.readG2o(str(path), False)  # keyed by the vertex ids themselves
+    for poses in (graph.poses, solve_g2o(graph).poses):
+        plain = gtsam.Values()
+        for k, (x, y, t) in zip(graph.ids.tolist(), poses.tolist()):
+            plain.insert(k, gtsam.Pose2(x, y, t))
+        assert ours.error(g2o_values(graph.ids, poses)) == pytest.approx(theirs.error(plain), rel=1e-12)

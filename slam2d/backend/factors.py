@@ -19,11 +19,12 @@ from slam2d.errors import InputError
 PRIOR_SIGMAS = np.array([1e-6, 1e-6, 1e-6])  # m, m, rad: anchors the first keyframe / vertex
 
 
-def pose_key(k: int) -> int:
-    """GTSAM key of keyframe ``k``."""
-    import gtsam
+POSE_KEY_BASE = ord("x") << 56  # gtsam.symbol("x", 0): a gtsam Symbol is its character above a 56-bit index
 
-    return gtsam.symbol("x", int(k))
+
+def pose_key(k: int) -> int:
+    """GTSAM key of keyframe ``k`` (``gtsam.symbol("x", k)``, without a call into gtsam)."""
+    return POSE_KEY_BASE + int(k)
 
 
 def landmark_key(n: int) -> int:
@@ -116,9 +117,11 @@ def g2o_factor_list(graph: g2o.PoseGraphFile, robust: str = "none", robust_param
     info = rb.check_information_stack(graph.information, lambda k: f"g2o edge {k} ({graph.i[k]} -> {graph.j[k]})")
     kernel = rb.m_estimator(robust, robust_param)
     plain = g2o.odometry_mask(graph) if plain_odometry else np.zeros(len(graph.i), bool)
-    factors = []
-    for a, b, m, inf, p in zip(graph.i.tolist(), graph.j.tolist(), graph.measurements.tolist(), info, plain):
-        model = rb.wrap(gtsam.noiseModel.Gaussian.Information(inf), None if p else kernel)
+    factors, models = [], {}  # one noise model per distinct information and kernel: most graphs have one
+    for a, b, m, inf, p in zip(graph.i.tolist(), graph.j.tolist(), graph.measurements.tolist(), info, plain.tolist()):
+        model = models.get((inf.tobytes(), p))
+        if model is None:
+            model = models[inf.tobytes(), p] = rb.wrap(gtsam.noiseModel.Gaussian.Information(inf), None if p else kernel)
         factors.append(between_factor(a, b, m, model))
     return factors
 
