@@ -21,6 +21,7 @@ from slam2d.backend.factors import (
     g2o_factors,
     g2o_values,
 )
+from slam2d.backend.sparse import SymmetricFactor
 from slam2d.datasets.g2o import PoseGraphFile, inject_outliers, odometry_mask, read_g2o
 from slam2d.errors import InputError
 
@@ -283,8 +284,9 @@ def test_certificate_at_the_optimum_of_a_noisy_graph():
 
 
 def test_certificate_in_gtsams_elimination_order(data_file):
-    """The certificate's factorisations in GTSAM's COLAMD order of the poses (``factors.elimination_order``):
-    fewer entries than without an order, the same outcome at MIT's optimum and at its local minimum."""
+    """The chordal start's and the certificate's factorisations in GTSAM's COLAMD order of the poses
+    (``factors.elimination_order``): fewer entries than without an order, the same start (also with the ids out
+    of order), the same certificate at MIT's optimum and at its local minimum."""
     graph = read_g2o(data_file("posegraphs/MIT.g2o"))
     order = elimination_order(graph.ids, factor_graph(g2o_factor_list(graph)))
     assert sorted(order) == list(range(len(graph.ids)))
@@ -293,12 +295,19 @@ def test_certificate_in_gtsams_elimination_order(data_file):
         plain, ordered = certificate.certify(graph, poses), certificate.certify(graph, poses, order)
         assert (ordered.certified, ordered.negative_pivots > 0) == (plain.certified, plain.negative_pivots > 0)
         assert ordered.cost == pytest.approx(plain.cost, rel=1e-9) and pose_error(ordered.poses, plain.poses) < 1e-9
+    for weighted in (False, True):
+        assert pose_error(ini.chordal(graph, weighted, order), ini.chordal(graph, weighted)) < 1e-6  # rounding
+    rows = np.r_[0, 1 + np.random.default_rng(1).permutation(len(graph.ids) - 1)]  # ids out of order, first kept
+    shuffled = PoseGraphFile(graph.ids[rows], graph.poses[rows], graph.i, graph.j, graph.measurements,
+                             graph.information)
+    assert pose_error(ini.chordal(shuffled, False, elimination_order(shuffled.ids, factor_graph(
+        g2o_factor_list(shuffled)))), ini.chordal(graph, False)[rows]) < 1e-6
     matrix = certificate.data_matrix(graph) + 1e-3 * sparse.identity(3 * len(graph.ids))
     perm = np.column_stack([order, len(order) + 2 * order, len(order) + 2 * order + 1]).ravel()
-    lu = certificate._SymmetricLU(matrix, perm)
+    lu = SymmetricFactor(matrix, perm)
     rhs = np.random.default_rng(0).normal(size=matrix.shape[0])
     assert np.abs(matrix @ lu.solve(rhs) - rhs).max() < 1e-8
-    natural = certificate._SymmetricLU(matrix, np.arange(matrix.shape[0]))
+    natural = SymmetricFactor(matrix, np.arange(matrix.shape[0]))
     assert lu.lu.L.nnz + lu.lu.U.nnz < 0.5 * (natural.lu.L.nnz + natural.lu.U.nnz)
 
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from slam2d.backend.consistency import id_ranks
+from slam2d.backend.sparse import SymmetricFactor, held_first, unknowns
 from slam2d.datasets import g2o
 
 ETA_REL = 1e-7  # eigenvalue tolerance, relative to the largest diagonal entry of M
@@ -107,46 +108,15 @@ def _curvature(graph, a, b, kappa, tau, poses, r, d, n):
     return coo_matrix((np.concatenate([w, w, -w, -w, u]), (rows, cols)), shape=(3 * n, 3 * n)).tocsc()
 
 
-class _SymmetricLU:
-    """SuperLU of a sparse symmetric matrix with diagonal pivots (an LDL^T: ``pivots()`` holds D), its rows
-    and columns taken in the order ``perm`` (indices; None: SuperLU's minimum degree on A + A^T, which on
-    city10000's 30 000 unknowns takes 3 x as long as the factorisation in GTSAM's COLAMD order of its
-    poses); RuntimeError on an exactly singular pivot."""
-
-    def __init__(self, matrix, perm=None) -> None:
-        from scipy.sparse.linalg import splu
-
-        self.perm = perm
-        matrix = matrix.tocsc() if perm is None else matrix.tocsr()[perm][:, perm].tocsc()
-        self.lu = splu(matrix, permc_spec="MMD_AT_PLUS_A" if perm is None else "NATURAL", diag_pivot_thresh=0.0,
-                       options={"SymmetricMode": True})
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        if self.perm is None:
-            return self.lu.solve(rhs)
-        out = np.empty_like(rhs)
-        out[self.perm] = self.lu.solve(rhs[self.perm])
-        return out
-
-    def pivots(self) -> np.ndarray:
-        return self.lu.U.diagonal()
-
-
-def _unknowns(elimination, columns) -> np.ndarray | None:
-    """Indices of every vertex's unknowns, vertex by vertex in ``elimination`` (id ranks; None: None);
-    ``columns(ranks)`` gives the (K, k) indices of ``ranks`` (K,)."""
-    return None if elimination is None else columns(elimination).ravel()
-
-
 def _newton_factor(graph, a, b, kappa, tau, x, r, d, n, free, perm=None):
     """Factorisation of Newton's Hessian at ``x`` (free unknowns, taken in the order ``perm``), or of
     Gauss-Newton's when Newton's is singular."""
     j = _jacobian(graph, a, b, kappa, tau, x, d, n)
     gauss = j.T @ j
     try:
-        return _SymmetricLU((gauss + _curvature(graph, a, b, kappa, tau, x, r, d, n))[free][:, free], perm)
+        return SymmetricFactor((gauss + _curvature(graph, a, b, kappa, tau, x, r, d, n))[free][:, free], perm)
     except RuntimeError:
-        return _SymmetricLU(gauss[free][:, free], perm)
+        return SymmetricFactor(gauss[free][:, free], perm)
 
 
 def polish(graph: g2o.PoseGraphFile, poses, mat=None, elimination=None) -> np.ndarray:
@@ -162,8 +132,7 @@ def polish(graph: g2o.PoseGraphFile, poses, mat=None, elimination=None) -> np.nd
     kappa, tau = isotropic_weights(graph)
     n = len(x)
     free = np.arange(3, 3 * n)
-    held = None if elimination is None else elimination[elimination != 0]  # the first vertex is held
-    perm = _unknowns(held, lambda k: 3 * (k[:, None] - 1) + np.arange(3))
+    perm = unknowns(held_first(elimination), lambda k: 3 * k[:, None] + np.arange(3))  # the first vertex held
     mat = data_matrix(graph) if mat is None else mat
     r, d = _residuals(graph, a, b, kappa, tau, x)
     lu, last = None, np.inf
@@ -261,7 +230,6 @@ def certify(graph: g2o.PoseGraphFile, poses, elimination=None) -> Certificate:
     from scipy.sparse import coo_matrix, identity
 
     mat = data_matrix(graph)
-    elimination = None if elimination is None else np.asarray(elimination)
     polished = polish(graph, poses, mat, elimination)
     order = np.argsort(graph.ids)
     n = len(order)
@@ -273,7 +241,7 @@ def certify(graph: g2o.PoseGraphFile, poses, elimination=None) -> Certificate:
     eta = ETA_REL * float(np.abs(mat.diagonal()).max())
     s = (mat - big + eta * identity(3 * n, format="csc")).tocsc()
     try:
-        lu = _SymmetricLU(s, _unknowns(elimination, lambda k: np.column_stack([k, n + 2 * k, n + 2 * k + 1])))
+        lu = SymmetricFactor(s, unknowns(elimination, lambda k: np.column_stack([k, n + 2 * k, n + 2 * k + 1])))
         negative = int(np.sum(lu.pivots() <= 0))
     except RuntimeError:  # an exactly singular pivot: S + eta I is not positive definite
         negative = -1

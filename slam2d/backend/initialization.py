@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from slam2d import geometry
+from slam2d.backend.sparse import SymmetricFactor, held_first, unknowns
 from slam2d.datasets import g2o
 from slam2d.errors import InputError
 
@@ -34,8 +35,9 @@ def _edge_index(graph: g2o.PoseGraphFile) -> tuple[np.ndarray, np.ndarray]:
     return a, b
 
 
-def _solve_anchored(rows, cols, vals, rhs, n_vars, fixed):
-    """Least squares ``A x ~ rhs`` (A sparse from triplets) with ``x[k] = v`` for (k, v) in ``fixed``."""
+def _solve_anchored(rows, cols, vals, rhs, n_vars, fixed, perm=None):
+    """Least squares ``A x ~ rhs`` (A sparse from triplets) with ``x[k] = v`` for (k, v) in ``fixed``; the normal
+    equations factorised with the free unknowns in the order ``perm`` (None: scipy's ``spsolve``)."""
     from scipy.sparse import csc_matrix
     from scipy.sparse.linalg import spsolve
 
@@ -46,13 +48,22 @@ def _solve_anchored(rows, cols, vals, rhs, n_vars, fixed):
         keep[k], x[k] = False, v
     rhs = rhs - a @ x
     a_free = a[:, keep]
-    x[keep] = spsolve((a_free.T @ a_free).tocsc(), a_free.T @ rhs)
+    normal, projected = a_free.T @ a_free, a_free.T @ rhs
+    x[keep] = spsolve(normal.tocsc(), projected) if perm is None else SymmetricFactor(normal, perm).solve(projected)
     return x
 
 
-def chordal_rotations(graph: g2o.PoseGraphFile, weighted: bool = True) -> np.ndarray:
+def _free_order(graph: g2o.PoseGraphFile, elimination) -> np.ndarray | None:
+    """The order of the free unknowns (two a vertex, the first vertex's held) of the vertices' id ranks
+    ``elimination`` (None: None)."""
+    rows = None if elimination is None else np.argsort(graph.ids)[np.asarray(elimination)]
+    return unknowns(held_first(rows), lambda k: 2 * k[:, None] + np.arange(2))
+
+
+def chordal_rotations(graph: g2o.PoseGraphFile, weighted: bool = True, elimination=None) -> np.ndarray:
     """Headings (N,) in rad by the chordal relaxation, vertex 0 at the file's heading;
-    each edge weighted by the square root of its heading information (1 unless ``weighted``)."""
+    each edge weighted by the square root of its heading information (1 unless ``weighted``). ``elimination``:
+    the vertices' id ranks in a fill-reducing order (``factors.elimination_order``; None: scipy's own)."""
     a, b = _edge_index(graph)
     m, n = len(a), len(graph.ids)
     c, s = np.cos(graph.measurements[:, 2]), np.sin(graph.measurements[:, 2])
@@ -63,13 +74,15 @@ def chordal_rotations(graph: g2o.PoseGraphFile, weighted: bool = True) -> np.nda
     cols = np.r_[2 * b, 2 * a, 2 * a + 1, 2 * b + 1, 2 * a, 2 * a + 1]
     vals = np.r_[w, -w * c, w * s, w, -w * s, -w * c]
     t0 = graph.poses[0, 2]
-    x = _solve_anchored(rows, cols, vals, np.zeros(2 * m), 2 * n, [(0, np.cos(t0)), (1, np.sin(t0))])
+    x = _solve_anchored(rows, cols, vals, np.zeros(2 * m), 2 * n, [(0, np.cos(t0)), (1, np.sin(t0))],
+                        _free_order(graph, elimination))
     return np.arctan2(x[1::2], x[0::2])
 
 
-def translations(graph: g2o.PoseGraphFile, theta, weighted: bool = True) -> np.ndarray:
+def translations(graph: g2o.PoseGraphFile, theta, weighted: bool = True, elimination=None) -> np.ndarray:
     """Positions (N, 2) in m minimising the translation residuals for fixed headings ``theta`` (N,),
-    whitened by each edge's translation information (identity unless ``weighted``)."""
+    whitened by each edge's translation information (identity unless ``weighted``); ``elimination`` as in
+    ``chordal_rotations``."""
     a, b = _edge_index(graph)
     m, n = len(a), len(graph.ids)
     # whiten in the frame of vertex i: L^T R_i^T (t_j - t_i - R_i t_ij), Lambda_xy = L L^T
@@ -85,15 +98,15 @@ def translations(graph: g2o.PoseGraphFile, theta, weighted: bool = True) -> np.n
             cols += [2 * b + k, 2 * a + k]
             vals += [wmat[:, r, k], -wmat[:, r, k]]
     x = _solve_anchored(np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), rhs, 2 * n,
-                        [(0, graph.poses[0, 0]), (1, graph.poses[0, 1])])
+                        [(0, graph.poses[0, 0]), (1, graph.poses[0, 1])], _free_order(graph, elimination))
     return x.reshape(n, 2)
 
 
-def chordal(graph: g2o.PoseGraphFile, weighted: bool = True) -> np.ndarray:
+def chordal(graph: g2o.PoseGraphFile, weighted: bool = True, elimination=None) -> np.ndarray:
     """Chordal start (N, 3): rotations by synchronisation, then linear translations
-    (isotropic unit weights unless ``weighted``)."""
-    theta = chordal_rotations(graph, weighted)
-    return np.column_stack([translations(graph, theta, weighted), theta])
+    (isotropic unit weights unless ``weighted``; ``elimination`` as in ``chordal_rotations``)."""
+    theta = chordal_rotations(graph, weighted, elimination)
+    return np.column_stack([translations(graph, theta, weighted, elimination), theta])
 
 
 def spanning_tree(graph: g2o.PoseGraphFile) -> np.ndarray:
@@ -121,11 +134,11 @@ def spanning_tree(graph: g2o.PoseGraphFile) -> np.ndarray:
     return poses
 
 
-def initial_poses(graph: g2o.PoseGraphFile, init: str = "chordal") -> np.ndarray:
-    """Start (N, 3) named ``init``: "chordal", "spanning_tree" or "file"."""
+def initial_poses(graph: g2o.PoseGraphFile, init: str = "chordal", elimination=None) -> np.ndarray:
+    """Start (N, 3) named ``init``: "chordal", "spanning_tree" or "file" (``elimination``: as in ``chordal``)."""
     name = str(init).lower()
     if name not in INITS:
         raise InputError("init", f"unknown initialisation {init!r} (choose from {', '.join(INITS)})")
     if name == "file":
         return np.array(graph.poses, dtype=np.float64)
-    return chordal(graph) if name == "chordal" else spanning_tree(graph)
+    return chordal(graph, elimination=elimination) if name == "chordal" else spanning_tree(graph)
