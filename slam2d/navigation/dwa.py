@@ -54,6 +54,8 @@ class DwaConfig(Section):
     progress_weight: float = Field(1.5, ge=0)
     path_weight: float = Field(1.0, ge=0)
     clearance_weight: float = Field(0.4, ge=0)
+    margin_weight: float = Field(3.0, ge=0, description="score lost by an arc coming the margin's width farther within "
+                                 "it than the moving arc that comes least within it (a tight passage: its middle)")
     velocity_weight: float = Field(0.6, ge=0)
     obstacle_speed: float = Field(0.8, ge=0, description="m/s assumed for points the map does not explain")
     obstacle_reach: float = Field(0.5, ge=0, description="m, the most such a point's margin grows along an arc")
@@ -113,6 +115,7 @@ class DynamicWindow:
         on_path = self._keeps_to(traj, pose, path, self.cfg.margin) & ~(unmapped & within).any()
         ok, clearance = self._admissible(v, dist, on_path)
         score = self._scores(v, traj, clearance, pose, path)
+        score -= self.cfg.margin_weight * self._within_margin(dist, ok & (v > 1e-3))
         score[~ok] = -np.inf
         forward = ok & (v > 1e-3)
         if not ok.any():
@@ -195,6 +198,16 @@ class DynamicWindow:
         stop = v * self.cfg.period + v**2 / (2 * self.robot.max_accel)
         ok = (stop <= v * free_time) | (v <= 1e-9)
         return ok, dist.min(axis=1) - r
+
+    def _within_margin(self, dist: np.ndarray, moving: np.ndarray) -> np.ndarray:
+        """How much farther (S,) each arc's disc comes within the margin of a point ahead than the ``moving`` (S,)
+        arc that comes least within it, as a fraction of the margin: in a passage narrower than the disc + twice
+        the margin the arcs along its middle lose nothing, and a stop gains nothing over driving through."""
+        if self.cfg.margin <= 0:
+            return np.zeros(len(dist))
+        within = np.clip(1.0 - (dist[:, 1:].min(axis=1) - self.robot.radius) / self.cfg.margin, 0.0, 1.0)
+        least = within[moving].min() if moving.any() else 0.0
+        return np.maximum(within - least, 0.0)
 
     def _reach(self, v_max: float) -> float:
         """Distance (m) within which points can matter to an arc."""
