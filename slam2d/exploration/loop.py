@@ -48,6 +48,7 @@ WARMUP = 2.0  # s the robot stands still at the start while the grid's first cel
 POCKET_REACHED = 0.1  # m: a view of a pocket is reached closer than other goals (it may be the only one)
 POCKET_DWELL = 1.0  # s standing at a view of a pocket (a log-odds cell needs a few scans to turn free)
 ENTRY_MIN = 0.3  # m: a tight goal's way with the safety margin shorter than this is not driven as a leg of its own
+TIGHT_MARGIN_WEIGHT = 3.0  # the DWA's margin_weight in a tight stretch: the arcs along its middle
 
 
 @dataclass(eq=False)
@@ -97,6 +98,9 @@ class _Loop:
         # a goal the map comes to block is inaccessible at once: the explorer picks another
         self.options = navigator_config({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
                                           True, "exploration.options")  # fmt: skip
+        dwa = self.options.dwa
+        self.tight_options = self.options.model_copy(update={"dwa": dwa.model_copy(update={
+            "margin_weight": max(dwa.margin_weight, TIGHT_MARGIN_WEIGHT)})})  # fmt: skip
         self.ignored = ignored_cells(self.world.unmapped, self.truth_frame, self.truth_free.shape, self.ecfg.bounds)
         # the robot's centre goes where the navigator plans: radius + inflation margin from walls
         self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2],
@@ -136,7 +140,7 @@ class _Loop:
         if goal.tight and (entry := self.entry(self.slam.pose, self.legs[0])) is not None:
             self.legs.insert(0, entry)  # the way to the tight stretch keeps the margin
             self.tight_legs.insert(0, False)
-        self.nav = Navigator(self.legs[0], self.disc(), self.options)
+        self.nav = self.navigator()
         self.goal_t0, self.best = now, (np.inf, now)
         self.goal_from = self.robot.pose[:2].copy()
         self.goals.append({"time": now, "position": goal.position.tolist(), "kind": goal.kind,
@@ -150,13 +154,16 @@ class _Loop:
         self._count(self.nav)
         self.legs.pop(0)
         self.tight_legs.pop(0)
-        self.nav = Navigator(self.legs[0], self.disc(), self.options)
+        self.nav = self.navigator()
         self.goal_t0, self.best = now, (np.inf, now)
 
-    def disc(self) -> RobotConfig:
-        """The robot as the navigator drives it: grown by the safety margin, but for the tight leg of a ``tight``
-        goal (a gap the margin does not fit through, the last resort)."""
-        return self.robot.cfg if self.goal is not None and self.tight_legs[0] else self.body
+    def navigator(self) -> Navigator:
+        """The navigator to the current leg: with the robot grown by the safety margin, but on the tight leg of a
+        ``tight`` goal (a gap the margin does not fit through, the last resort) with its own disc, and a DWA that
+        drives the gap's middle."""
+        if self.tight_legs[0]:
+            return Navigator(self.legs[0], self.robot.cfg, self.tight_options)
+        return Navigator(self.legs[0], self.body, self.options)
 
     def entry(self, pose, target) -> np.ndarray | None:
         """Where a tight goal's way to ``target`` (x, y) m leaves the room of the robot grown by the safety margin:
@@ -186,7 +193,7 @@ class _Loop:
                 cell[0], cell[1]]):  # fmt: skip
             self._count(self.nav)
             self.tight_legs[0] = False
-            self.nav = Navigator(self.legs[0], self.body, self.options)
+            self.nav = self.navigator()
 
     def close_goal(self, outcome: str) -> None:
         self._count(self.nav)

@@ -54,8 +54,9 @@ class DwaConfig(Section):
     progress_weight: float = Field(1.5, ge=0)
     path_weight: float = Field(1.0, ge=0)
     clearance_weight: float = Field(0.4, ge=0)
-    margin_weight: float = Field(3.0, ge=0, description="score lost by an arc coming the margin's width farther within "
-                                 "it than the moving arc that comes least within it (a tight passage: its middle)")
+    margin_weight: float = Field(0.0, ge=0, description="score lost by an arc coming the margin's width farther within "
+                                 "it than the arc along the path that comes least within it (a tight passage: its "
+                                 "middle); exploration's tight stretches use 3")
     velocity_weight: float = Field(0.6, ge=0)
     obstacle_speed: float = Field(0.8, ge=0, description="m/s assumed for points the map does not explain")
     obstacle_reach: float = Field(0.5, ge=0, description="m, the most such a point's margin grows along an arc")
@@ -116,7 +117,8 @@ class DynamicWindow:
         on_path = (off_path <= self.cfg.margin) & ~(unmapped & within).any()
         ok, clearance = self._admissible(v, dist, on_path)
         score = self._scores(v, traj, clearance, pose, path)
-        score -= self.cfg.margin_weight * self._within_margin(dist, ok & (v > 1e-3) & (off_path <= self.cfg.path_band))
+        if self.cfg.margin_weight > 0:
+            score -= self.cfg.margin_weight * self._within_margin(dist, ok & (v > 1e-3) & (off_path <= self.cfg.path_band))
         score[~ok] = -np.inf
         forward = ok & (v > 1e-3)
         if not ok.any():
