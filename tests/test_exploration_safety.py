@@ -2,6 +2,8 @@
 walls, through a doorway with little more room than that, and still explores both rooms; through a doorway the
 map draws too narrow for the margin (a tight goal) it keeps the margin up to the door and the door's middle in it."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -53,3 +55,35 @@ def test_a_tight_door_is_driven_through_its_middle_and_the_way_to_it_keeps_the_m
     assert m["tight_goals"] >= 1 and m["coverage"] >= 0.99 and m["collisions"] == 0
     assert (run.truth[:, 0] > 6.0).any()  # through the door and round the partition
     assert m["min_clearance"] >= cfg.exploration.safety_margin
+
+
+def test_the_way_to_a_tight_door_is_a_leg_of_its_own_with_the_margin():
+    """A room whose only door is 0.45 m wide (the boxed-in room of test_exploration): the tight goal beyond it is
+    driven in two legs, to the room's cell nearest the door with the disc grown by the margin, then through the
+    door with the robot's own disc and the DWA that keeps to the middle. Before, one leg with the bare disc."""
+    from slam2d.exploration.explorer import Explorer
+    from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView
+    from slam2d.exploration.loop import TIGHT_MARGIN_WEIGHT, _Loop
+
+    state = np.full((80, 240), UNKNOWN, dtype=np.int8)
+    state[10:70, 10:50] = FREE  # the room, 2 x 3 m
+    state[10:70, 50:52] = OCCUPIED  # its east wall, the door in it at y 1.8-2.25 m
+    state[36:45, 50:52] = FREE
+    state[10:70, 52:210] = FREE  # the hall beyond
+    state[8:10, 8:212] = state[70:72, 8:212] = OCCUPIED
+    state[10:70, 8:10] = OCCUPIED
+    view = GridView(state, 0.05, (0.0, 0.0))
+    cfg = explore_config.load(None, {"exploration.strategy": "nearest_frontier", "exploration.animation": False})
+    loop = _Loop(cfg)
+    loop.view = lambda: view
+    pose = np.array([1.0, 1.0, 0.0])
+    goal = Explorer(cfg.exploration, 0.2, 0.05, 12.0).decide(pose, view)
+    assert goal is not None and goal.tight
+    loop.slam = SimpleNamespace(pose=pose)  # where the robot stands on this map
+    loop.set_goal(goal, 0.0)
+    entry = loop.legs[0]
+    assert len(loop.legs) == 2 and loop.tight_legs == [False, True]
+    assert 2.0 < entry[0] < 2.5 and 1.7 < entry[1] < 2.35  # in the room, at the door
+    assert loop.nav.robot.radius == pytest.approx(0.25) and loop.nav.local.cfg.margin_weight == 0
+    loop.next_leg(1.0)
+    assert loop.nav.robot.radius == pytest.approx(0.2) and loop.nav.local.cfg.margin_weight == TIGHT_MARGIN_WEIGHT
