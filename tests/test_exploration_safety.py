@@ -1,5 +1,8 @@
 """The exploring robot's safety margin: it keeps ``exploration.safety_margin`` (5 cm) between its disc and the
-walls, through a doorway with little more room than that, and still explores both rooms."""
+walls, through a doorway with little more room than that, and still explores both rooms; through a doorway the
+map draws too narrow for the margin (a tight goal) it keeps the margin up to the door and the door's middle in it."""
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -16,8 +19,8 @@ def narrow_door_png(tmp_path, door: float = 0.7):
     img = np.zeros((80, 180), dtype=np.uint8)
     img[10:70, 10:90] = 255  # room A: x 0.5-4.5, y 0.5-3.5 (rows from the top)
     img[10:70, 94:170] = 255  # room B: x 4.7-8.5
-    half = round(door / 0.05) // 2
-    img[40 - half:40 + half, 88:96] = 255  # the door, centred at y = 2 m
+    rows = round(door / 0.05)
+    img[40 - rows // 2:40 - rows // 2 + rows, 88:96] = 255  # the door, at y = 2 m
     img[10:50, 110:113] = 0  # the partition
     path = tmp_path / "narrow_door.png"
     Image.fromarray(img).save(path)
@@ -35,3 +38,52 @@ def test_the_margin_holds_through_a_narrow_doorway_and_both_rooms_are_explored(t
     assert m["coverage"] >= 0.99 and m["collisions"] == 0 and not m["premature_stop"]
     assert (run.truth[:, 0] > 6.0).any()  # through the door and round the partition
     assert m["min_clearance"] >= cfg.exploration.safety_margin  # 5 cm from every wall, the door's jambs too
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_tight_door_is_driven_through_its_middle_and_the_way_to_it_keeps_the_margin(tmp_path, seed):
+    """A door 0.55 m wide: on the map the disc grown by the margin does not fit through it (a tight goal), yet its
+    middle leaves the robot's disc 7.5 cm each side. Before, the whole way to it was driven with the bare disc and
+    the door off its middle: 2.1 and 2.9 cm (seeds 1, 2)."""
+    cfg = explore_config.load(None, {
+        "dataset.simulator.world": str(narrow_door_png(tmp_path, 0.55)), "seed": seed,
+        "exploration.strategy": "nearest_frontier", "exploration.start": [1.5, 2.0, 0.0], "exploration.max_time": 200,
+        "exploration.animation": False,
+    })  # fmt: skip
+    run = explore(cfg)
+    m = run.metrics
+    assert m["tight_goals"] >= 1 and m["coverage"] >= 0.99 and m["collisions"] == 0
+    assert (run.truth[:, 0] > 6.0).any()  # through the door and round the partition
+    assert m["min_clearance"] >= cfg.exploration.safety_margin
+
+
+def test_the_way_to_a_tight_door_is_a_leg_of_its_own_with_the_margin():
+    """A room whose only door is 0.45 m wide (the boxed-in room of test_exploration): the tight goal beyond it is
+    driven in two legs, to the room's cell nearest the door with the disc grown by the margin, then through the
+    door with the robot's own disc and the DWA that keeps to the middle. Before, one leg with the bare disc."""
+    from slam2d.exploration.explorer import Explorer
+    from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView
+    from slam2d.exploration.loop import TIGHT_MARGIN_WEIGHT, _Loop
+
+    state = np.full((80, 240), UNKNOWN, dtype=np.int8)
+    state[10:70, 10:50] = FREE  # the room, 2 x 3 m
+    state[10:70, 50:52] = OCCUPIED  # its east wall, the door in it at y 1.8-2.25 m
+    state[36:45, 50:52] = FREE
+    state[10:70, 52:210] = FREE  # the hall beyond
+    state[8:10, 8:212] = state[70:72, 8:212] = OCCUPIED
+    state[10:70, 8:10] = OCCUPIED
+    view = GridView(state, 0.05, (0.0, 0.0))
+    cfg = explore_config.load(None, {"exploration.strategy": "nearest_frontier", "exploration.animation": False})
+    loop = _Loop(cfg)
+    loop.view = lambda: view
+    pose = np.array([1.0, 1.0, 0.0])
+    goal = Explorer(cfg.exploration, 0.2, 0.05, 12.0).decide(pose, view)
+    assert goal is not None and goal.tight
+    loop.slam = SimpleNamespace(pose=pose)  # where the robot stands on this map
+    loop.set_goal(goal, 0.0)
+    entry = loop.legs[0]
+    assert len(loop.legs) == 2 and loop.tight_legs == [False, True]
+    assert 2.0 < entry[0] < 2.5 and 1.7 < entry[1] < 2.35  # in the room, at the door
+    assert loop.nav.robot.radius == pytest.approx(0.25) and loop.nav.local.cfg.margin_weight == 0
+    loop.next_leg(1.0)
+    assert loop.nav.robot.radius == pytest.approx(0.2) and loop.nav.local.cfg.margin_weight == TIGHT_MARGIN_WEIGHT

@@ -47,6 +47,8 @@ log = logging.getLogger(__name__)
 WARMUP = 2.0  # s the robot stands still at the start while the grid's first cells become free
 POCKET_REACHED = 0.1  # m: a view of a pocket is reached closer than other goals (it may be the only one)
 POCKET_DWELL = 1.0  # s standing at a view of a pocket (a log-odds cell needs a few scans to turn free)
+ENTRY_MIN = 0.3  # m: a tight goal's way with the safety margin shorter than this is not driven as a leg of its own
+TIGHT_MARGIN_WEIGHT = 3.0  # the DWA's margin_weight in a tight stretch: the arcs along its middle
 
 
 @dataclass(eq=False)
@@ -96,6 +98,9 @@ class _Loop:
         # a goal the map comes to block is inaccessible at once: the explorer picks another
         self.options = navigator_config({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
                                           True, "exploration.options")  # fmt: skip
+        dwa = self.options.dwa
+        self.tight_options = self.options.model_copy(update={"dwa": dwa.model_copy(update={
+            "margin_weight": max(dwa.margin_weight, TIGHT_MARGIN_WEIGHT)})})  # fmt: skip
         self.ignored = ignored_cells(self.world.unmapped, self.truth_frame, self.truth_free.shape, self.ecfg.bounds)
         # the robot's centre goes where the navigator plans: radius + inflation margin from walls
         self.reachable = reachable_free(self.truth_free, self.truth_frame, start[:2],
@@ -113,6 +118,7 @@ class _Loop:
         self.goal: Goal | None = None
         self.dwell: float | None = None  # s: until when the robot stands at a view of a pocket
         self.legs: list[np.ndarray] = []
+        self.tight_legs: list[bool] = []  # per leg: driven with the robot's own disc (the tight stretch of a goal)
         self.goals: list[dict] = []
         self.replans = self.recoveries = self.escapes = 0
         self.contacts: list = []
@@ -130,7 +136,11 @@ class _Loop:
             self.nav = None
             return
         self.legs = [np.asarray(w, float) for w in goal.waypoints] + [goal.position]
-        self.nav = Navigator(self.legs[0], self.disc(), self.options)
+        self.tight_legs = [goal.tight] * len(self.legs)
+        if goal.tight and (entry := self.entry(self.slam.pose, self.legs[0])) is not None:
+            self.legs.insert(0, entry)  # the way to the tight stretch keeps the margin
+            self.tight_legs.insert(0, False)
+        self.nav = self.navigator()
         self.goal_t0, self.best = now, (np.inf, now)
         self.goal_from = self.robot.pose[:2].copy()
         self.goals.append({"time": now, "position": goal.position.tolist(), "kind": goal.kind,
@@ -143,13 +153,34 @@ class _Loop:
     def next_leg(self, now: float) -> None:
         self._count(self.nav)
         self.legs.pop(0)
-        self.nav = Navigator(self.legs[0], self.disc(), self.options)
+        self.tight_legs.pop(0)
+        self.nav = self.navigator()
         self.goal_t0, self.best = now, (np.inf, now)
 
-    def disc(self) -> RobotConfig:
-        """The robot as the navigator drives it: grown by the safety margin, but for a ``tight`` goal (a gap the
-        margin does not fit through, the last resort)."""
-        return self.robot.cfg if self.goal is not None and self.goal.tight else self.body
+    def navigator(self) -> Navigator:
+        """The navigator to the current leg: with the robot grown by the safety margin, but on the tight leg of a
+        ``tight`` goal (a gap the margin does not fit through, the last resort) with its own disc, and a DWA that
+        drives the gap's middle."""
+        if self.tight_legs[0]:
+            return Navigator(self.legs[0], self.robot.cfg, self.tight_options)
+        return Navigator(self.legs[0], self.body, self.options)
+
+    def entry(self, pose, target) -> np.ndarray | None:
+        """Where a tight goal's way to ``target`` (x, y) m leaves the room of the robot grown by the safety margin:
+        of the cells that disc reaches from ``pose``, the one nearest ``target`` along the paths of the robot's own
+        disc (the paths the explorer found it on); None when that is within ``ENTRY_MIN`` of the robot or
+        ``target`` is out of the map."""
+        view = self.view()
+        cell, goal = view.to_cell(pose[:2]), view.to_cell(target)
+        if not view.inside(goal[None])[0]:
+            return None
+        wide = geodesic(view.traversable(self.body.radius), cell, view.resolution)
+        left = np.where(np.isfinite(wide), geodesic(view.traversable(self.robot.cfg.radius), goal, view.resolution),
+                        np.inf)  # fmt: skip
+        best = np.unravel_index(np.argmin(left), left.shape)
+        if not np.isfinite(left[best]) or wide[best] < ENTRY_MIN:
+            return None
+        return view.to_world(np.array(best))
 
     def widen(self, pose) -> None:
         """A ``tight`` goal whose current leg the map now lets the robot reach with the safety margin (a door
@@ -161,8 +192,8 @@ class _Loop:
         if np.isfinite(geodesic(view.traversable(self.body.radius), view.to_cell(pose[:2]), view.resolution)[
                 cell[0], cell[1]]):  # fmt: skip
             self._count(self.nav)
-            self.goal.tight = False
-            self.nav = Navigator(self.legs[0], self.body, self.options)
+            self.tight_legs[0] = False
+            self.nav = self.navigator()
 
     def close_goal(self, outcome: str) -> None:
         self._count(self.nav)
@@ -237,7 +268,7 @@ def _drive(loop: _Loop, cfg: ExploreConfig, progress, view, t_wall: float) -> Ex
             loop.explorer.keep_up(checked)  # the decision's grids kept up with the map while the robot drives
             if loop.explorer.spent(loop.goal, checked):
                 loop.close_goal("spent")
-            elif loop.goal.tight:
+            elif loop.tight_legs[0]:
                 loop.widen(pose)
         if loop.goal is None and loop.retrace is None:
             loop.set_goal(loop.explorer.decide(pose, loop.view()), now)
@@ -275,7 +306,10 @@ def _drive(loop: _Loop, cfg: ExploreConfig, progress, view, t_wall: float) -> Ex
             if loop.nav.status == REACHED:
                 loop.close_goal("reached")
             elif loop.nav.status != ACTIVE or loop.no_progress(pose, now):
-                loop.close_goal("inaccessible")
+                if len(loop.legs) > 1 and loop.tight_legs[1] and not loop.tight_legs[0]:
+                    loop.next_leg(now)  # the way to a tight stretch failed with the margin: on with the robot's disc
+                else:
+                    loop.close_goal("inaccessible")
             if loop.nav is None and idle < 20:  # a new goal at once, the robot waits at most 20 decisions
                 idle += 1
                 continue

@@ -54,6 +54,9 @@ class DwaConfig(Section):
     progress_weight: float = Field(1.5, ge=0)
     path_weight: float = Field(1.0, ge=0)
     clearance_weight: float = Field(0.4, ge=0)
+    margin_weight: float = Field(0.0, ge=0, description="score lost by an arc coming the margin's width farther within "
+                                 "it than the arc along the path that comes least within it (a tight passage: its "
+                                 "middle); exploration's tight stretches use 3")
     velocity_weight: float = Field(0.6, ge=0)
     obstacle_speed: float = Field(0.8, ge=0, description="m/s assumed for points the map does not explain")
     obstacle_reach: float = Field(0.5, ge=0, description="m, the most such a point's margin grows along an arc")
@@ -110,9 +113,12 @@ class DynamicWindow:
         within = d2 < self._reach(v.max()) ** 2  # points that can matter to an arc
         dist = self._distances(traj, points[within], unmapped[within])
         # a point that may move near the arcs: no squeezing along the path
-        on_path = self._keeps_to(traj, pose, path, self.cfg.margin) & ~(unmapped & within).any()
+        off_path = self._off_path(traj, pose, path)
+        on_path = (off_path <= self.cfg.margin) & ~(unmapped & within).any()
         ok, clearance = self._admissible(v, dist, on_path)
         score = self._scores(v, traj, clearance, pose, path)
+        if self.cfg.margin_weight > 0:
+            score -= self.cfg.margin_weight * self._within_margin(dist, ok & (v > 1e-3) & (off_path <= self.cfg.path_band))
         score[~ok] = -np.inf
         forward = ok & (v > 1e-3)
         if not ok.any():
@@ -196,19 +202,32 @@ class DynamicWindow:
         ok = (stop <= v * free_time) | (v <= 1e-9)
         return ok, dist.min(axis=1) - r
 
+    def _within_margin(self, dist: np.ndarray, along: np.ndarray) -> np.ndarray:
+        """How much farther (S,) each arc's disc comes within the margin of a point ahead than the arc ``along``
+        (S,) the path (moving, within ``path_band`` of it) that comes least within it, as a fraction of the margin:
+        in a passage narrower than the disc + twice the margin the arcs along its middle lose nothing, and neither
+        a stop nor turning away gains anything over driving through."""
+        if self.cfg.margin <= 0:
+            return np.zeros(len(dist))
+        within = np.clip(1.0 - (dist[:, 1:].min(axis=1) - self.robot.radius) / self.cfg.margin, 0.0, 1.0)
+        if not along.any():
+            return np.zeros(len(dist))
+        return np.maximum(within - within[along].min(), 0.0)
+
     def _reach(self, v_max: float) -> float:
         """Distance (m) within which points can matter to an arc."""
         c = self.cfg
         return v_max * c.horizon + self.robot.radius + c.margin + c.obstacle_reach + 0.1
 
-    def _keeps_to(self, traj, pose, path, band: float) -> np.ndarray:
-        """Whether every sample of each arc lies within ``band`` m of the path ahead (S,)."""
+    def _off_path(self, traj, pose, path) -> np.ndarray:
+        """How far (S,) m the farthest sample of each arc lies from the path ahead (inf: no path within reach)."""
+        band = max(self.cfg.margin, self.cfg.path_band)
         local = in_robot_frame(pose, path)
         local = local[np.einsum("ij,ij->i", local, local) < (self.robot.max_speed * self.cfg.horizon + band) ** 2]
         if len(local) == 0:
-            return np.zeros(len(traj), bool)
+            return np.full(len(traj), np.inf)
         gap = cKDTree(local).query(traj[:, :, :2].reshape(-1, 2))[0].reshape(traj.shape[:2])  # (S, K) m
-        return gap.max(axis=1) <= band
+        return gap.max(axis=1)
 
     def _scores(self, v, traj, clearance, pose, path) -> np.ndarray:
         """Weighted score (S,) of every arc (higher is better)."""
