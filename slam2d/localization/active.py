@@ -7,8 +7,9 @@ hypothesis; under hypothesis h the robot would stand at h composed with that
 relative pose. The scan predicted there under the best (ray cast in the map) is
 scored under each other hypothesis as the filter would score it: the evidence one
 scan would add. Only goals free in every hypothesis are offered (driving there is
-safe whichever is true); the nearest whose evidence reaches GAIN (or, if none
-does, half the most any candidate reaches) is chosen. :class:`Looker` steers a
+safe whichever is true); the nearest by the way the robot drives (round walls, through
+doors) whose evidence reaches GAIN (or, if none does, half the most any candidate
+reaches) is chosen. :class:`Looker` steers a
 robot without a navigation stack there.
 """
 
@@ -22,7 +23,7 @@ from slam2d import geometry
 from slam2d.localization.mcl import ParticleFilter
 from slam2d.localization.sensor import BeamModel
 
-__all__ = ["Goal", "Looker", "contenders", "disambiguating_goal", "separation"]
+__all__ = ["Goal", "Looker", "contenders", "disambiguating_goal", "separation", "way_length", "way_to"]
 
 GAIN = 1.0  # log evidence per scan from which a goal is decisive (the nearest such is chosen)
 WORTH = 0.1  # log evidence per scan below which no place separates the hypotheses (copies drawn a cell apart)
@@ -107,28 +108,31 @@ def _misfit(pf: ParticleFilter, ranges: np.ndarray, poses: np.ndarray, angles: n
 def disambiguating_goal(pf: ParticleFilter, candidates: int = 400, max_distance: float = 15.0,
                         clearance: float = 0.5, seed: int = 0, angles: np.ndarray | None = None) -> Goal | None:
     """The nearest of ``candidates`` free places (``clearance`` m from walls) within ``max_distance`` m
-    of the estimate (in the best hypothesis's map) whose scan would add GAIN of evidence (or half the
-    most any candidate would) against the other hypotheses (:func:`separation`; ``angles``: the
-    laser's); None when fewer than two compact hypotheses hold weight or no place is worth WORTH."""
+    of way (:func:`way_length`: the robot drives round walls, so a place behind one is as far as the way
+    through the door) from the estimate (in the best hypothesis's map) whose scan would add GAIN of
+    evidence (or half the most any candidate would) against the other hypotheses (:func:`separation`;
+    ``angles``: the laser's); None when fewer than two compact hypotheses hold weight or no place is
+    worth WORTH."""
     best = pf.estimate.hypotheses[0] if pf.estimate.hypotheses else None
     if best is None:
         return None
     rng = np.random.default_rng(seed)
     known = pf.map
     cells = known.free_cells(clearance)
-    row, col = np.divmod(cells, known.shape[1])
+    length = way_length(known, best.pose).ravel()[cells]
+    cells, length = cells[length <= max_distance], length[length <= max_distance]
+    if len(cells) == 0:
+        return None
+    pick = rng.choice(len(cells), min(candidates, len(cells)), replace=False)
+    row, col = np.divmod(cells[pick], known.shape[1])
     xy = np.column_stack([known.origin[0] + (col + 0.5) * known.resolution,
                           known.origin[1] + (row + 0.5) * known.resolution])  # fmt: skip
-    near = xy[np.hypot(*(xy - best.pose[:2]).T) <= max_distance]
-    if len(near) == 0:
-        return None
-    pick = near[rng.choice(len(near), min(candidates, len(near)), replace=False)]
-    goals = np.column_stack([pick, np.arctan2(pick[:, 1] - best.pose[1], pick[:, 0] - best.pose[0])])
+    goals = np.column_stack([xy, np.arctan2(xy[:, 1] - best.pose[1], xy[:, 0] - best.pose[0])])
     sep, free = separation(pf, goals, angles, clearance)
     sep = np.where(free, sep, 0.0)
     if sep.max() < WORTH:
         return None
-    distance = np.hypot(*(goals[:, :2] - best.pose[:2]).T)
+    distance = length[pick]
     good = np.flatnonzero(sep >= min(GAIN, 0.5 * sep.max()))
     i = good[np.argmin(distance[good])]
     return Goal(goals[i], float(sep[i]), float(distance[i]))
@@ -158,6 +162,23 @@ def way_to(known, goal: np.ndarray) -> np.ndarray:
         return np.full(known.shape, np.inf)
     field, _ = MCP_Geometric(cost).find_costs([tuple(int(c) for c in cell)])
     return field
+
+
+def way_length(known, start: np.ndarray) -> np.ndarray:
+    """Length (m) (H, W) of the shortest way from ``start`` (x, y, ...) to every cell over the cells
+    :func:`way_to` lets the robot pass (inf where none leads); the cells within ``_LOOKAHEAD`` m of the
+    start are passable (the robot steers out from near a wall)."""
+    from skimage.graph import MCP_Geometric
+
+    cost = np.where(known.free & (known.distance() >= _NARROW), 1.0, np.inf)
+    cell = known.world_to_cell(np.asarray(start[:2], dtype=np.float64)[None])[0]
+    if not known.in_bounds(cell[None])[0]:
+        return np.full(known.shape, np.inf)
+    rows, cols = np.ogrid[:known.shape[0], :known.shape[1]]
+    near = np.hypot(rows - cell[0], cols - cell[1]) <= _LOOKAHEAD / known.resolution
+    cost[near & known.free] = 1.0
+    field, _ = MCP_Geometric(cost).find_costs([tuple(int(c) for c in cell)])
+    return field * known.resolution
 
 
 def heading_to(known, field: np.ndarray, pose: np.ndarray) -> float | None:
