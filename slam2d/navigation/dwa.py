@@ -221,9 +221,9 @@ class DynamicWindow:
 
     def _off_path(self, traj, pose, path) -> np.ndarray:
         """How far (S,) m the farthest sample of each arc lies from the path ahead (inf: no path within reach)."""
-        band = max(self.cfg.margin, self.cfg.path_band)
         local = in_robot_frame(pose, path)
-        local = local[np.einsum("ij,ij->i", local, local) < (self.robot.max_speed * self.cfg.horizon + band) ** 2]
+        reach = self.robot.max_speed * self.cfg.horizon + self.cfg.margin
+        local = local[np.einsum("ij,ij->i", local, local) < reach**2]
         if len(local) == 0:
             return np.full(len(traj), np.inf)
         gap = cKDTree(local).query(traj[:, :, :2].reshape(-1, 2))[0].reshape(traj.shape[:2])  # (S, K) m
