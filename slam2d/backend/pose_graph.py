@@ -5,8 +5,7 @@ Keyframe ``k`` is the gtsam key ``symbol('x', k)``, landmark ``n`` is
 tight prior; each later keyframe a between factor from its predecessor (odometry or
 scan matching, no robust kernel); loop closures are between factors with the configured
 robust kernel; landmark observations are bearing-range factors. iSAM2 keeps the incremental
-estimate (keyframes joined by odometry alone wait for the next loop or landmark, see
-``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors, in a
+estimate (at most one update per keyframe, see ``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors, in a
 worker process that a signal ends at once (``lm.in_worker``; iSAM2's updates stay in this process).
 
 Poses are numpy ``(x, y, theta)`` (m, m, rad); information matrices are 3x3
@@ -183,13 +182,15 @@ class PoseGraph:
     def update(self) -> None:
         """Bring the estimate up to date with the factors added since the last call.
 
-        Keyframes added with odometry alone do not reach iSAM2 while its estimate has
-        settled (no delta above a relinearisation threshold, so an update would only add
-        them): a chain of odometry leaves the optimum of the rest unchanged, so each such
-        keyframe is estimated at its predecessor's estimate composed with its odometry (which
-        replaces its initial value, also when it enters iSAM2 at once). Otherwise, and with
-        any other factor (loop, landmark, the first keyframe's prior), one iSAM2 update with
-        everything pending; so too a call with nothing new (one more iteration). Reads needing iSAM2 (``marginal_covariance``,
+        Keyframes added with odometry alone do not reach iSAM2 while its estimate has settled (no
+        delta above a relinearisation threshold, so an update would only add them): a chain of
+        odometry leaves the optimum of the rest unchanged, so each such keyframe is estimated at its
+        predecessor's estimate composed with its odometry (which replaces its initial value, also when
+        it enters iSAM2 at once). When iSAM2 has not settled, the relinearisation waits one call: it
+        goes with the keyframe's loops if they come, else with the next call, so a keyframe costs at
+        most one iSAM2 update (docs/posegraphs.md, "Latency per keyframe"). With any other factor
+        (loop, landmark, the first keyframe's prior), one iSAM2 update with everything pending; so too
+        a call with nothing new (one more iteration). Reads needing iSAM2 (``marginal_covariance``,
         ``loop_consistency``) hand the waiting keyframes over first.
         """
         nothing_new = self._n_updated == len(self._initial)
@@ -197,16 +198,15 @@ class PoseGraph:
             i, delta = self._odometry[k - 1]
             self._new_values.update(pose_key(k), self._pose_value(i).compose(delta))
         self._n_updated = len(self._initial)
-        if self._pending_other or nothing_new or not self._is_settled():
+        if self._pending_other or nothing_new or self._relinearisation_due:
             self._flush()
+        else:
+            self._relinearisation_due = not self._is_settled()
 
     def _flush(self) -> None:
-        """One iSAM2 update with every factor and value pending.
-
-        If Cholesky finds the system indeterminate (very anisotropic information
-        matrices, as in MIT.g2o, square the condition number), iSAM2 restarts with
-        QR factorisation from its last linearisation point and stays with QR.
-        """
+        """One iSAM2 update with every factor and value pending. If Cholesky finds the system indeterminate
+        (very anisotropic information matrices, as in MIT.g2o, square the condition number), iSAM2 restarts
+        with QR factorisation from its last linearisation point and stays with QR."""
         import gtsam
 
         self.isam_updates += 1
@@ -228,19 +228,21 @@ class PoseGraph:
                 self._isam.update(self._batch_graph()[0], values)
         self._new_graph, self._new_values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         self._n_in_isam = self._n_updated = len(self._initial)
-        self._pending_other = False
+        self._pending_other = self._relinearisation_due = False
         self._isam_poses = None
         self._settled = None  # unknown until asked (``_is_settled``)
 
     def _is_settled(self) -> bool:
-        """Whether iSAM2's next update would relinearise nothing (no delta above a threshold),
-        i.e. only add what is pending; asked once per iSAM2 update."""
+        """Whether iSAM2's next update would relinearise nothing (no delta above a threshold), i.e. only add
+        what is pending; asked once per iSAM2 update. iSAM2's full check (``CheckRelinearizationFull``; the
+        partial one, if enabled, may find less) on its delta as one vector, landmarks (2 each) before poses (3
+        each) in key order: ``predictUpdateInfo``'s answer without marking the cliques to re-eliminate (up to
+        50 ms on city10000)."""
         if self._settled is None:
-            import gtsam
-
-            nothing = gtsam.NonlinearFactorGraph(), gtsam.Values(), gtsam.ISAM2UpdateParams()
-            keys, _ = self._isam.predictUpdateInfo(*nothing)
-            self._settled = keys.size() == 0
+            delta = self._isam.getDelta().vector()
+            n = delta.size - 3 * self._n_in_isam  # landmark components
+            self._settled = not (np.any(np.abs(delta[n:]).reshape(-1, 3) > RELINEARIZE_POSE)
+                                 or np.any(np.abs(delta[:n]) > RELINEARIZE_LANDMARK))
         return self._settled
 
     def estimate(self) -> np.ndarray:
@@ -416,7 +418,8 @@ class PoseGraph:
         self._isam = gtsam.ISAM2(params)
         self._new_graph, self._new_values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         self._n_in_isam = self._n_updated = 0  # keyframes in iSAM2; keyframes update() has seen
-        self._pending_other = False  # a pending factor other than odometry
+        self._pending_other = self._relinearisation_due = False  # a pending factor other than odometry; iSAM2 had
+        # not settled at the last call to update (the next one updates it)
         self._settled = None  # iSAM2's next update would relinearise nothing (None: not asked)
         self._isam_poses = None
 
