@@ -12,7 +12,8 @@ With ``--latency`` it reports instead, for each graph, the wall time a SLAM run 
 at one update per keyframe under the default thresholds (adding the keyframe, its loops and the
 updates: the time from one keyframe's arrival to the next's), its median, p90, p99 and max over
 all keyframes and ``--repeat`` runs, the same for this thread's CPU time (the machine is shared), and the final
-estimate's error against the batch optimum's.
+estimate's error against the batch optimum's. The replay adds a keyframe's loops before it reads anything, so a
+relinearisation waiting in ``PoseGraph.update`` goes with them; the SLAM back end's loop search reads in between.
 
     nice .venv/bin/python benchmarks/posegraph_incremental.py [--graph M3500] [--every 1 10] [--repeat 3]
     nice .venv/bin/python benchmarks/posegraph_incremental.py --latency --graph M3500 intel MIT CSAIL [--partial-check]
