@@ -186,6 +186,75 @@ def test_odometry_keyframes_wait_outside_isam2_at_their_optimum():
     assert pg.isam_updates == before + 2
 
 
+def _isam2_would_relinearise(pg) -> bool:
+    """iSAM2's own answer: its next update would relinearise some variable."""
+    nothing = gtsam.NonlinearFactorGraph(), gtsam.Values(), gtsam.ISAM2UpdateParams()
+    return pg._isam.predictUpdateInfo(*nothing)[0].size() > 0
+
+
+def test_a_keyframe_costs_at_most_one_isam2_update():
+    """While iSAM2 has not settled, a keyframe joined by odometry waits one call: its relinearisation goes with
+    its loops (one iSAM2 update, not two), or without loops with the next keyframe's call."""
+    truth = square()
+    deltas = odometry(truth, seed=5)
+    pg = build(truth, deltas, [true_loop(truth)])
+    lap = odometry(truth, seed=6)
+    poses = dead_reckoning(pg.estimate()[-1], lap)
+    assert _isam2_would_relinearise(pg)
+    counts = []  # iSAM2 updates at the keyframe's own call, then with its loops
+    for k, d, loops in zip(range(17, 21), lap, ([1], [], [], [4])):
+        before = pg.isam_updates
+        pg.add_keyframe(poses[k - 16], d, ODOM_INFO)
+        pg.update()
+        counts.append(pg.isam_updates - before)
+        for i in loops:  # back where keyframe i was
+            pg.add_loop(i, k, np.zeros(3), LOOP_INFO)
+            pg.update()
+        counts.append(pg.isam_updates - before)
+    assert counts == [0, 1, 0, 0, 1, 1, 0, 1]  # 18 waits, 19 relinearises; 17 and 20 with their loops
+
+
+def test_a_read_runs_the_waiting_relinearisation_first():
+    """What a read gives does not depend on whether the relinearisation waited: the SLAM back end, which reads
+    between a keyframe and its loops, gets the estimates it got when every update relinearised at once."""
+    truth = square()
+    deltas, lap = odometry(truth, seed=5), odometry(truth, seed=6)
+    graphs = [build(truth, deltas, [true_loop(truth)]) for _ in range(2)]
+    reads = []
+    for pg, read in zip(graphs, ("estimate", "pose")):
+        pg.add_keyframe(geometry.compose(pg.estimate()[-1], lap[0]), lap[0], ODOM_INFO)
+        pg.update()
+        before = pg.isam_updates
+        reads.append(pg.estimate() if read == "estimate" else pg.pose(17))
+        assert pg.isam_updates == before + 1
+    eager = build(truth, deltas, [true_loop(truth)])
+    eager.add_keyframe(geometry.compose(eager.estimate()[-1], lap[0]), lap[0], ODOM_INFO)
+    eager.update()
+    eager.update()  # the old eager relinearisation: one more iSAM2 update with nothing new
+    np.testing.assert_array_equal(reads[0], eager.estimate())
+    np.testing.assert_array_equal(reads[1], eager.pose(17))
+
+
+def test_settled_is_isam2s_own_relinearisation_check():
+    """The settled check on iSAM2's delta agrees with iSAM2's prediction of its next update, landmarks included."""
+    truth = square()
+    deltas = odometry(truth, seed=7)
+    pg = PoseGraph(BackendConfig(name="pose_graph", robust="none"))
+    poses = dead_reckoning(truth[0], deltas)
+    pg.add_keyframe(poses[0])
+    answers = set()
+    for k, d in enumerate(deltas, 1):
+        pg.add_keyframe(poses[k], d, ODOM_INFO)
+        if k % 4 == 0:
+            pg.add_landmark_observation(k, k // 4, 0.3, 2.0, np.diag([1e-4, 1e-3]))
+        if k == 16:
+            pg.add_loop(*true_loop(truth), LOOP_INFO)
+        pg.update()
+        pg._settled = None
+        answers.add((pg._is_settled(), not _isam2_would_relinearise(pg)))
+    assert answers == {(True, True), (False, False)}
+
+
 class _FailsOnce:
     """An iSAM2 whose next update raises Cholesky's indeterminate-system error."""
 

@@ -5,8 +5,7 @@ Keyframe ``k`` is the gtsam key ``symbol('x', k)``, landmark ``n`` is
 tight prior; each later keyframe a between factor from its predecessor (odometry or
 scan matching, no robust kernel); loop closures are between factors with the configured
 robust kernel; landmark observations are bearing-range factors. iSAM2 keeps the incremental
-estimate (keyframes joined by odometry alone wait for the next loop or landmark, see
-``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors, in a
+estimate (at most one update per keyframe, see ``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors, in a
 worker process that a signal ends at once (``lm.in_worker``; iSAM2's updates stay in this process).
 
 Poses are numpy ``(x, y, theta)`` (m, m, rad); information matrices are 3x3
@@ -183,30 +182,30 @@ class PoseGraph:
     def update(self) -> None:
         """Bring the estimate up to date with the factors added since the last call.
 
-        Keyframes added with odometry alone do not reach iSAM2 while its estimate has
-        settled (no delta above a relinearisation threshold, so an update would only add
-        them): a chain of odometry leaves the optimum of the rest unchanged, so each such
-        keyframe is estimated at its predecessor's estimate composed with its odometry (which
-        replaces its initial value, also when it enters iSAM2 at once). Otherwise, and with
-        any other factor (loop, landmark, the first keyframe's prior), one iSAM2 update with
-        everything pending; so too a call with nothing new (one more iteration). Reads needing iSAM2 (``marginal_covariance``,
-        ``loop_consistency``) hand the waiting keyframes over first.
-        """
+        Keyframes added with odometry alone do not reach iSAM2 while its estimate has settled (no delta
+        above a relinearisation threshold, so an update would only add them): a chain of odometry leaves
+        the optimum of the rest unchanged, so each such keyframe is estimated at its predecessor's estimate
+        composed with its odometry (which replaces its initial value, also when it enters iSAM2 at once).
+        When iSAM2 has not settled, the relinearisation waits for the next call, so it goes with the
+        keyframe's loops if they come before any read: a keyframe costs at most one iSAM2 update
+        (docs/posegraphs.md, "Latency per keyframe"); a read runs it first, so gives what it gave before.
+        With any other factor (loop, landmark, the first keyframe's prior), one iSAM2 update with everything
+        pending; so too a call with nothing new (one more iteration). Reads needing iSAM2
+        (``marginal_covariance``, ``loop_consistency``) hand the waiting keyframes over first."""
         nothing_new = self._n_updated == len(self._initial)
         for k in range(max(self._n_updated, 1), len(self._initial)):
             i, delta = self._odometry[k - 1]
             self._new_values.update(pose_key(k), self._pose_value(i).compose(delta))
         self._n_updated = len(self._initial)
-        if self._pending_other or nothing_new or not self._is_settled():
+        if self._pending_other or nothing_new or self._relinearisation_due:
             self._flush()
+        else:
+            self._relinearisation_due = not self._is_settled()
 
     def _flush(self) -> None:
-        """One iSAM2 update with every factor and value pending.
-
-        If Cholesky finds the system indeterminate (very anisotropic information
-        matrices, as in MIT.g2o, square the condition number), iSAM2 restarts with
-        QR factorisation from its last linearisation point and stays with QR.
-        """
+        """One iSAM2 update with every factor and value pending. If Cholesky finds the system indeterminate
+        (very anisotropic information matrices, as in MIT.g2o, square the condition number), iSAM2 restarts
+        with QR factorisation from its last linearisation point and stays with QR."""
         import gtsam
 
         self.isam_updates += 1
@@ -228,19 +227,19 @@ class PoseGraph:
                 self._isam.update(self._batch_graph()[0], values)
         self._new_graph, self._new_values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         self._n_in_isam = self._n_updated = len(self._initial)
-        self._pending_other = False
+        self._pending_other = self._relinearisation_due = False
         self._isam_poses = None
         self._settled = None  # unknown until asked (``_is_settled``)
 
     def _is_settled(self) -> bool:
-        """Whether iSAM2's next update would relinearise nothing (no delta above a threshold),
-        i.e. only add what is pending; asked once per iSAM2 update."""
+        """Whether iSAM2's next update would relinearise nothing, asked once per iSAM2 update: its full check
+        (any delta component above its threshold; a partial check may find less) on the delta as one vector,
+        landmarks (2 each) before poses (3 each): ``predictUpdateInfo`` without its up to 50 ms of marking."""
         if self._settled is None:
-            import gtsam
-
-            nothing = gtsam.NonlinearFactorGraph(), gtsam.Values(), gtsam.ISAM2UpdateParams()
-            keys, _ = self._isam.predictUpdateInfo(*nothing)
-            self._settled = keys.size() == 0
+            delta = self._isam.getDelta().vector()
+            n = delta.size - 3 * self._n_in_isam  # landmark components
+            self._settled = not (np.any(np.abs(delta[n:]).reshape(-1, 3) > RELINEARIZE_POSE)
+                                 or np.any(np.abs(delta[:n]) > RELINEARIZE_LANDMARK))
         return self._settled
 
     def estimate(self) -> np.ndarray:
@@ -249,6 +248,7 @@ class PoseGraph:
         initial value."""
         import gtsam
 
+        self._relinearise_if_due()
         if self._isam_poses is None:
             self._isam_poses = gtsam.utilities.extractPose2(self._isam.calculateEstimate()).reshape(-1, 3)
         tail = gtsam.utilities.extractPose2(self._new_values).reshape(-1, 3)  # the keyframes not in iSAM2, in key order
@@ -256,11 +256,13 @@ class PoseGraph:
 
     def pose(self, key: int) -> np.ndarray:
         """Current pose (3,) of keyframe ``key`` alone (cheaper than the whole estimate)."""
+        self._relinearise_if_due()
         p = self._pose_value(self._check_key(key))
         return np.array([p.x(), p.y(), p.theta()])
 
     def landmarks(self) -> tuple[np.ndarray, np.ndarray]:
         """Landmark ids (L,) and their current positions (L, 2), m."""
+        self._relinearise_if_due()
         ids = np.array(sorted(self._landmarks), dtype=int)
         pts = [self._point_value(landmark_key(n)) for n in ids]
         return ids, np.array(pts).reshape(-1, 2)
@@ -271,12 +273,9 @@ class PoseGraph:
         return np.asarray(self._isam.marginalCovariance(pose_key(key)))
 
     def loop_consistency(self, i: int, j: int, delta, information) -> float:
-        """Squared Mahalanobis distance of a loop measurement ``delta`` (j seen from i)
-        from the current estimate; compare with ``CHI2_3DOF_99``.
-
-        The covariance is the measurement's plus that of the estimated relative pose,
-        propagated from the iSAM2 joint marginal of keyframes i and j.
-        """
+        """Squared Mahalanobis distance of a loop measurement ``delta`` (j seen from i) from the current
+        estimate; compare with ``CHI2_3DOF_99``. The covariance is the measurement's plus that of the
+        estimated relative pose, propagated from the iSAM2 joint marginal of keyframes i and j."""
         import gtsam
 
         i, j = self._check_updated(i), self._check_updated(j)
@@ -297,8 +296,7 @@ class PoseGraph:
         outliers. The result replaces the estimate and restarts iSAM2 from it.
         Returns the poses (K, 3)."""
         graph, index = self._batch_graph()
-        initial = self._isam.calculateEstimate()
-        initial.insert(self._new_values)
+        initial = self._values()
         t0 = time.perf_counter()
         if self.cfg.gnc:
             inliers = [g for g, f in enumerate(index) if self._factors[f].kind != "loop"]
@@ -333,8 +331,7 @@ class PoseGraph:
         for (i, j), d, info in zip(np.asarray(pairs).tolist(), np.asarray(deltas, float), infos):
             model = rb.wrap(gtsam.noiseModel.Gaussian.Information(info), kernel)
             graph.add(between_factor(self._check_key(i), self._check_key(j), d, model))
-        initial = self._isam.calculateEstimate()
-        initial.insert(self._new_values)
+        initial = self._values()
         return self._restart_at(_lm(graph, initial)[0])
 
     def _restart_at(self, values) -> np.ndarray:
@@ -352,15 +349,10 @@ class PoseGraph:
 
     def to_g2o(self) -> g2o.PoseGraphFile:
         """Keyframes at their current estimate with all odometry and loop edges."""
-        edges = [f for f, a in zip(self._factors, self._active) if a and f.kind in ("odometry", "loop")]
-        return g2o.PoseGraphFile(
-            ids=np.arange(len(self._initial)),
-            poses=self.estimate(),
-            i=np.array([e.i for e in edges], dtype=int),
-            j=np.array([e.j for e in edges], dtype=int),
-            measurements=np.array([e.measurement for e in edges]).reshape(-1, 3),
-            information=np.array([e.information for e in edges]).reshape(-1, 3, 3),
-        )
+        _, i, j, measurements, information = zip(*self.edges()) if self.edges() else ((),) * 5
+        return g2o.PoseGraphFile(ids=np.arange(len(self._initial)), poses=self.estimate(), i=np.array(i, dtype=int),
+                                 j=np.array(j, dtype=int), measurements=np.array(measurements).reshape(-1, 3),
+                                 information=np.array(information).reshape(-1, 3, 3))
 
     def edges(self) -> list[tuple[str, int, int, np.ndarray, np.ndarray]]:
         """The odometry and loop factors in the graph (removed loops left out), in the order added:
@@ -416,7 +408,7 @@ class PoseGraph:
         self._isam = gtsam.ISAM2(params)
         self._new_graph, self._new_values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         self._n_in_isam = self._n_updated = 0  # keyframes in iSAM2; keyframes update() has seen
-        self._pending_other = False  # a pending factor other than odometry
+        self._pending_other = self._relinearisation_due = False  # pending: a non-odometry factor; a relinearisation
         self._settled = None  # iSAM2's next update would relinearise nothing (None: not asked)
         self._isam_poses = None
 
@@ -480,9 +472,21 @@ class PoseGraph:
         k = self._check_key(key)
         if k >= self._n_updated:
             raise InputError("pose graph", f"keyframe {k} is not optimised yet; call update() first")
-        if k >= self._n_in_isam:
+        if k >= self._n_in_isam or self._relinearisation_due:
             self._flush()
         return k
+
+    def _relinearise_if_due(self) -> None:
+        """Run the relinearisation ``update`` left for its next call before a read."""
+        if self._relinearisation_due:
+            self._flush()
+
+    def _values(self):
+        """gtsam.Values of every variable at its current estimate (a waiting relinearisation run first)."""
+        self._relinearise_if_due()
+        values = self._isam.calculateEstimate()
+        values.insert(self._new_values)
+        return values
 
     def _pose_value(self, k: int):
         """Best current gtsam.Pose2 of keyframe ``k``."""
