@@ -37,3 +37,26 @@ def wings_plan(tmp_path) -> Path:
 
     Image.fromarray(_wings()[::-1]).save(tmp_path / "wings.png")
     return tmp_path / "wings.png"
+
+
+@pytest.fixture
+def two_place_filter():
+    """Call with a KnownMap and ``places`` [(pose (3,), particles), ...]: a ParticleFilter whose equally weighted
+    particles sit at those places (5 cm, 0.01 rad spread; the first place its initial pose), estimate clustered."""
+    import math
+
+    import numpy as np
+
+    from slam2d.localization import MclConfig, ParticleFilter
+
+    def make(known, places):
+        rng = np.random.default_rng(0)
+        pf = ParticleFilter(known, MclConfig(), 12.0, seed=0)
+        pf.init_pose(np.asarray(places[0][0], float))
+        pf.particles = np.concatenate([np.asarray(pose, float) + rng.standard_normal((n, 3)) * [0.05, 0.05, 0.01]
+                                       for pose, n in places])  # fmt: skip
+        pf.log_w = np.full(len(pf.particles), -math.log(len(pf.particles)))
+        pf._estimate = pf._cluster_estimate()
+        return pf
+
+    return make

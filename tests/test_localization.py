@@ -669,19 +669,13 @@ def test_navigation_on_mcl_turns_in_place_while_the_pose_is_ambiguous(tmp_path):
     assert [e[1] for e in result.events] == ["hold"]
 
 
-def test_the_disambiguating_goal_looks_where_the_wings_differ(wings_plan):
+def test_the_disambiguating_goal_looks_where_the_wings_differ(wings_plan, two_place_filter):
     from slam2d.localization.active import disambiguating_goal, separation
 
     known = KnownMap.load(wings_plan)
     truth = np.array([7.7, 17.0, -np.pi / 2])  # far end of the west wing; the east wing's copy is 17.5 m east
     copy = truth + [17.5, 0.0, 0.0]
-    rng = np.random.default_rng(0)
-    pf = ParticleFilter(known, MclConfig(), 12.0, seed=0)
-    pf.init_pose(truth)
-    pf.particles = np.concatenate([truth + rng.standard_normal((300, 3)) * [0.05, 0.05, 0.01],
-                                   copy + rng.standard_normal((300, 3)) * [0.05, 0.05, 0.01]])  # fmt: skip
-    pf.log_w = np.full(600, -math.log(600))
-    pf._estimate = pf._cluster_estimate()
+    pf = two_place_filter(known, [(truth, 300), (copy, 300)])
     assert len(pf.estimate.hypotheses) == 2
     here, free = separation(pf, pf.estimate.pose[None])
     assert free[0] and here[0] < 0.05  # the scans here are the same under both (log evidence per scan)

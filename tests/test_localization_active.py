@@ -73,7 +73,7 @@ def test_the_way_to_a_goal_does_not_lead_through_a_gap_the_robot_does_not_fit():
         assert np.isfinite(field[30, 20]) == passable, gap  # from (1.0, 1.5) on the other side
 
 
-def test_the_disambiguating_goal_is_near_by_the_way_the_robot_drives_not_through_a_wall(data_file):
+def test_the_disambiguating_goal_is_near_by_the_way_the_robot_drives_not_through_a_wall(data_file, two_place_filter):
     """lab_a, active kidnap seed 4, 15.7 s after the start: the filter holds the room 8.2 m east of the
     true one (80 %) and the true one; inside them the scans are alike (0.02-0.04 nat an update), the
     rooms beside them and the corridor outside their doors differ. Measured straight, the nearest decisive
@@ -84,13 +84,7 @@ def test_the_disambiguating_goal_is_near_by_the_way_the_robot_drives_not_through
 
     known = KnownMap.load(data_file("rooms/lab_a_scan_furnitures.png"))
     best, truth = np.array([25.84, 33.2, -0.44]), np.array([17.65, 33.19, -0.45])
-    rng = np.random.default_rng(0)
-    pf = ParticleFilter(known, MclConfig(), 12.0, seed=0)
-    pf.init_pose(best)
-    pf.particles = np.concatenate([best + rng.standard_normal((400, 3)) * [0.05, 0.05, 0.01],
-                                   truth + rng.standard_normal((100, 3)) * [0.05, 0.05, 0.01]])  # fmt: skip
-    pf.log_w = np.full(500, -math.log(500))
-    pf._estimate = pf._cluster_estimate()
+    pf = two_place_filter(known, [(best, 400), (truth, 100)])
     way = way_length(known, pf.estimate.pose)
     for seed in range(3):
         goal = disambiguating_goal(pf, seed=seed)
