@@ -136,14 +136,14 @@ def _start_here(graph: g2o.PoseGraphFile, name: str, elimination=None) -> np.nda
     return ini.initial_poses(graph, name, elimination)
 
 
-def _certified(graph: g2o.PoseGraphFile, poses, call=in_worker, order=None) -> bool:
-    """Whether SE-Sync's certificate holds at ``poses`` (``certificate.certify`` with the elimination ``order``, in
+def _certified(graph: g2o.PoseGraphFile, poses, call=in_worker, elimination=None) -> bool:
+    """Whether SE-Sync's certificate holds at ``poses`` (``certificate.certify`` in the ``elimination`` order, in
     a worker process: ``call`` as in ``_start``)."""
-    return call(_certified_here, graph, poses, order)
+    return call(_certified_here, graph, poses, elimination)
 
 
-def _certified_here(graph: g2o.PoseGraphFile, poses, order=None) -> bool:
-    return certificate.certify(graph, poses, order).certified
+def _certified_here(graph: g2o.PoseGraphFile, poses, elimination=None) -> bool:
+    return certificate.certify(graph, poses, elimination).certified
 
 
 def _run(graph: g2o.PoseGraphFile, fg, name: str, call=in_worker, elimination=None) -> _Run:
@@ -253,15 +253,15 @@ def _least_squares(graph: g2o.PoseGraphFile, robust: str, robust_param: float, i
     plain = robust == "none"
     first = str(init).lower() if init else (G2O_INIT if plain else G2O_ROBUST_INIT)
     fg = factor_graph(g2o_factor_list(graph, robust, robust_param))
-    order = elimination_order(graph.ids, fg)  # the starts' and the certificate's (city10000: 0.6 s less)
-    runs = [_run(graph, fg, first, call, order)]
+    elimination = elimination_order(graph.ids, fg)  # the starts' and the certificate's (city10000: 0.6 s less)
+    runs = [_run(graph, fg, first, call, elimination)]
     best, verified, certified = runs[0], None, None  # the first start's run unless another is clearly lower
     timings = {"start": best.start_seconds, "solve": best.seconds}
     poses = best.poses
     inlier = _classify(graph, poses)
     if verify and plain:  # on the edges within the gate: a solution bent by false loops is not worth a
         t0 = time.perf_counter()  # certificate of the whole graph's (M3500 + 1000 false loops: 450 s)
-        pending = worker.submit(_certified_here, consistency.subgraph(graph, inlier), poses, order)
+        pending = worker.submit(_certified_here, consistency.subgraph(graph, inlier), poses, elimination)
         t1 = time.perf_counter()
         if meanwhile is not None:
             meanwhile(_result(graph, fg, plain, best, poses, inlier, None, None, dict(timings)))
@@ -271,7 +271,7 @@ def _least_squares(graph: g2o.PoseGraphFile, robust: str, robust_param: float, i
         verified = True if certified and inlier.all() else None  # the optimum of every edge: no second start
     t0 = time.perf_counter()
     for name in [n for n in VERIFY_STARTS if n != first] if verify and verified is None else []:
-        runs.append(_run(graph, fg, name, call, order))
+        runs.append(_run(graph, fg, name, call, elimination))
         if runs[-1].cost < best.cost and not _agree(runs[-1].cost, best.cost):
             best = runs[-1]
         verified = any(_agree(r.cost, best.cost) for r in runs if r is not best)
@@ -285,7 +285,7 @@ def _least_squares(graph: g2o.PoseGraphFile, robust: str, robust_param: float, i
         poses = best.poses
         inlier = _classify(graph, poses)
         if certified is not None:
-            certified = _certified(consistency.subgraph(graph, inlier), poses, call, order)
+            certified = _certified(consistency.subgraph(graph, inlier), poses, call, elimination)
     out = _result(graph, fg, plain, best, poses, inlier, verified, certified, timings)
     log.info("g2o %s from %s: error %.6g -> %.6g, %d iterations, %.3f s",
              robust, best.init, out.start_error, out.final_error, out.iterations, best.seconds)

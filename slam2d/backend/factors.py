@@ -119,9 +119,9 @@ def g2o_factor_list(graph: g2o.PoseGraphFile, robust: str = "none", robust_param
     plain = g2o.odometry_mask(graph) if plain_odometry else np.zeros(len(graph.i), bool)
     factors, models = [], {}  # one noise model per distinct information and kernel: most graphs have one
     for a, b, m, inf, p in zip(graph.i.tolist(), graph.j.tolist(), graph.measurements.tolist(), info, plain.tolist()):
-        model = models.get((inf.tobytes(), p))
+        model = models.get(key := (inf.tobytes(), p))
         if model is None:
-            model = models[inf.tobytes(), p] = rb.wrap(gtsam.noiseModel.Gaussian.Information(inf), None if p else kernel)
+            model = models[key] = rb.wrap(gtsam.noiseModel.Gaussian.Information(inf), None if p else kernel)
         factors.append(between_factor(a, b, m, model))
     return factors
 

@@ -4,8 +4,8 @@ Keyframe ``k`` is the gtsam key ``symbol('x', k)``, landmark ``n`` is
 ``symbol('l', n)`` (see ``factors``, which builds every factor). Keyframe 0 carries a
 tight prior; each later keyframe a between factor from its predecessor (odometry or
 scan matching, no robust kernel); loop closures are between factors with the configured
-robust kernel; landmark observations are bearing-range factors. iSAM2 keeps the incremental
-estimate (at most one update per keyframe, see ``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors, in a
+robust kernel; landmark observations are bearing-range factors. iSAM2 keeps the incremental estimate (at most one
+update per keyframe, ``PoseGraph.update``); ``optimize_batch`` runs Levenberg-Marquardt (or GNC) over all factors in a
 worker process that a signal ends at once (``lm.in_worker``; iSAM2's updates stay in this process).
 
 Poses are numpy ``(x, y, theta)`` (m, m, rad); information matrices are 3x3
@@ -349,7 +349,7 @@ class PoseGraph:
 
     def to_g2o(self) -> g2o.PoseGraphFile:
         """Keyframes at their current estimate with all odometry and loop edges."""
-        _, i, j, measurements, information = zip(*self.edges()) if self.edges() else ((),) * 5
+        _, i, j, measurements, information = zip(*edges) if (edges := self.edges()) else ((),) * 5
         return g2o.PoseGraphFile(ids=np.arange(len(self._initial)), poses=self.estimate(), i=np.array(i, dtype=int),
                                  j=np.array(j, dtype=int), measurements=np.array(measurements).reshape(-1, 3),
                                  information=np.array(information).reshape(-1, 3, 3))

@@ -152,14 +152,19 @@ _NARROW = 0.3  # m: cells closer to walls are no way (a gap the robot's lane doe
 def way_to(known, goal: np.ndarray) -> np.ndarray:
     """Geodesic cost (H, W) of every free cell to ``goal`` (x, y) over the map's free space, walls
     avoided (inf where unreachable)."""
-    from skimage.graph import MCP_Geometric
-
     dist = known.distance()
     cost = np.where(dist < _WALL_COST, 20.0, 1.0)
     cost[~known.free | (dist < _NARROW)] = np.inf
     cell = known.world_to_cell(np.asarray(goal[:2], dtype=np.float64)[None])[0]
     if not known.in_bounds(cell[None])[0] or not known.free[cell[0], cell[1]]:
         return np.full(known.shape, np.inf)
+    return _costs_from(cost, cell)
+
+
+def _costs_from(cost: np.ndarray, cell) -> np.ndarray:
+    """Least geodesic cost (H, W) from ``cell`` (row, col) over the per-cell ``cost`` (inf: impassable)."""
+    from skimage.graph import MCP_Geometric
+
     field, _ = MCP_Geometric(cost).find_costs([tuple(int(c) for c in cell)])
     return field
 
@@ -168,8 +173,6 @@ def way_length(known, start: np.ndarray) -> np.ndarray:
     """Length (m) (H, W) of the shortest way from ``start`` (x, y, ...) to every cell over the cells
     :func:`way_to` lets the robot pass (inf where none leads); the cells within ``_LOOKAHEAD`` m of the
     start are passable (the robot steers out from near a wall)."""
-    from skimage.graph import MCP_Geometric
-
     cost = np.where(known.free & (known.distance() >= _NARROW), 1.0, np.inf)
     cell = known.world_to_cell(np.asarray(start[:2], dtype=np.float64)[None])[0]
     if not known.in_bounds(cell[None])[0]:
@@ -177,8 +180,7 @@ def way_length(known, start: np.ndarray) -> np.ndarray:
     rows, cols = np.ogrid[:known.shape[0], :known.shape[1]]
     near = np.hypot(rows - cell[0], cols - cell[1]) <= _LOOKAHEAD / known.resolution
     cost[near & known.free] = 1.0
-    field, _ = MCP_Geometric(cost).find_costs([tuple(int(c) for c in cell)])
-    return field * known.resolution
+    return _costs_from(cost, cell) * known.resolution
 
 
 def heading_to(known, field: np.ndarray, pose: np.ndarray) -> float | None:

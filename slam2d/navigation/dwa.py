@@ -118,7 +118,8 @@ class DynamicWindow:
         ok, clearance = self._admissible(v, dist, on_path)
         score = self._scores(v, traj, clearance, pose, path)
         if self.cfg.margin_weight > 0:
-            score -= self.cfg.margin_weight * self._within_margin(dist, ok & (v > 1e-3) & (off_path <= self.cfg.path_band))
+            along = ok & (v > 1e-3) & (off_path <= self.cfg.path_band)  # moving arcs along the path
+            score -= self.cfg.margin_weight * self._within_margin(dist, along)
         score[~ok] = -np.inf
         forward = ok & (v > 1e-3)
         if not ok.any():
