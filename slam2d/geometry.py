@@ -13,6 +13,7 @@ import numpy as np
 
 __all__ = [
     "wrap_angle",
+    "wrap_scalar",
     "compose",
     "inverse",
     "between",
@@ -45,7 +46,7 @@ def rotation(theta) -> np.ndarray:
     return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
 
 
-def _wrap(a: float) -> float:
+def wrap_scalar(a: float) -> float:
     """``wrap_angle`` of one Python float."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
@@ -56,7 +57,7 @@ def compose(a, b) -> np.ndarray:
     if a.ndim == 1 and b.ndim == 1:  # one pose: Python floats, a tenth of numpy's per-call cost
         (ax, ay, at), (bx, by, bt) = a.tolist(), b.tolist()
         c, s = math.cos(at), math.sin(at)
-        return np.array([ax + c * bx - s * by, ay + s * bx + c * by, _wrap(at + bt)])
+        return np.array([ax + c * bx - s * by, ay + s * bx + c * by, wrap_scalar(at + bt)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
@@ -69,7 +70,7 @@ def inverse(a) -> np.ndarray:
     if a.ndim == 1:
         x, y, t = a.tolist()
         c, s = math.cos(t), math.sin(t)
-        return np.array([-c * x - s * y, s * x - c * y, _wrap(-t)])
+        return np.array([-c * x - s * y, s * x - c * y, wrap_scalar(-t)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]
@@ -83,7 +84,7 @@ def between(a, b) -> np.ndarray:
         (ax, ay, at), (bx, by, bt) = a.tolist(), b.tolist()
         c, s = math.cos(at), math.sin(at)
         dx, dy = bx - ax, by - ay
-        return np.array([c * dx + s * dy, -s * dx + c * dy, _wrap(bt - at)])
+        return np.array([c * dx + s * dy, -s * dx + c * dy, wrap_scalar(bt - at)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
     return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], -1)
@@ -135,7 +136,7 @@ def _interpolate_one(stamps: np.ndarray, poses: np.ndarray, q: float) -> np.ndar
     t0, t1 = stamps[i].item(), stamps[i + 1].item()
     w = min(max((q - t0) / (t1 - t0), 0.0), 1.0) if t1 > t0 else 0.0
     (x0, y0, a0), (x1, y1, a1) = poses[i].tolist(), poses[i + 1].tolist()
-    return np.array([x0 + w * (x1 - x0), y0 + w * (y1 - y0), _wrap(a0 + w * _wrap(a1 - a0))])
+    return np.array([x0 + w * (x1 - x0), y0 + w * (y1 - y0), wrap_scalar(a0 + w * wrap_scalar(a1 - a0))])
 
 
 def adjoint(pose) -> np.ndarray:
