@@ -521,3 +521,25 @@ def test_batch_removes_loop_the_optimised_graph_cannot_accommodate():
     assert pose_diff(result, reference) < 1e-3
     kept = pg.to_g2o()
     assert (int(kept.i[-1]), int(kept.j[-1])) == true_loop(truth)[:2]
+
+
+def test_a_return_after_long_drift_is_readmitted_and_a_false_loop_is_not():
+    """Round a 30 m square (120 keyframes, odometry within its stated noise) the return is 5.7 m off; its two
+    loops enter under the Cauchy kernel saturated, the batch solution does not follow them, and the final check
+    removes them. The second chance solves least squares with them from there, then the robust graph from that
+    start: every loop passes, so they are readmitted and the solution is least squares' (the code before kept
+    the drift). A false loop (keyframes 10 m apart claimed to coincide) removed by the check stays out."""
+    truth = square(30)
+    deltas = odometry(truth, seed=1)
+    n = len(truth) - 1
+    loops = [(n, 0, geometry.between(truth[n], truth[0])), (n - 1, 1, geometry.between(truth[n - 1], truth[1]))]
+    pg = build(truth, deltas, loops, robust="cauchy")
+    assert pose_diff(pg.estimate(), truth) > 5.0
+    result = pg.optimize_batch()
+    assert (pg.num_loops, pg.rejected_inconsistent) == (2, 0)
+    assert pose_diff(result, gtsam_reference(truth, deltas, loops)[2]) < 0.01
+    pg = build(truth, deltas, loops + [(2, 12, np.zeros(3))], robust="cauchy")
+    pg.optimize_batch()
+    g = pg.to_g2o()
+    assert [(int(i), int(j)) for i, j in zip(g.i, g.j) if j - i != 1] == [(n, 0), (n - 1, 1)]
+    assert pg.rejected_inconsistent == 1

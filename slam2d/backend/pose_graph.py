@@ -38,6 +38,7 @@ from slam2d.backend.factors import (
     prior_factor,
 )
 from slam2d.backend.lm import in_worker, levenberg_marquardt
+from slam2d.backend.readmission import inconsistent_loops, second_chance
 from slam2d.config import BackendConfig
 from slam2d.datasets import g2o
 from slam2d.errors import InputError
@@ -291,9 +292,9 @@ class PoseGraph:
 
     def optimize_batch(self) -> np.ndarray:
         """Levenberg-Marquardt over all factors from the current estimate; loops whose
-        residual then fails the chi-square test (``CHI2_3DOF_99``) are removed and LM
-        runs once more. With ``cfg.gnc``, GNC instead, rejecting loops it weighs as
-        outliers. The result replaces the estimate and restarts iSAM2 from it.
+        residual then fails the chi-square test (``CHI2_3DOF_99``) are removed, the clusters
+        of them the graph accommodates readmitted (``readmission``), and LM runs once more.
+        With ``cfg.gnc``, GNC instead, rejecting loops it weighs as outliers. The result replaces the estimate and restarts iSAM2 from it.
         Returns the poses (K, 3)."""
         graph, index = self._batch_graph()
         initial = self._values()
@@ -305,9 +306,10 @@ class PoseGraph:
         else:
             result, iterations = _lm(graph, initial)
             log.info("batch LM: %d iterations", iterations)
-            if self._reject_inconsistent(result):
+            removed = self._reject_inconsistent(result)
+            if removed:
+                result = self._second_chance(result, removed)
                 graph, index = self._batch_graph()
-                result, _ = _lm(graph, result)
         log.info(
             "batch %s: error %.6g -> %.6g in %.3f s",
             "GNC" if self.cfg.gnc else "LM",
@@ -433,24 +435,22 @@ class PoseGraph:
                 index.append(n)
         return graph, index
 
-    def _reject_inconsistent(self, values) -> int:
+    def _reject_inconsistent(self, values) -> list[int]:
         """Deactivate loops whose squared Mahalanobis residual at ``values`` exceeds
-        ``CHI2_3DOF_99`` (the graph could not accommodate them); how many."""
-        import gtsam
+        ``CHI2_3DOF_99`` (the graph could not accommodate them); their factor indices."""
+        removed = inconsistent_loops(self._factors, self._active, values)
+        for n in removed:
+            self._active[n] = False
+        if removed:
+            log.info("%d loop closures inconsistent with the optimised graph removed", len(removed))
+        self.rejected_inconsistent += len(removed)
+        return removed
 
-        rejected = 0
-        for n, (f, a) in enumerate(zip(self._factors, self._active)):
-            if not a or f.kind != "loop":
-                continue
-            rel = values.atPose2(pose_key(f.i)).between(values.atPose2(pose_key(f.j)))
-            err = gtsam.Pose2.Logmap(gtsam_pose(f.measurement).between(rel))
-            if float(err @ f.information @ err) > CHI2_3DOF_99:
-                self._active[n] = False
-                rejected += 1
-        if rejected:
-            log.info("%d loop closures inconsistent with the optimised graph removed", rejected)
-        self.rejected_inconsistent += rejected
-        return rejected
+    def _second_chance(self, values, removed: list[int]):
+        """The ``removed`` loops readmitted where the graph accommodates them (``readmission``); the solution."""
+        result = second_chance(self._factors, self._active, lambda: self._batch_graph()[0], removed, values, _lm)
+        self.rejected_inconsistent -= sum(self._active[n] for n in removed)
+        return result
 
     def _reject_outliers(self, index, weights) -> None:
         """Deactivate the loops GNC weighs as outliers (counted in ``rejected_inconsistent``)."""
