@@ -448,8 +448,8 @@ class PoseGraph:
 
     def _second_chance(self, values, removed: list[int]):
         """The ``removed`` loops readmitted where the graph accommodates them (``readmission``); the solution."""
-        result = second_chance(self._factors, self._active, lambda: self._batch_graph()[0], removed, values, _lm)
-        self.rejected_inconsistent -= sum(self._active[n] for n in removed)
+        result, out = second_chance(self._factors, self._active, lambda: self._batch_graph()[0], removed, values, _lm)
+        self.rejected_inconsistent += len(set(out) - set(removed)) - sum(self._active[n] for n in removed)
         return result
 
     def _reject_outliers(self, index, weights) -> None:
