@@ -85,8 +85,5 @@ def test_the_way_to_a_tight_door_is_a_leg_of_its_own_with_the_margin():
     assert len(loop.legs) == 2 and loop.tight_legs == [False, True]
     assert 2.0 < entry[0] < 2.5 and 1.7 < entry[1] < 2.35  # in the room, at the door
     assert loop.nav.robot.radius == pytest.approx(0.25) and loop.nav.local.cfg.margin_weight == 0
-    # the tight stretch starts from rest: at the entry's mouth at speed the approach leg goes on (to its stop)
-    assert not loop.leg_done(0.2, (0.6, 1.2)) and loop.leg_done(0.2, (0.0, 0.0))
     loop.next_leg(1.0)
-    assert loop.leg_done(0.2, (0.6, 1.2))  # the goal's last leg: within goal_reached at any speed
     assert loop.nav.robot.radius == pytest.approx(0.2) and loop.nav.local.cfg.margin_weight == TIGHT_MARGIN_WEIGHT

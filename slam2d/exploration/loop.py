@@ -49,7 +49,6 @@ POCKET_REACHED = 0.1  # m: a view of a pocket is reached closer than other goals
 POCKET_DWELL = 1.0  # s standing at a view of a pocket (a log-odds cell needs a few scans to turn free)
 ENTRY_MIN = 0.3  # m: a tight goal's way with the safety margin shorter than this is not driven as a leg of its own
 TIGHT_MARGIN_WEIGHT = 3.0  # the DWA's margin_weight in a tight stretch: the arcs along its middle
-STANDING = 0.02  # m/s: slower than this the robot stands (a tight stretch starts only then)
 
 
 @dataclass(eq=False)
@@ -150,17 +149,6 @@ class _Loop:
             self.goals[-1]["options"] = goal.options
         if goal.tight:
             self.goals[-1]["tight"] = True
-
-    def approaching(self) -> bool:
-        """Whether the current leg is a tight goal's approach leg (the next one is its tight stretch)."""
-        return len(self.legs) > 1 and self.tight_legs[1] and not self.tight_legs[0]
-
-    def leg_done(self, d_leg: float, velocity) -> bool:
-        """Whether the current leg, ``d_leg`` m away, is done: within ``goal_reached`` of it; an approach leg
-        only with the robot standing there (``velocity`` (v, w)), so that the tight stretch starts from rest and
-        not swinging round the gap's mouth at speed (every arc of the bare disc then came within the margin and
-        the robot, braking on its turn, 3.3 cm from a wall)."""
-        return d_leg < self.ecfg.goal_reached and not (self.approaching() and abs(velocity[0]) >= STANDING)
 
     def next_leg(self, now: float) -> None:
         self._count(self.nav)
@@ -296,7 +284,7 @@ def _drive(loop: _Loop, cfg: ExploreConfig, progress, view, t_wall: float) -> Ex
         if loop.goal is not None:
             d_leg = float(np.hypot(*(pose[:2] - loop.legs[0])))
             view_leg = loop.goal.kind == "pocket" and len(loop.legs) == 1
-            if (d_leg < POCKET_REACHED) if view_leg else loop.leg_done(d_leg, step.velocity):
+            if d_leg < (POCKET_REACHED if view_leg else ecfg.goal_reached):
                 if view_leg:  # stand still at a view long enough for the grid's cells to settle
                     loop.dwell = now + POCKET_DWELL if loop.dwell is None else loop.dwell
                     if now < loop.dwell:
@@ -315,12 +303,10 @@ def _drive(loop: _Loop, cfg: ExploreConfig, progress, view, t_wall: float) -> Ex
             cmd = escape(loop, step, now)
         if cmd is None and loop.nav is not None:
             cmd = loop.nav.step(pose, step.velocity, step.scan.points_in_base(), loop.slam.grid, now - loop.goal_t0)
-            if loop.nav.status == REACHED and len(loop.legs) > 1:
-                loop.next_leg(now)  # an approach leg driven to a stop on its end
-            elif loop.nav.status == REACHED:
+            if loop.nav.status == REACHED:
                 loop.close_goal("reached")
             elif loop.nav.status != ACTIVE or loop.no_progress(pose, now):
-                if loop.approaching():
+                if len(loop.legs) > 1 and loop.tight_legs[1] and not loop.tight_legs[0]:
                     loop.next_leg(now)  # the way to a tight stretch failed with the margin: on with the robot's disc
                 else:
                     loop.close_goal("inaccessible")
