@@ -35,6 +35,7 @@ from slam2d.sim.robot import RobotConfig
 __all__ = ["DwaConfig", "DynamicWindow", "arcs"]
 
 _SQUEEZE = 0.02  # m, closest an arc passing by may bring the robot's disc to a point within the margin
+_PASSING = 0.1  # m/s; arcs along the path slower than this stay short of a passage: no reference for the margin
 TIGHT = (0.2, 0.3)  # m; with less clearance than the first, the carrot comes in, down to the second at none
 
 
@@ -119,7 +120,7 @@ class DynamicWindow:
         score = self._scores(v, traj, clearance, pose, path)
         if self.cfg.margin_weight > 0:
             along = ok & (v > 1e-3) & (off_path <= self.cfg.path_band)  # moving arcs along the path
-            score -= self.cfg.margin_weight * self._within_margin(dist, along)
+            score -= self.cfg.margin_weight * self._within_margin(dist, along, v)
         score[~ok] = -np.inf
         forward = ok & (v > 1e-3)
         if not ok.any():
@@ -203,17 +204,18 @@ class DynamicWindow:
         ok = (stop <= v * free_time) | (v <= 1e-9)
         return ok, dist.min(axis=1) - r
 
-    def _within_margin(self, dist: np.ndarray, along: np.ndarray) -> np.ndarray:
+    def _within_margin(self, dist: np.ndarray, along: np.ndarray, v: np.ndarray) -> np.ndarray:
         """How much farther (S,) each arc's disc comes within the margin of a point ahead than the arc ``along``
-        (S,) the path (moving, within ``path_band`` of it) that comes least within it, as a fraction of the margin:
-        in a passage narrower than the disc + twice the margin the arcs along its middle lose nothing, and neither
-        a stop nor turning away gains anything over driving through."""
-        if self.cfg.margin <= 0:
+        (S,) the path (moving, within ``path_band`` of it) that comes least within it, as a fraction of the margin;
+        of the arcs along the path only those at ``_PASSING`` m/s or more (``v`` (S,) m/s; or the fastest there
+        are): in a passage narrower than the disc + twice the margin the arcs along its middle lose nothing, and
+        neither a stop, turning away nor a crawl that stays short of the passage within the horizon gains anything
+        over driving through it slowly."""
+        if self.cfg.margin <= 0 or not along.any():
             return np.zeros(len(dist))
         within = np.clip(1.0 - (dist[:, 1:].min(axis=1) - self.robot.radius) / self.cfg.margin, 0.0, 1.0)
-        if not along.any():
-            return np.zeros(len(dist))
-        return np.maximum(within - within[along].min(), 0.0)
+        passing = along & (v >= min(_PASSING, v[along].max()) - 1e-9)
+        return np.maximum(within - within[passing].min(), 0.0)
 
     def _reach(self, v_max: float) -> float:
         """Distance (m) within which points can matter to an arc."""

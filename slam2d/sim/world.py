@@ -32,6 +32,9 @@ def _cross(ax, ay, bx, by):
     return ax * by - ay * bx
 
 
+_PAIRS = 2_000_000  # point-segment pairs measured at once (memory: ~50 bytes each)
+
+
 def _point_segment_distance(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """Distances (M, K) in metres from points (M, 2) to segments (K, 2, 2)."""
     p, e = segments[:, 0], segments[:, 1] - segments[:, 0]
@@ -202,7 +205,9 @@ class World:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         if len(self.segments) == 0:
             return np.full(len(pts), np.inf)
-        return _point_segment_distance(pts, self.segments).min(axis=1)
+        chunk = max(1, _PAIRS // len(self.segments))  # points per block: a plan's thousands of segments
+        return np.concatenate([_point_segment_distance(pts[i:i + chunk], self.segments).min(axis=1)
+                               for i in range(0, len(pts), chunk)] or [np.zeros(0)])  # fmt: skip
 
     def segment_distance(self, segments) -> np.ndarray:
         """Shortest distance (L,) in metres from segments (L, 2, 2) to the walls; 0 where one crosses a wall."""
