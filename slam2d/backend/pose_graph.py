@@ -294,8 +294,8 @@ class PoseGraph:
         """Levenberg-Marquardt over all factors from the current estimate; loops whose
         residual then fails the chi-square test (``CHI2_3DOF_99``) are removed, the clusters
         of them the graph accommodates readmitted (``readmission``), and LM runs once more.
-        With ``cfg.gnc``, GNC instead, rejecting loops it weighs as outliers. The result replaces the estimate and restarts iSAM2 from it.
-        Returns the poses (K, 3)."""
+        With ``cfg.gnc``, GNC instead, rejecting loops it weighs as outliers. The result
+        replaces the estimate and restarts iSAM2 from it. Returns the poses (K, 3)."""
         graph, index = self._batch_graph()
         initial = self._values()
         t0 = time.perf_counter()
