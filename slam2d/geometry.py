@@ -15,7 +15,9 @@ __all__ = [
     "wrap_angle",
     "wrap_scalar",
     "compose",
+    "compose_floats",
     "inverse",
+    "inverse_floats",
     "between",
     "transform_points",
     "interpolate",
@@ -51,13 +53,26 @@ def wrap_scalar(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def compose_floats(a, b) -> list[float]:
+    """:func:`compose` of two poses given as Python floats (x, y, theta), as a list: a tenth of numpy's per-call
+    cost."""
+    (ax, ay, at), (bx, by, bt) = a, b
+    c, s = math.cos(at), math.sin(at)
+    return [ax + c * bx - s * by, ay + s * bx + c * by, wrap_scalar(at + bt)]
+
+
+def inverse_floats(a) -> list[float]:
+    """:func:`inverse` of one pose given as Python floats (x, y, theta), as a list."""
+    x, y, t = a
+    c, s = math.cos(t), math.sin(t)
+    return [-c * x - s * y, s * x - c * y, wrap_scalar(-t)]
+
+
 def compose(a, b) -> np.ndarray:
     """a ⊕ b: pose ``b`` expressed in frame ``a``, mapped to the world frame."""
     a, b = as_pose(a), as_pose(b)
-    if a.ndim == 1 and b.ndim == 1:  # one pose: Python floats, a tenth of numpy's per-call cost
-        (ax, ay, at), (bx, by, bt) = a.tolist(), b.tolist()
-        c, s = math.cos(at), math.sin(at)
-        return np.array([ax + c * bx - s * by, ay + s * bx + c * by, wrap_scalar(at + bt)])
+    if a.ndim == 1 and b.ndim == 1:  # one pose: Python floats
+        return np.array(compose_floats(a.tolist(), b.tolist()))
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
@@ -68,9 +83,7 @@ def inverse(a) -> np.ndarray:
     """⊖a, so that compose(a, inverse(a)) is the identity."""
     a = as_pose(a)
     if a.ndim == 1:
-        x, y, t = a.tolist()
-        c, s = math.cos(t), math.sin(t)
-        return np.array([-c * x - s * y, s * x - c * y, wrap_scalar(-t)])
+        return np.array(inverse_floats(a.tolist()))
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]
