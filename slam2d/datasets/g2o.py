@@ -102,7 +102,7 @@ def _read_well_formed(path: Path):
     ids = v[:, 0].astype(np.int64)
     ends = e[:, :2].astype(np.int64)
     if (not np.isfinite(v).all() or not np.isfinite(e).all() or np.any(ids != v[:, 0]) or np.any(ends != e[:, :2])
-            or len(np.unique(ids)) != len(ids)):
+            or len(set(ids.tolist())) != len(ids)):
         return None
     info = np.zeros((len(e), 3, 3))
     for tag, order in _EDGE_TAGS.items():
