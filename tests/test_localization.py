@@ -733,3 +733,20 @@ def test_a_kidnapped_filter_settled_on_a_wrong_look_alike_searches_on(data_file)
     assert not wrong[k + 10:].any()  # after the second it takes to notice the jump, never claimed wrong
     c = converged_at(track, k)
     assert c is not None and (c - k) * 0.1 < 3.0
+
+
+def test_look_alikes_judged_by_what_the_laser_sees(wings_plan, data_file):
+    """A pose is at a look-alike place where the laser sees the same at its image (LookAlikes.seen): in a wing of
+    the U plan the other wing, in the middle of the corridor joining them nothing; in office_c's corridor its
+    copies 13.7 m along, which the regions (walls within 4 m, the rooms behind the corridor's walls included) miss."""
+    from slam2d.localization.lookalike import look_alikes
+
+    wings = look_alikes(KnownMap.load(wings_plan))
+    shifts = [round(float(a.transform[0]), 1) for a in wings.seen(np.array([7.7, 10.0, 1.57]), 12.0)]
+    assert shifts == [17.5]
+    assert wings.seen(np.array([15.0, 2.5, 0.0]), 12.0) == []
+    office_c = look_alikes(KnownMap.load(data_file("rooms/office_c_furnitures.png")))
+    pose = np.array([57.7, 23.9, 0.0])
+    shifts = sorted(round(float(a.transform[0]), 1) for a in office_c.seen(pose, 12.0))
+    assert -13.7 in shifts and 13.7 in shifts
+    assert office_c.at(pose) == []
