@@ -750,3 +750,19 @@ def test_look_alikes_judged_by_what_the_laser_sees(wings_plan, data_file):
     shifts = sorted(round(float(a.transform[0]), 1) for a in office_c.seen(pose, 12.0))
     assert -13.7 in shifts and 13.7 in shifts
     assert office_c.at(pose) == []
+
+
+def test_the_look_alikes_the_laser_sees_are_tested(data_file, two_place_filter):
+    """A compact best hypothesis in office_c's corridor, where the regions find no look-alike: its copies 13.7 m
+    along (which the laser cannot tell from it) join as hypotheses of its weight (before, none did: a copy dropped
+    by the first updates' sampling was never tested again)."""
+    from slam2d.localization.lookalike import add_lookalikes
+
+    known = KnownMap.load(data_file("rooms/office_c_furnitures.png"))
+    best = np.array([57.7, 23.9, 0.0])
+    pf = two_place_filter(known, [(best, 300)])
+    assert add_lookalikes(pf, pf.estimate) >= 2
+    hyps = pf._cluster_estimate().hypotheses
+    for shift in (-13.7, 13.7):
+        held = [h for h in hyps if np.hypot(h.pose[0] - best[0] - shift, h.pose[1] - best[1]) < 0.3]
+        assert held and held[0].weight > 0.5 * hyps[0].weight

@@ -101,6 +101,12 @@ class LookAlikes:
         agree = np.mean(np.abs(ranges[1:] - ranges[0]) < SEEN_TOLERANCE, axis=1)
         return [a for a, ok in zip(self.items, free & (agree >= SEEN_AGREE)) if ok]
 
+    def alike(self, pose, range_max: float) -> list[LookAlike]:
+        """The look-alikes of ``pose`` (3,): those whose region holds it (:meth:`at`) and those under which
+        the laser sees the same (:meth:`seen`, ``range_max`` m)."""
+        held = {id(a) for a in [*self.at(pose), *self.seen(pose, range_max)]}
+        return [a for a in self.items if id(a) in held]
+
     def summary(self) -> str:
         """One line: how many places look alike and by which transforms."""
         if not self.items:
@@ -269,7 +275,7 @@ def add_lookalikes(pf, est, raise_held: bool = True) -> int:
     source, source_w = pf.particles[inside], pf.log_w[inside]
     best_mass = logsumexp(source_w)
     images, raised = [], 0
-    for place in pf.lookalikes.at(best.pose):
+    for place in pf.lookalikes.alike(best.pose, pf.range_max):
         image = place.image(best.pose[None])[0]
         held = [i for i, h in enumerate(est.hypotheses) if same_place(image, h.pose)]
         if not held:
