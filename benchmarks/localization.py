@@ -26,8 +26,9 @@ hypothesis holding the true pose (truth_rank, null: none does), the number of hy
 of the best over the runner-up (null: none). Rows go to runs.jsonl, the
 summary (medians and rates per world and filter) to table.md, followed by the success of the global and
 kidnap scenarios raw and with the runs that end ambiguous at a look-alike place of the map's analysis (and
-are no success) counted apart, as the targets count them: the true pose at the end in a transform's region
-(lookalikes_at_end), or where the laser sees the same at it and at its image (seen_alike_at_end).
+are no success) counted apart, as the targets count them: the true pose at the end held by a hypothesis and
+in a transform's region (lookalikes_at_end), or where the laser sees the same at it and at its image
+(seen_alike_at_end).
 """
 
 from __future__ import annotations
@@ -226,10 +227,12 @@ def _alike(row: dict, seen: bool) -> bool:
 
 def apart(rows: list[dict], key: str, seen: bool = True) -> tuple[int, int, int]:
     """(successes, runs, runs set apart) of ``rows`` by ``key`` (converged / recovered): a run that is no
-    success and ends ``ambiguous`` with its true pose at a look-alike place (:func:`_alike`) is set apart
-    (the filter reported what the plan cannot tell, as the issue's targets count it), not a failure."""
+    success and ends ``ambiguous`` with its true pose at a look-alike place (:func:`_alike`) and held by one
+    of the hypotheses (``truth_rank``) is set apart (the filter reported what the plan cannot tell, as the
+    issue's targets count it), not a failure."""
     won = sum(bool(r.get(key)) for r in rows)
-    alike = sum(not r.get(key) and r.get("end_state") == "ambiguous" and _alike(r, seen) for r in rows)
+    alike = sum(not r.get(key) and r.get("end_state") == "ambiguous" and r.get("truth_rank") is not None
+                and _alike(r, seen) for r in rows)  # fmt: skip
     return won, len(rows), alike
 
 
