@@ -244,9 +244,9 @@ def counting(rows: list[dict]) -> str:
     """Markdown: global and kidnap success per scenario and filter, all worlds pooled and per world, raw and
     with the runs ending ambiguous at a look-alike place counted apart (:func:`apart`): by the analysis's
     regions alone, and by its regions or what the laser sees."""
-    lines = ["| world | filter | scenario | success (raw) | not a success, ambiguous at a look-alike: region / "
-             "region or seen | success, those apart (region) | success, those apart (region or seen) | "
-             "not a success, elsewhere | false |", "|" + "---|" * 9]  # fmt: skip
+    lines = [("| world | filter | scenario | success (raw) | not a success, ambiguous at a look-alike: region / "
+              "region or seen | success, those apart (region) | success, those apart (region or seen) | "
+              "not a success, elsewhere | false |"), "|" + "---|" * 9]  # fmt: skip
     for world in ["all", *sorted({r["world"] for r in rows})]:
         for name in [n for n in FILTERS["global"] if any(r["filter"] == n for r in rows)]:
             for scenario, key in SUCCESS.items():
