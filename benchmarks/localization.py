@@ -205,12 +205,6 @@ def _states(rows) -> str:
     return " / ".join(str(sum(r.get("end_state") == s for r in rows)) for s in ("tracking", "ambiguous", "lost"))
 
 
-def _predicted(rows) -> str:
-    """Runs ending ambiguous whose true pose lies at a look-alike place of the map's analysis / all ending ambiguous."""
-    amb = [r for r in rows if r.get("end_state") == "ambiguous"]
-    return f"{sum(bool(r.get('lookalikes_at_end')) for r in amb)} / {len(amb)}" if amb else "-"
-
-
 def _count(rows, key) -> str:
     return f"{sum(bool(r.get(key)) for r in rows)}" if rows else "-"
 
@@ -223,6 +217,13 @@ def _alike(row: dict, seen: bool) -> bool:
     transform's region (walls within its radius), or with ``seen`` also where the laser sees the same at
     the pose and at its image (LookAlikes.seen)."""
     return bool(row.get("lookalikes_at_end")) or (seen and bool(row.get("seen_alike_at_end")))
+
+
+def _predicted(rows) -> str:
+    """Runs ending ambiguous whose true pose lies at a look-alike place of the map's analysis (:func:`_alike`: its
+    regions or what the laser sees) / all ending ambiguous."""
+    amb = [r for r in rows if r.get("end_state") == "ambiguous"]
+    return f"{sum(_alike(r, True) for r in amb)} / {len(amb)}" if amb else "-"
 
 
 def apart(rows: list[dict], key: str, seen: bool = True) -> tuple[int, int, int]:
