@@ -24,7 +24,11 @@ Filters: slam2d (defaults), amcl (ROS 1 defaults, recovery off as shipped),
 amcl_recovery (recovery_alpha_slow / fast 0.001 / 0.1). Each row also has, at the end, the rank of the
 hypothesis holding the true pose (truth_rank, null: none does), the number of hypotheses and the evidence
 of the best over the runner-up (null: none). Rows go to runs.jsonl, the
-summary (medians and rates per world and filter) to table.md.
+summary (medians and rates per world and filter) to table.md, followed by the success of the global and
+kidnap scenarios raw and with the runs that end ambiguous at a look-alike place of the map's analysis (and
+are no success) counted apart, as the targets count them: the true pose at the end held by a hypothesis and
+in a transform's region (lookalikes_at_end), or where the laser sees the same at it and at its image
+(seen_alike_at_end).
 """
 
 from __future__ import annotations
@@ -159,6 +163,9 @@ def run_one(spec: str, scenario: str, seed: int, filters: tuple[str, ...] = ()) 
                "update_ms": float(np.median(track.update_ms)) if len(track.update_ms) else None,
                "false": bool(false_convergence(track)), "end_state": final_state(track),
                "lookalikes_at_end": None if pf.lookalikes is None else len(pf.lookalikes.at(stream.truth[-1])),
+               "seen_alike_at_end": None if pf.lookalikes is None else len(pf.lookalikes.seen(stream.truth[-1],
+                                                                                             pf.range_max)),
+               "truth_end": [float(v) for v in stream.truth[-1]],
                "truth_rank": truth_rank(pf.estimate.hypotheses, stream.truth[-1]),
                "hypotheses": len(pf.estimate.hypotheses), "evidence": _finite(pf.estimate.evidence)}  # fmt: skip
         if kind == "global":
@@ -198,14 +205,62 @@ def _states(rows) -> str:
     return " / ".join(str(sum(r.get("end_state") == s for r in rows)) for s in ("tracking", "ambiguous", "lost"))
 
 
-def _predicted(rows) -> str:
-    """Runs ending ambiguous whose true pose lies at a look-alike place of the map's analysis / all ending ambiguous."""
-    amb = [r for r in rows if r.get("end_state") == "ambiguous"]
-    return f"{sum(bool(r.get('lookalikes_at_end')) for r in amb)} / {len(amb)}" if amb else "-"
-
-
 def _count(rows, key) -> str:
     return f"{sum(bool(r.get(key)) for r in rows)}" if rows else "-"
+
+
+SUCCESS = {"global": "converged", "active": "converged", "kidnap": "recovered", "active_kidnap": "recovered"}
+
+
+def _alike(row: dict, seen: bool) -> bool:
+    """Whether the run's true pose at the end lies at a look-alike place of the map's analysis: in a
+    transform's region (walls within its radius), or with ``seen`` also where the laser sees the same at
+    the pose and at its image (LookAlikes.seen)."""
+    return bool(row.get("lookalikes_at_end")) or (seen and bool(row.get("seen_alike_at_end")))
+
+
+def _predicted(rows) -> str:
+    """Runs ending ambiguous whose true pose lies at a look-alike place of the map's analysis (:func:`_alike`: its
+    regions or what the laser sees) / all ending ambiguous."""
+    amb = [r for r in rows if r.get("end_state") == "ambiguous"]
+    return f"{sum(_alike(r, True) for r in amb)} / {len(amb)}" if amb else "-"
+
+
+def apart(rows: list[dict], key: str, seen: bool = True) -> tuple[int, int, int]:
+    """(successes, runs, runs set apart) of ``rows`` by ``key`` (converged / recovered): a run that is no
+    success and ends ``ambiguous`` with its true pose at a look-alike place (:func:`_alike`) and held by one
+    of the hypotheses (``truth_rank``) is set apart (the filter reported what the plan cannot tell, as the
+    issue's targets count it), not a failure."""
+    won = sum(bool(r.get(key)) for r in rows)
+    alike = sum(not r.get(key) and r.get("end_state") == "ambiguous" and r.get("truth_rank") is not None
+                and _alike(r, seen) for r in rows)  # fmt: skip
+    return won, len(rows), alike
+
+
+def _share(won: int, runs: int) -> str:
+    return f"{won} / {runs} ({100.0 * won / runs:.1f} %)" if runs else "-"
+
+
+def counting(rows: list[dict]) -> str:
+    """Markdown: global and kidnap success per scenario and filter, all worlds pooled and per world, raw and
+    with the runs ending ambiguous at a look-alike place counted apart (:func:`apart`): by the analysis's
+    regions alone, and by its regions or what the laser sees."""
+    lines = [("| world | filter | scenario | success (raw) | not a success, ambiguous at a look-alike: region / "
+              "region or seen | success, those apart (region) | success, those apart (region or seen) | "
+              "not a success, elsewhere | false |"), "|" + "---|" * 9]  # fmt: skip
+    for world in ["all", *sorted({r["world"] for r in rows})]:
+        for name in [n for n in FILTERS["global"] if any(r["filter"] == n for r in rows)]:
+            for scenario, key in SUCCESS.items():
+                sel = [r for r in rows if r["filter"] == name and r["scenario"] == scenario
+                       and world in ("all", r["world"])]  # fmt: skip
+                if not sel:
+                    continue
+                won, runs, region = apart(sel, key, seen=False)
+                alike = apart(sel, key)[2]
+                lines.append(f"| {world} | {name} | {scenario} | {_share(won, runs)} | {region} / {alike} | "
+                             f"{_share(won, runs - region)} | {_share(won, runs - alike)} | {runs - alike - won} | "
+                             f"{_count(sel, 'false')} |")  # fmt: skip
+    return "\n".join(lines) + "\n"
 
 
 def table(rows: list[dict]) -> str:
@@ -260,7 +315,7 @@ def main(argv: list[str]) -> None:
             f.flush()
             if n % 10 == 0 or n == len(jobs):
                 print(f"{n}/{len(jobs)} runs, {time.perf_counter() - t0:.0f} s", flush=True)
-    text = table(rows)
+    text = table(rows) + "\n" + counting(rows)
     (out / "table.md").write_text(text)
     print(text)
 

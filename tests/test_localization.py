@@ -733,3 +733,36 @@ def test_a_kidnapped_filter_settled_on_a_wrong_look_alike_searches_on(data_file)
     assert not wrong[k + 10:].any()  # after the second it takes to notice the jump, never claimed wrong
     c = converged_at(track, k)
     assert c is not None and (c - k) * 0.1 < 3.0
+
+
+def test_look_alikes_judged_by_what_the_laser_sees(wings_plan, data_file):
+    """A pose is at a look-alike place where the laser sees the same at its image (LookAlikes.seen): in a wing of
+    the U plan the other wing, in the middle of the corridor joining them nothing; in office_c's corridor its
+    copies 13.7 m along, which the regions (walls within 4 m, the rooms behind the corridor's walls included) miss."""
+    from slam2d.localization.lookalike import look_alikes
+
+    wings = look_alikes(KnownMap.load(wings_plan))
+    shifts = [round(float(a.transform[0]), 1) for a in wings.seen(np.array([7.7, 10.0, 1.57]), 12.0)]
+    assert shifts == [17.5]
+    assert wings.seen(np.array([15.0, 2.5, 0.0]), 12.0) == []
+    office_c = look_alikes(KnownMap.load(data_file("rooms/office_c_furnitures.png")))
+    pose = np.array([57.7, 23.9, 0.0])
+    shifts = sorted(round(float(a.transform[0]), 1) for a in office_c.seen(pose, 12.0))
+    assert -13.7 in shifts and 13.7 in shifts
+    assert office_c.at(pose) == []
+
+
+def test_the_look_alikes_the_laser_sees_are_tested(data_file, two_place_filter):
+    """A compact best hypothesis in office_c's corridor, where the regions find no look-alike: its copies 13.7 m
+    along (which the laser cannot tell from it) join as hypotheses of its weight (before, none did: a copy dropped
+    by the first updates' sampling was never tested again)."""
+    from slam2d.localization.lookalike import add_lookalikes
+
+    known = KnownMap.load(data_file("rooms/office_c_furnitures.png"))
+    best = np.array([57.7, 23.9, 0.0])
+    pf = two_place_filter(known, [(best, 300)])
+    assert add_lookalikes(pf, pf.estimate) >= 2
+    hyps = pf._cluster_estimate().hypotheses
+    for shift in (-13.7, 13.7):
+        held = [h for h in hyps if np.hypot(h.pose[0] - best[0] - shift, h.pose[1] - best[1]) < 0.3]
+        assert held and held[0].weight > 0.5 * hyps[0].weight
