@@ -104,5 +104,7 @@ def test_the_way_to_a_tight_door_is_a_leg_of_its_own_with_the_margin():
     assert len(loop.legs) == 2 and loop.tight_legs == [False, True]
     assert 2.0 < entry[0] < 2.5 and 1.7 < entry[1] < 2.35  # in the room, at the door
     assert loop.nav.robot.radius == pytest.approx(0.25) and loop.nav.local.cfg.margin_weight == 0
+    assert not loop.nav.cfg.touch
     loop.next_leg(1.0)
     assert loop.nav.robot.radius == pytest.approx(0.2) and loop.nav.local.cfg.margin_weight == TIGHT_MARGIN_WEIGHT
+    assert loop.nav.cfg.touch  # the door's cells the disc touches a blocked centre from are planned through
