@@ -1,6 +1,7 @@
 """The exploring robot's safety margin: it keeps ``exploration.safety_margin`` (5 cm) between its disc and the
 walls, through a doorway with little more room than that, and still explores both rooms; through a doorway the
-map draws too narrow for the margin (a tight goal) it keeps the margin up to the door and the door's middle in it."""
+map draws too narrow for the margin (a tight goal) it keeps the margin up to the door and the door's middle in it;
+a door of the disc + twice the margin, which the map draws narrower than the disc once seen from close by, is passed."""
 
 from types import SimpleNamespace
 
@@ -57,6 +58,24 @@ def test_a_tight_door_is_driven_through_its_middle_and_the_way_to_it_keeps_the_m
     assert m["min_clearance"] >= cfg.exploration.safety_margin
 
 
+@pytest.mark.parametrize("seed", [0, 2])
+def test_a_door_of_the_disc_and_twice_the_margin_is_passed_though_the_map_draws_it_narrower_close_by(tmp_path, seed):
+    """A door 0.50 m wide: 5.0 cm each side of the robot's disc on its middle line and nowhere else. Seen from close
+    by, the map draws each jamb's face (on a cell boundary) in the cell on the door's side: 8 free cells, whose
+    middle ones the disc touches a blocked cell's centre from. Before, the tight stretch found no path there and the
+    second room was lost (coverage 88.5 and 84.0 %, seeds 0 and 2); its planner now takes such cells."""
+    cfg = explore_config.load(None, {
+        "dataset.simulator.world": str(narrow_door_png(tmp_path, 0.50)), "seed": seed,
+        "exploration.strategy": "nearest_frontier", "exploration.start": [1.5, 2.0, 0.0], "exploration.max_time": 200,
+        "exploration.animation": False,
+    })  # fmt: skip
+    run = explore(cfg)
+    m = run.metrics
+    assert m["tight_goals"] >= 1 and m["coverage"] >= 0.99 and m["collisions"] == 0
+    assert (run.truth[:, 0] > 5.0).any()  # through the door
+    assert m["min_clearance"] >= 0.04  # the door's middle leaves 5.0 cm
+
+
 def test_the_way_to_a_tight_door_is_a_leg_of_its_own_with_the_margin():
     """A room whose only door is 0.45 m wide (the boxed-in room of test_exploration): the tight goal beyond it is
     driven in two legs, to the room's cell nearest the door with the disc grown by the margin, then through the
@@ -85,5 +104,7 @@ def test_the_way_to_a_tight_door_is_a_leg_of_its_own_with_the_margin():
     assert len(loop.legs) == 2 and loop.tight_legs == [False, True]
     assert 2.0 < entry[0] < 2.5 and 1.7 < entry[1] < 2.35  # in the room, at the door
     assert loop.nav.robot.radius == pytest.approx(0.25) and loop.nav.local.cfg.margin_weight == 0
+    assert not loop.nav.cfg.touch
     loop.next_leg(1.0)
     assert loop.nav.robot.radius == pytest.approx(0.2) and loop.nav.local.cfg.margin_weight == TIGHT_MARGIN_WEIGHT
+    assert loop.nav.cfg.touch  # the door's cells the disc touches a blocked centre from are planned through

@@ -285,6 +285,27 @@ def test_a_diagonal_gap_tighter_than_the_margin_is_the_way_through():
     assert result.min_clearance > 0.01
 
 
+@pytest.mark.parametrize("touch", [False, True])
+def test_a_door_of_the_disc_and_twice_the_margin_drawn_a_cell_narrower_each_side_is_passed_with_touch(touch):
+    """A 0.50 m door (the disc + 2 x 5 cm) whose map draws each face a cell into it, as a live map of 5 cm cells does
+    once the jambs are seen from close by: 8 free cells, the disc at its middle cells exactly touching a blocked
+    cell's centre. The default navigator finds no path; with ``touch`` (exploration's tight stretches) it plans
+    through and the DWA, on the laser's points, drives the door's middle."""
+    world = World.from_polygons([box(0, 0, 8, 4), box(3.9, 0, 4.1, 1.75), box(3.9, 2.25, 4.1, 4)], name="door")
+    free = np.ones((80, 160), dtype=bool)
+    free[[0, -1], :] = free[:, [0, -1]] = False
+    free[:, 78:82] = False  # the wall, x 3.9-4.1 m
+    free[36:44, 78:82] = True  # the door drawn y 1.80-2.20 m (it is 1.75-2.25 m)
+    grid = PlanningGrid(free, 0.05, (0.0, 0.0))
+    robot = Robot(world, [2.0, 2.0, 0.0], RobotConfig(radius=0.2), seed=2)
+    cfg = NavigatorConfig(touch=touch, dwa={"margin_weight": 3.0})
+    result = run_navigation(world, robot, grid, [6.0, 2.0], "dwa", cfg)
+    if not touch:
+        assert not result.success and result.reason.startswith("no path")
+        return
+    assert result.success and result.collisions == 0 and result.min_clearance > 0.04  # 0.05 m at its middle
+
+
 def test_a_new_map_that_blocks_the_path_makes_the_navigator_replan(hall):
     world, grid = hall
     nav = Navigator([9.0, 2.0], RobotConfig(), NavigatorConfig())

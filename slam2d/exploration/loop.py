@@ -99,7 +99,7 @@ class _Loop:
         self.options = navigator_config({"max_time": 120.0, "blocked_goal_reach": 0.0, **self.ecfg.options},
                                           True, "exploration.options")  # fmt: skip
         dwa = self.options.dwa
-        self.tight_options = self.options.model_copy(update={"dwa": dwa.model_copy(update={
+        self.tight_options = self.options.model_copy(update={"touch": True, "dwa": dwa.model_copy(update={
             "margin_weight": max(dwa.margin_weight, TIGHT_MARGIN_WEIGHT)})})  # fmt: skip
         self.ignored = ignored_cells(self.world.unmapped, self.truth_frame, self.truth_free.shape, self.ecfg.bounds)
         # the robot's centre goes where the navigator plans: radius + inflation margin from walls
@@ -159,8 +159,9 @@ class _Loop:
 
     def navigator(self) -> Navigator:
         """The navigator to the current leg: with the robot grown by the safety margin, but on the tight leg of a
-        ``tight`` goal (a gap the margin does not fit through, the last resort) with its own disc, and a DWA that
-        drives the gap's middle."""
+        ``tight`` goal (a gap the margin does not fit through, the last resort) with its own disc, planned also where
+        it touches a blocked cell's centre (the map draws a door seen from close by up to a cell narrower each side),
+        and a DWA that drives the gap's middle."""
         if self.tight_legs[0]:
             return Navigator(self.legs[0], self.robot.cfg, self.tight_options)
         return Navigator(self.legs[0], self.body, self.options)

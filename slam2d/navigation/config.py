@@ -29,6 +29,8 @@ class NavigatorConfig(Section):
     period: float = Field(0.1, gt=0, description="s, control period")
     inflation_margin: float = Field(0.05, ge=0, description="m; a cell where the disc comes this close costs `tight_weight`")
     tight_weight: float = Field(20.0, ge=0, description="extra step cost at the radius (lethal), falling to 0 over the margin")
+    touch: bool = Field(False, description="a cell where the disc would touch the centre of a blocked cell fits it "
+                        "(exploration's tight stretches: a map of 5 cm cells draws a door's faces up to a cell into it)")
     wall_distance: float = Field(0.3, gt=0, description="m beyond the margin over which a soft cost falls to 0")
     wall_weight: float = Field(1.0, ge=0, description="extra step cost at the margin's edge (1 = double)")
     unknown_free: bool = Field(False, description="occupancy maps: unknown cells are free for planning")

@@ -59,6 +59,7 @@ _FINAL_GAP = 0.01  # m kept between the robot's disc and any point on the final 
 GOAL_PADDING = 1.0  # m of free cells kept around a goal beyond a map whose unknown cells are free
 _CREEP = 0.05  # m/s; slower than this, the final approach turns on the spot to a goal more than 0.3 rad off
 _STOP_DECEL = 0.9  # of max_accel: the deceleration the stop at the goal is planned with
+_TOUCH = 1e-6  # m: with ``touch``, a disc this far within a blocked cell's centre still fits (rounding)
 
 
 def make_local_planner(name: str, robot: RobotConfig, cfg: NavigatorConfig):
@@ -186,13 +187,14 @@ class Navigator:
     def _layers(self, clear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(Where the robot's disc fits, the A* cost) of cells with clearance ``clear`` (m): ``wall_weight``
         where the disc comes within ``inflation_margin`` of a blocked cell, rising by up to ``tight_weight``
-        as it comes closer (through a tight gap, its middle), falling linearly to 0 over ``wall_distance`` beyond."""
+        as it comes closer (through a tight gap, its middle), falling linearly to 0 over ``wall_distance`` beyond.
+        The disc fits where it keeps off every blocked cell's centre, or with ``touch`` where it reaches one."""
         c = self.cfg
         gap = clear - self.robot.radius
         beyond = gap - c.inflation_margin  # m between the disc + margin and the nearest blocked cell centre
         tight = np.clip(-beyond / c.inflation_margin, 0.0, 1.0) if c.inflation_margin > 0 else 0.0
         cost = c.wall_weight * np.clip(1.0 - beyond / c.wall_distance, 0.0, 1.0) + c.tight_weight * tight
-        return gap > 0, cost
+        return (gap > -_TOUCH) if c.touch else (gap > 0), cost
 
     def plan(self, pose, points_world=None, unmapped=None) -> str:
         """Plans from ``pose`` (3,) to the goal, with ``points_world`` (P, 2) blocked if given;
