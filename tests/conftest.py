@@ -20,6 +20,17 @@ def _data_file(rel: str) -> Path:
     return path
 
 
+def load_benchmark(name: str):
+    """The module of ``benchmarks/<name>.py``, loaded from its file (the benchmarks are scripts, not a package)."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"{name}_bench", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 @pytest.fixture
 def data_file():
     """Call with a path relative to SLAM2D_DATA; skips (or fails in CI) when absent."""

@@ -1,18 +1,13 @@
 """The exploration benchmark's pairing of runs (benchmarks/exploration.py): ratios per world and seed, and the
 figure of their spread."""
 
-import importlib.util
 import math
-from pathlib import Path
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "exploration.py"
+from conftest import load_benchmark
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("exploration_bench", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("exploration")
 
 
 def _run(world, seed, strategy, d90, d99):

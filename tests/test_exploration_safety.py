@@ -41,17 +41,22 @@ def test_the_margin_holds_through_a_narrow_doorway_and_both_rooms_are_explored(t
     assert m["min_clearance"] >= cfg.exploration.safety_margin  # 5 cm from every wall, the door's jambs too
 
 
+def door_run(tmp_path, width: float, seed: int):
+    """(config, run) of the nearest frontier exploring the two rooms of a door ``width`` m wide from the first."""
+    cfg = explore_config.load(None, {
+        "dataset.simulator.world": str(narrow_door_png(tmp_path, width)), "seed": seed,
+        "exploration.strategy": "nearest_frontier", "exploration.start": [1.5, 2.0, 0.0], "exploration.max_time": 200,
+        "exploration.animation": False,
+    })  # fmt: skip
+    return cfg, explore(cfg)
+
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_a_tight_door_is_driven_through_its_middle_and_the_way_to_it_keeps_the_margin(tmp_path, seed):
     """A door 0.55 m wide: on the map the disc grown by the margin does not fit through it (a tight goal), yet its
     middle leaves the robot's disc 7.5 cm each side. Before, the whole way to it was driven with the bare disc and
     the door off its middle: 2.1 and 2.9 cm (seeds 1, 2)."""
-    cfg = explore_config.load(None, {
-        "dataset.simulator.world": str(narrow_door_png(tmp_path, 0.55)), "seed": seed,
-        "exploration.strategy": "nearest_frontier", "exploration.start": [1.5, 2.0, 0.0], "exploration.max_time": 200,
-        "exploration.animation": False,
-    })  # fmt: skip
-    run = explore(cfg)
+    cfg, run = door_run(tmp_path, 0.55, seed)
     m = run.metrics
     assert m["tight_goals"] >= 1 and m["coverage"] >= 0.99 and m["collisions"] == 0
     assert (run.truth[:, 0] > 6.0).any()  # through the door and round the partition
@@ -64,12 +69,7 @@ def test_a_door_of_the_disc_and_twice_the_margin_is_passed_though_the_map_draws_
     by, the map draws each jamb's face (on a cell boundary) in the cell on the door's side: 8 free cells, whose
     middle ones the disc touches a blocked cell's centre from. Before, the tight stretch found no path there and the
     second room was lost (coverage 88.5 and 84.0 %, seeds 0 and 2); its planner now takes such cells."""
-    cfg = explore_config.load(None, {
-        "dataset.simulator.world": str(narrow_door_png(tmp_path, 0.50)), "seed": seed,
-        "exploration.strategy": "nearest_frontier", "exploration.start": [1.5, 2.0, 0.0], "exploration.max_time": 200,
-        "exploration.animation": False,
-    })  # fmt: skip
-    run = explore(cfg)
+    _, run = door_run(tmp_path, 0.50, seed)
     m = run.metrics
     assert m["tight_goals"] >= 1 and m["coverage"] >= 0.99 and m["collisions"] == 0
     assert (run.truth[:, 0] > 5.0).any()  # through the door

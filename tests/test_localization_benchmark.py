@@ -2,17 +2,11 @@
 ambiguous at a look-alike place of the map's analysis, the true pose held by a hypothesis, is counted apart;
 every other failure counts."""
 
-import importlib.util
-from pathlib import Path
-
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "localization.py"
+from conftest import load_benchmark
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("localization_bench", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("localization")
 
 
 def _row(world, scenario, ok, end, lookalikes, false=False, seen=0, rank=0):

@@ -5,11 +5,10 @@ a scan taken while moving is de-skewed back to the static one."""
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import load_benchmark
 from test_icp import _box
 
 from slam2d import geometry
@@ -17,16 +16,12 @@ from slam2d.datasets.simulator import World
 from slam2d.frontends import create_frontend
 from slam2d.types import Scan
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "scale_audit.py"
 BEAMS = np.deg2rad(np.arange(-90.0, 90.5, 1.0))  # 181 beams, 1 deg: the Freiburg clinic's laser
 RANGE_MAX = 30.0
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("scale_audit", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("scale_audit")
 
 
 @pytest.fixture(scope="module")
