@@ -93,3 +93,25 @@ def test_the_disambiguating_goal_is_near_by_the_way_the_robot_drives_not_through
         assert goal.distance == pytest.approx(way[cell[0], cell[1]])
         assert goal.distance < 7.0, goal  # through the next room: 9 m
         assert goal.pose[1] < 29.3  # in the corridor, south of the rooms' wall
+
+
+def test_the_evidence_a_scan_adds_is_given_per_contender(wings_plan, two_place_filter):
+    """The U plan's west wing held by three hypotheses (the truth, the east wing's copy, the east wing turned
+    by a half turn 8 m south): per contender, the evidence one scan adds against it (``gains``: what the
+    trace of office_c's active moves reads), whose mean weighted by the contenders is ``separation``; at the
+    far end of the wing none against the east wing's copy, some against the turned one."""
+    from slam2d.localization.active import gains, separation
+
+    known = KnownMap.load(wings_plan)
+    truth = np.array([7.7, 17.0, -np.pi / 2])
+    pf = two_place_filter(known, [(truth, 300), (truth + [17.5, 0.0, 0.0], 200),
+                                  (truth + [17.5, -8.0, np.pi], 100)])  # fmt: skip
+    goals = np.array([truth, truth + [0.0, -8.0, 0.0]])  # here; in sight of the joining corridor
+    gain, weights, free = gains(pf, goals)
+    assert gain.shape == (2, 2) and np.allclose(weights, [1 / 3, 1 / 6], atol=0.02) and free.all()
+    hyps = pf.estimate.hypotheses
+    copy = 0 if abs(hyps[1].pose[2] - truth[2]) < 0.5 else 1  # the row of the copy not turned
+    assert gain[copy, 0] < 0.05 < gain[1 - copy, 0]
+    assert gain[copy, 1] > 0.5  # the joining corridor tells the wings apart
+    sep, _ = separation(pf, goals)
+    assert np.allclose(sep, weights @ np.minimum(gain, pf.evidence_threshold) / weights.sum())

@@ -23,7 +23,8 @@ from slam2d import geometry
 from slam2d.localization.mcl import ParticleFilter
 from slam2d.localization.sensor import BeamModel
 
-__all__ = ["Goal", "Looker", "contenders", "disambiguating_goal", "separation", "way_length", "way_to"]
+__all__ = ["Goal", "Looker", "contenders", "disambiguating_goal", "gains", "separation", "way_length",
+           "way_to"]
 
 GAIN = 1.0  # log evidence per scan from which a goal is decisive (the nearest such is chosen)
 WORTH = 0.1  # log evidence per scan below which no place separates the hypotheses (copies drawn a cell apart)
@@ -52,12 +53,24 @@ def contenders(pf: ParticleFilter) -> list:
 def separation(pf: ParticleFilter, goals: np.ndarray, angles: np.ndarray | None = None,
                clearance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """For goals (G, 3) relative to the best compact hypothesis, the evidence (G,) one scan taken there
-    would give it over the other :func:`contenders` (log likelihood ratio as the filter weighs
-    hypotheses: the scan predicted under the best, its end points scored under each other one on the
-    smooth likelihood field, each beam raised to beam_weight; the weighted mean over the others, each
-    capped at the evidence threshold), and whether each goal is free, ``clearance`` m from walls (the
-    filter's free_clearance by default), under every hypothesis (G,). ``angles`` (rad): the laser's
-    beams (72 over the full turn by default)."""
+    would give it over the other :func:`contenders` (:func:`gains`, each capped at the evidence threshold,
+    their mean weighted by the contenders' weights), and whether each goal is free under every hypothesis
+    (G,)."""
+    gain, weights, free = gains(pf, goals, angles, clearance)
+    if len(weights) == 0:
+        return np.zeros(len(goals)), free
+    return (weights @ np.minimum(gain, pf.evidence_threshold)) / weights.sum(), free
+
+
+def gains(pf: ParticleFilter, goals: np.ndarray, angles: np.ndarray | None = None,
+          clearance: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per other contender k of the best compact hypothesis (:func:`contenders`, heaviest first) and goal
+    (G, 3, relative to the best), the evidence (K, G) one scan taken there would give the best over k (log
+    likelihood ratio as the filter weighs hypotheses: the scan predicted under one, its end points scored
+    under the other on the smooth likelihood field, each beam raised to beam_weight; the smaller of the
+    two ways, since whichever is true its scan must misfit the other); the contenders' weights (K,); and
+    whether each goal is free, ``clearance`` m from walls (the filter's free_clearance by default), under
+    every hypothesis (G,). ``angles`` (rad): the laser's beams (72 over the full turn by default)."""
     clearance = pf.cfg.free_clearance if clearance is None else clearance
     hyps, cfg, known = contenders(pf), pf.cfg, pf.map
     angles = np.linspace(-np.pi, np.pi, 72, endpoint=False) if angles is None else np.asarray(angles)
@@ -75,16 +88,12 @@ def separation(pf: ParticleFilter, goals: np.ndarray, angles: np.ndarray | None 
         free &= ok
         under.append(poses)
     if len(hyps) < 2:
-        return np.zeros(len(goals)), free
+        return np.zeros((0, len(goals))), np.zeros(0), free
     model = BeamModel(known, cfg, pf.range_max)
     ranges = [model.expected_ranges(p, np.zeros(3), angles) for p in under]  # (G, n) each
-    gains, weights = [], []
-    for i in range(1, len(hyps)):  # whichever of the two is true, its scan must misfit the other
-        gain = np.minimum(_misfit(pf, ranges[0], under[i], angles), _misfit(pf, ranges[i], under[0], angles))
-        gains.append(np.minimum(gain, pf.evidence_threshold))
-        weights.append(hyps[i].weight)
-    w = np.array(weights)
-    return (w @ np.array(gains)) / w.sum(), free
+    gain = np.array([np.minimum(_misfit(pf, ranges[0], under[i], angles), _misfit(pf, ranges[i], under[0], angles))
+                     for i in range(1, len(hyps))])  # fmt: skip
+    return gain, np.array([h.weight for h in hyps[1:]]), free
 
 
 def _misfit(pf: ParticleFilter, ranges: np.ndarray, poses: np.ndarray, angles: np.ndarray) -> np.ndarray:
