@@ -54,3 +54,23 @@ def test_the_heading_drift_does_not_follow_the_beam_order():
         steps = [robot.step(0.0, 0.0, 0.0)] + [robot.step(0.3, 0.0, 0.1) for _ in range(150)]
         gaps.append(_heading_drift(steps, False) - _heading_drift(steps, True))
     assert abs(np.degrees(np.mean(gaps))) < 0.07, np.degrees(gaps)
+
+
+def test_each_seed_of_the_random_order_is_one_draw():
+    """``map_seed`` draws the random order: the same seed keeps the same points of a noisy oblique wall, another
+    seed other points (first come, first kept), and the frontend's config reaches the map."""
+    from slam2d.frontends.icp.config import IcpConfig
+    from slam2d.frontends.icp.mapping import get_local_map
+
+    rng = np.random.default_rng(3)
+    bearings = np.deg2rad(np.arange(-60.0, 60.25, 0.5))
+    scan = (1.0 / np.cos(bearings) + rng.normal(0.0, 0.01, len(bearings)))[:, None] * np.column_stack(
+        [np.cos(bearings), np.sin(bearings)])  # fmt: skip
+
+    def kept(seed: int) -> np.ndarray:
+        local_map = get_local_map(IcpConfig(map_order="random", map_seed=seed))
+        local_map.add(np.zeros(3), scan)
+        return np.sort(local_map.voxels.point_cloud()[:, :2], axis=0)
+
+    assert np.array_equal(kept(1), kept(1))
+    assert not np.array_equal(kept(1), kept(2))

@@ -40,6 +40,7 @@ class IcpConfig(Section):
         "turns the map against the scan (-0.5 mdeg a scan in the simulator), random does not (the clinic, Intel "
         "and MIT-CSAIL lose by it)"
     )
+    map_seed: int = Field(0, ge=0, description="seed of the random order (map_order random): each seed one draw")
     map_radius: float = Field(30.0, gt=0, description="m; map voxels farther than this from the robot are dropped")
     initial_threshold: float = Field(0.5, gt=0, description="m; correspondence scale before any motion statistics")
     min_motion: float = Field(0.02, ge=0, description="m; odometry deviation that updates the adaptive threshold")

@@ -33,17 +33,17 @@ class LocalMap:
     """Scan points (m) in the frontend's frame: a kiss-icp ``VoxelHashMap`` (``voxels``) of voxels
     ``voxel_size`` m wide holding at most ``max_points_per_voxel`` points, none beyond ``radius`` m of
     the robot, made of the last ``window`` scans (0: every scan); each scan's points go in in beam order
-    or a seeded random ``order`` (module docstring)."""
+    or a random ``order`` drawn from ``seed`` (module docstring)."""
 
     def __init__(self, voxel_size: float, radius: float, max_points_per_voxel: int, window: int,
-                 order: str = "beam"):
+                 order: str = "beam", seed: int = 0):
         from kiss_icp.mapping import VoxelHashMap
 
         self.voxels = VoxelHashMap(voxel_size, radius, max_points_per_voxel)
         self.window = window
         self._recent: deque[np.ndarray] = deque(maxlen=window or None)
         self._since_rebuild = 0
-        self._shuffle = np.random.default_rng(0) if order == "random" else None
+        self._shuffle = np.random.default_rng(seed) if order == "random" else None
 
     def empty(self) -> bool:
         return self.voxels.empty()
@@ -78,6 +78,6 @@ class LocalMap:
 
 def get_local_map(config: IcpConfig) -> LocalMap:
     """The local map of ``config`` (``map_voxel_size``, ``map_radius``, ``map_max_points_per_voxel``,
-    ``map_window``, ``map_order``)."""
+    ``map_window``, ``map_order``, ``map_seed``)."""
     return LocalMap(config.map_voxel_size, config.map_radius, config.map_max_points_per_voxel, config.map_window,
-                    config.map_order)
+                    config.map_order, config.map_seed)
