@@ -207,8 +207,7 @@ class TourPlanner:
 
         cfg = explorer.cfg.tour
         self.decisions += 1
-        min_cells = int(np.ceil(explorer.min_frontier / view.resolution))
-        found = _unviewed(view, explorer.frontiers(pose, view, distance), explorer.viewed, min_cells)
+        found = _unviewed(view, explorer.frontiers(pose, view, distance), explorer.viewed)
         if not found:
             return None
         keys, goals, paths, members = _subspaces(view, found, cfg.cell, distance)
@@ -311,11 +310,10 @@ class TourPlanner:
         return xy[first].copy(), view.to_world(cells[sees[first]])
 
 
-def _unviewed(view, found: list, viewed: np.ndarray, min_cells: int = 1) -> list:
+def _unviewed(view, found: list, viewed: np.ndarray) -> list:
     """The frontier regions ``found`` without the cells ``viewed`` (K, 2) m (frontier cells a viewpoint reached was
     chosen to see and did not clear: the map keeps them frontier from there, another viewpoint would not fare
-    better); a region with fewer than ``min_cells`` left is dropped, as a region that small is never found (the
-    rest of a region looked at is no target of its own: a trip back across the plan for a few cells)."""
+    better); a region with none left is dropped."""
     if len(viewed) == 0:
         return found
     mask = np.zeros(view.shape, dtype=bool)
@@ -327,7 +325,7 @@ def _unviewed(view, found: list, viewed: np.ndarray, min_cells: int = 1) -> list
         keep = ~mask[f.cells[:, 0], f.cells[:, 1]]
         if keep.all():
             out.append(f)
-        elif keep.sum() >= max(min_cells, 1):
+        elif keep.any():
             out.append(replace(f, cells=f.cells[keep], size=int(keep.sum())))
     return out
 
