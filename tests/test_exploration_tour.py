@@ -165,26 +165,3 @@ def test_frontier_cells_a_reached_viewpoint_did_not_clear_are_no_target_any_more
     again = ex.decide(np.array([*first.position, 0.0]), view)
     old = {tuple(c) for c in np.round(first.targets, 3)}
     assert again is None or again.targets is None or not old & {tuple(c) for c in np.round(again.targets, 3)}
-
-
-def test_a_begun_subspace_holding_a_scrap_of_frontier_is_not_toured_first():
-    """S, a subspace begun when the robot stood by it, keeps two frontier cells (the rest of a region a viewpoint
-    looked at) when the robot has driven 14 m east, next to E (begun) with F further east. Begun first, S would be
-    a trip back before F (lab_b: 13.6 m back across the plan for two cells); holding less than any region found,
-    it is placed where it costs least: last, after F."""
-    import copy
-
-    from slam2d.exploration.tour import TourPlanner
-
-    pts = np.array([[-13, 0], [-14, 0], [3, 0], [9, 0]], dtype=float)  # the robot (by S), S, E, F
-    keys = [(0, 0), (1, 0), (2, 0)]  # S, E, F
-    planner = TourPlanner()
-    cost = np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1))
-    planner._global_order(keys, cost, 50.0, 6.0)  # S begun
-    pts[0] = [0.0, 0.0]
-    cost = np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1))
-    planner._global_order(keys, cost, 50.0, 6.0)  # E begun, F 9 m away not
-    assert planner.begun == {(0, 0), (1, 0)}
-    region = copy.deepcopy(planner)._global_order(keys, cost, 50.0, 6.0)  # were S a region: begun, before F
-    assert region.index(0) < region.index(2)
-    assert planner._global_order(keys, cost, 50.0, 6.0, scraps={(0, 0)}) == [1, 2, 0]

@@ -212,9 +212,7 @@ class TourPlanner:
             return None
         keys, goals, paths, members = _subspaces(view, found, cfg.cell, distance)
         cost = self._costs(explorer, view, pose, goals, paths)
-        least = np.ceil(explorer.min_frontier / view.resolution)  # cells of the smallest frontier region found
-        scraps = {key for key, m in zip(keys, members) if len(m) < least}
-        order = self._global_order(keys, cost, cfg.solver_ms, cfg.horizon, scraps)
+        order = self._global_order(keys, cost, cfg.solver_ms, cfg.horizon)
         first = order[0]
         nxt = goals[order[1]] if len(order) > 1 else None
         cells = members[first]
@@ -259,24 +257,19 @@ class TourPlanner:
             out[i] = row[0].lengths(at)  # the search resumed only as far as these cells
         return np.minimum(out, out.T)
 
-    def _global_order(self, keys, cost, solver_ms, horizon, scraps=frozenset()) -> list[int]:
+    def _global_order(self, keys, cost, solver_ms, horizon) -> list[int]:
         """Indices of the subspaces in tour order, warm-started from the previous decision's order. A subspace once
         within ``horizon`` m of path from the robot is *begun*, and the begun subspaces are toured before the others
         (TARE's local horizon, finished before the robot leaves it; a begun subspace left for the end of the tour is
         a trip back once the tour has grown the other way): an arc from one not begun to a begun one costs
-        ``LEAVE`` m more. The ``scraps`` (subspaces holding less frontier than any region found: a region's rest a
-        viewpoint looked at, a region's corner over a square's border) are placed where they cost least, neither
-        ahead of the others nor kept behind the begun ones (a begun scrap first was a trip back across lab_b)."""
+        ``LEAVE`` m more."""
         index = {key: i for i, key in enumerate(keys)}
         previous = [index[key] + 1 for key in self.order if key in index]
         self.begun |= {keys[k - 1] for k in range(1, len(cost)) if cost[0, k] <= horizon}
-        scrap = np.array([False] + [key in scraps for key in keys])
-        near = np.array([False] + [key in self.begun for key in keys]) & ~scrap
-        rest = ~near & ~scrap
-        rest[0] = False  # not from the robot (node 0)
-        if near.any() and rest.any():
+        near = np.array([False] + [key in self.begun for key in keys])
+        if near.any() and not near[1:].all():
             cost = cost.copy()
-            cost[np.ix_(rest, near)] += LEAVE
+            cost[np.ix_(np.flatnonzero(~near)[1:], near)] += LEAVE  # not from the robot (node 0)
         order = [k - 1 for k in solve_open_tour(cost, initial=previous, time_ms=solver_ms)]
         self.order = [keys[i] for i in order]
         return order
