@@ -124,16 +124,23 @@ def _lookup(grid, mask: np.ndarray, points) -> np.ndarray:
 def path_repetition(xy: np.ndarray) -> float:
     """Fraction of the path (resampled every SAMPLE_STEP m) within REPEAT_RADIUS of path driven more than
     REPEAT_GAP m earlier."""
+    at, repeated = repeated_path(xy)
+    return float(np.mean(repeated)) if len(at) else 0.0
+
+
+def repeated_path(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The path ``xy`` (N, 2) m resampled every SAMPLE_STEP m: each sample's distance along it (K,) m and whether it is
+    driven again (K,) bool (within REPEAT_RADIUS of path driven more than REPEAT_GAP m earlier); none for a path
+    shorter than REPEAT_GAP."""
     seg = np.hypot(*np.diff(xy, axis=0).T)
     s = np.concatenate([[0.0], np.cumsum(seg)])
     if s[-1] < REPEAT_GAP:
-        return 0.0
+        return np.zeros(0), np.zeros(0, dtype=bool)
     at = np.arange(0.0, s[-1], SAMPLE_STEP)
     pts = np.column_stack([np.interp(at, s, xy[:, 0]), np.interp(at, s, xy[:, 1])])
     near = cKDTree(pts).query_ball_point(pts, REPEAT_RADIUS)
     gap = round(REPEAT_GAP / SAMPLE_STEP)
-    repeated = [bool(js) and min(js) < i - gap for i, js in enumerate(near)]
-    return float(np.mean(repeated))
+    return at, np.array([bool(js) and min(js) < i - gap for i, js in enumerate(near)], dtype=bool)
 
 
 def at_coverage(curve: np.ndarray, level: float) -> tuple[float, float]:
