@@ -76,7 +76,10 @@ class IcpConfig(Section):
     )
     point_sigma: float = Field(0.03, gt=0, description="m; std of one point residual: prior weight vs points")
     inlier_distance: float = Field(0.1, gt=0, description="m; residual of a point counted as matched")
-    retry_below: float = Field(0.6, ge=0, le=1, description="matched fraction below which other guesses are tried")
+    retry_below: float = Field(
+        0.6, ge=0, le=1, description="matched fraction below which other guesses are tried (as also when odometry "
+        "lies beyond the ICP's reach from them)"
+    )
     min_points: int = Field(20, ge=3, description="fewer valid points than this -> odometry fallback")
     min_inlier_fraction: float = Field(0.2, ge=0, le=1, description="fewer matched points -> fallback")
     max_correction_xy: MaxCorrectionXY = 0.5

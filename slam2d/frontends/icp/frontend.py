@@ -172,9 +172,10 @@ class IcpFrontend:
         """(pose, fit, start) of the best start, or None if all failed.
 
         Starts from the odometry ``guess``; if under ``retry_below`` of the
-        points match, also from the constant-velocity and the no-motion
-        predictions (prior still at ``guess``), keeping the result matching
-        most points. If that result diverges from ``guess``, odometry may be
+        points match, or either prediction lies beyond the ICP's reach from
+        ``guess`` (``_beyond_reach``), also from the constant-velocity and the
+        no-motion predictions (prior still at ``guess``), keeping the result
+        matching most points. If that result diverges from ``guess``, odometry may be
         lying (frozen then jumping, a wild step, slip): each of the two
         predictions is tried as its own start and prior, and one whose match
         stays within the divergence bound of it and matches at least
@@ -184,7 +185,7 @@ class IcpFrontend:
         cfg = self.config
         best = self.registration.match(source, guess, guess, threshold, grid, self.map)
         predictions = (geometry.compose(self.pose, self._last_delta), self.pose)
-        if best is None or best[1].matched < cfg.retry_below:
+        if best is None or best[1].matched < cfg.retry_below or self._beyond_reach(guess, predictions, threshold):
             for start in predictions:
                 other = self.registration.match(source, start, guess, threshold, grid, self.map)
                 if other is not None and (best is None or other[1].matched > best[1].matched):
@@ -199,6 +200,13 @@ class IcpFrontend:
         if overruling:
             return max(overruling, key=lambda r: r[1].matched)
         return None if best is None else (*best, guess)
+
+    def _beyond_reach(self, guess, predictions, threshold: float) -> bool:
+        """Whether a prediction lies beyond the ICP's reach from ``guess``: their translation apart plus the
+        chord of their turn at ``threshold_range`` (kiss-icp's model deviation, m) above ``threshold``."""
+        deltas = np.array([geometry.between(guess, p) for p in predictions])
+        chords = 2 * self.config.threshold_range * np.abs(np.sin(deltas[:, 2] / 2))
+        return bool(np.any(np.hypot(deltas[:, 0], deltas[:, 1]) + chords > threshold))
 
     def _without_moving(self, points, pose, fit: Fit, start, threshold, grid):
         """(pose, fit, points) matched again from ``pose`` without the points earlier scans saw
