@@ -1,13 +1,12 @@
 """The Radish logs under several draws of the ICP local map's point order: how much a log's figure is one draw.
 
-Usage: .venv/bin/python benchmarks/slam_draws.py [intel aces fr079 fr-clinic csail] [--draws 4] [--workers 2]
+Usage: .venv/bin/python benchmarks/slam_draws.py [intel aces fr079 fr-clinic csail] [--draws 4] [--first-draw 0] [--workers 2]
        [--set KEY=VALUE ...] [--out results/bench-draws]
 
-Runs each experiments/<log>.yaml with ``frontend.options.map_order=random`` and ``map_seed`` 0 … draws − 1 (and the
-``--set`` overrides, so that a change can be judged over draws rather than on one run), each `slam2d run` in a
-process of its own, and prints per log every draw's relations error (m), their median and how many draws beat
-Cartographer's published figure (Hess et al. 2016). The default (beam order) is one order of the points, not a
-draw: run it with ``slam2d run experiments/<log>.yaml``.
+Runs each experiments/<log>.yaml with ``frontend.options.map_order=random`` (the default) and ``map_seed``
+first … first + draws − 1 (and the ``--set`` overrides, so that a change can be judged over draws rather than on
+one run), each `slam2d run` in a process of its own, and prints per log every draw's relations error (m), their
+median and how many draws beat Cartographer's published figure (Hess et al. 2016). Draw 0 is the default run.
 """
 
 from __future__ import annotations
@@ -35,10 +34,11 @@ def draw(log: str, seed: int, overrides: list[str], out: Path) -> float:
     return error
 
 
-def table(errors: dict[str, list[float]]) -> str:
-    """Markdown table: per log the draws' errors (m), their median and the draws below Cartographer's figure."""
+def table(errors: dict[str, list[float]], first: int = 0) -> str:
+    """Markdown table: per log the errors (m) of draws ``first`` on, their median and the draws below
+    Cartographer's figure."""
     n = max(len(e) for e in errors.values())
-    out = ["| log | " + " | ".join(f"draw {k}" for k in range(n)) + " | median | beat Cartographer |",
+    out = ["| log | " + " | ".join(f"draw {k}" for k in range(first, first + n)) + " | median | beat Cartographer |",
            "|---|" + "---|" * (n + 2)]
     for log, e in errors.items():
         beat = sum(x < CARTOGRAPHER[log] for x in e)
@@ -50,7 +50,8 @@ def table(errors: dict[str, list[float]]) -> str:
 def main(argv: list[str]) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("logs", nargs="*", default=list(CARTOGRAPHER), help=f"some of {', '.join(CARTOGRAPHER)}")
-    ap.add_argument("--draws", type=int, default=4, help="map_seed 0 … draws - 1")
+    ap.add_argument("--draws", type=int, default=4, help="how many draws: map_seed first … first + draws - 1")
+    ap.add_argument("--first-draw", type=int, default=0, help="the first draw's map_seed")
     ap.add_argument("--workers", type=int, default=2, help="runs at once")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="config override KEY=VALUE")
     ap.add_argument("--out", type=Path, default=Path("results/bench-draws"))
@@ -58,13 +59,13 @@ def main(argv: list[str]) -> None:
     unknown = set(args.logs) - set(CARTOGRAPHER)
     if unknown:
         ap.error(f"unknown logs: {', '.join(sorted(unknown))} (known: {', '.join(CARTOGRAPHER)})")
-    jobs = [(log, seed) for log in args.logs for seed in range(args.draws)]
+    jobs = [(log, seed) for log in args.logs for seed in range(args.first_draw, args.first_draw + args.draws)]
     with ThreadPoolExecutor(args.workers) as pool:
         found = list(pool.map(lambda job: draw(*job, args.overrides, args.out), jobs))
     errors: dict[str, list[float]] = {}
     for (log, _), error in zip(jobs, found):
         errors.setdefault(log, []).append(error)
-    print(table(errors))
+    print(table(errors, args.first_draw))
 
 
 if __name__ == "__main__":

@@ -17,7 +17,7 @@ def test_the_map_of_a_wall_seen_obliquely_is_not_turned():
     """A wall 1 m ahead seen through beams 0.5 deg apart over +-60 deg with 1 cm range noise, the points in
     random order (``map_order`` "random"): the map's voxels keep one point per 4.5 cm, first come first
     kept. A line fitted to the kept points lies along the wall (turned by 2 mdeg over 600 scans, standard
-    error 1.2 mdeg); with the points in beam order (``map_order`` "beam", the default) the kept ones sat
+    error 1.2 mdeg); with the points in beam order (``map_order`` "beam") the kept ones sat
     behind the wall on one side and before it on the other: turned by 22 mdeg."""
     rng = np.random.default_rng(0)
     bearings = np.deg2rad(np.arange(-60.0, 60.25, 0.5))
@@ -45,7 +45,7 @@ def test_the_heading_drift_does_not_follow_the_beam_order():
     """A 4.5 m straight drive along the office's south corridor (150 scans, the simulator's laser and
     odometry), six seeds, the frontend (``map_order`` "random") fed each scan's beams as they are and in
     reverse order (the same points): the end headings differ by 20 mdeg on average (-43 to 145). With
-    the points going into the map in beam order (``map_order`` "beam", the default) the drift followed
+    the points going into the map in beam order (``map_order`` "beam") the drift followed
     it: 137 mdeg (0.9 mdeg a scan), 45 to 172 in every seed."""
     world = World.office()
     gaps = []

@@ -14,6 +14,7 @@ def test_the_draws_table_counts_the_draws_below_cartographer():
     assert "| 0.53906 |" in csail and "2 of 4 (< 0.0319)" in csail
     assert "| 0.03572 |" in aces and "4 of 4 (< 0.0375)" in aces
     assert rows.splitlines()[0].count("draw ") == 4
+    assert "| draw 4 | draw 5 |" in bench.table({"aces": [0.0355, 0.0356]}, first=4).splitlines()[0]
 
 
 def test_an_unknown_log_is_refused_by_name(capsys):

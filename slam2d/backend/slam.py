@@ -69,6 +69,7 @@ class GraphSlamBackend:
             self._new_keyframe(scan, pose, delta, information, result.landmarks, previous)
             return
         cov = np.linalg.inv(result.information)
+        cov[2, 2] += (self.cfg.turn_sigma * result.delta[2]) ** 2
         self._cov = geometry.compose_covariance(self._cov, result.delta, cov)
         self._delta = geometry.compose(self._delta, result.delta)
         self._travelled += float(np.hypot(*result.delta[:2]))

@@ -36,9 +36,9 @@ class IcpConfig(Section):
     map_max_points_per_voxel: int = Field(20, gt=0, le=10_000, description="points kept per map voxel")
     map_window: int = Field(30, ge=0, description="scans kept in the local map (0: all within map_radius)")
     map_order: Literal["beam", "random"] = Field(
-        "beam", description="order a scan's points go into the map's voxels, first come first kept: beam order "
-        "turns the map against the scan (-0.5 mdeg a scan in the simulator), random does not (the clinic, Intel "
-        "and MIT-CSAIL lose by it)"
+        "random", description="order a scan's points go into the map's voxels, first come first kept: random (each "
+        "map_seed one draw) keeps them without regard to the beams; beam order turns the map against the scan "
+        "(-0.5 mdeg a scan in the simulator)"
     )
     map_seed: int = Field(0, ge=0, description="seed of the random order (map_order random): each seed one draw")
     map_radius: float = Field(30.0, gt=0, description="m; map voxels farther than this from the robot are dropped")
