@@ -3,10 +3,11 @@
 Usage: .venv/bin/python benchmarks/slam_draws.py [intel aces fr079 fr-clinic csail] [--draws 4] [--first-draw 0] [--workers 2]
        [--set KEY=VALUE ...] [--out results/bench-draws]
 
-Runs each experiments/<log>.yaml with ``frontend.options.map_order=random`` (the default) and ``map_seed``
-first … first + draws − 1 (and the ``--set`` overrides, so that a change can be judged over draws rather than on
-one run), each `slam2d run` in a process of its own, and prints per log every draw's relations error (m), their
-median and how many draws beat Cartographer's published figure (Hess et al. 2016). Draw 0 is the default run.
+Runs each experiments/<log>.yaml with ``frontend.options.map_order=random`` and ``map_seed`` first … first +
+draws − 1 (and the ``--set`` overrides, so that a change can be judged over draws rather than on one run), each
+`slam2d run` in a process of its own, and prints per log every draw's relations error (m), their median and how
+many draws beat Cartographer's published figure (Hess et al. 2016). The default (beam order) is one order of the
+points, not a draw: run it with ``slam2d run experiments/<log>.yaml``.
 """
 
 from __future__ import annotations

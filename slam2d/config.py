@@ -153,7 +153,7 @@ class LoopClosureConfig(Section):
         2.0, gt=0, description="m; half-width of the translational search window (the drift it can undo)"
     )
     drift: float = Field(
-        0.05, ge=0, description="m of drift allowed per m of graph path between two keyframes: widens window_xy ..."
+        0.03, ge=0, description="m of drift allowed per m of graph path between two keyframes: widens window_xy ..."
     )
     max_window_xy: float = Field(30.0, gt=0, description="m; ... and search_radius by as much, up to this window")
     wide_every: int = Field(
@@ -199,7 +199,7 @@ class BackendConfig(Section):
     robust_param: float = Field(2.0, gt=0, description="kernel width (whitened units)")
     gnc: bool = Field(False, description="graduated non-convexity in the final batch optimisation")
     turn_sigma: float = Field(
-        0.03, ge=0, le=1, description="heading std (rad) added to each scan's match per rad it turns: a matcher's "
+        0.0, ge=0, le=1, description="heading std (rad) added to each scan's match per rad it turns: a matcher's "
         "systematic error in turns, which its own residuals do not show"
     )
     loop_closure: LoopClosureConfig = LoopClosureConfig()

@@ -351,8 +351,10 @@ def test_mit_csail_freeze_and_jump_not_double_counted(data_file):
 def test_an_odometry_turn_beyond_the_icps_reach_is_checked_against_the_predictions(data_file, seed):
     """MIT-CSAIL's first 1300 scans: at 246.67 s odometry turns -40.1 deg in one scan. In draws 0 and 3 of the
     random order the match from odometry stops 23 deg short with exactly ``retry_below`` of the points matched;
-    the constant-velocity and no-motion starts, tried because odometry lies beyond the ICP's reach from them,
-    match. The relations' rotational error squared: 0.18-0.19 deg^2 (2.0-2.3 without the check)."""
-    m = _mit_csail_relations(data_file, create_frontend("icp", {"map_order": "random", "map_seed": seed}), 0, 1300)
+    the constant-velocity and no-motion starts, tried because odometry lies beyond the ICP's reach from them
+    (``retry_beyond_reach``), match. The relations' rotational error squared: 0.18-0.19 deg^2 (2.0-2.3 without
+    the check)."""
+    options = {"map_order": "random", "map_seed": seed, "retry_beyond_reach": True}
+    m = _mit_csail_relations(data_file, create_frontend("icp", options), 0, 1300)
     assert m["matched"] >= 700
     assert m["rot_sq_mean"] < 0.5 and m["trans_abs_mean"] < 0.036, m

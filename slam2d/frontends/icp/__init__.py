@@ -52,14 +52,14 @@ the scan is matched again from the result, and they are kept out of the local ma
 under ``MOVING_EVENT``). A person walking beside the robot along a corridor otherwise drags
 the pose along with them: lengthwise nothing else fixes it.
 
-Odometry that lies (frozen then jumping, a wild step, slip): the
-constant-velocity and the no-motion predictions are also tried as starts when
-the odometry prediction lies beyond the ICP's reach from either (translation
-plus the chord of the turn at ``threshold_range`` above the adaptive
-threshold: a match from odometry can stop short with enough points matched).
-When the match from the odometry prediction diverges from it, the two
-predictions are tried as starts and priors of their own; a match
-that agrees with one of them and matches well overrules odometry (counted
+Odometry that lies (frozen then jumping, a wild step, slip): with
+``retry_beyond_reach`` the constant-velocity and the no-motion predictions are
+also tried as starts when the odometry prediction lies beyond the ICP's reach
+from either (translation plus the chord of the turn at ``threshold_range``
+above the adaptive threshold: a match from odometry can stop short with enough
+points matched; off by default). When the match from the odometry prediction
+diverges from it, the two predictions are tried as starts and priors of their
+own; a match that agrees with one of them and matches well overrules odometry (counted
 under ``ODOMETRY_OVERRULED_EVENT``) instead of falling back to it.
 
 Motion filter: while odometry says the robot moved less than ``still_distance``

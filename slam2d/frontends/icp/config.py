@@ -36,9 +36,8 @@ class IcpConfig(Section):
     map_max_points_per_voxel: int = Field(20, gt=0, le=10_000, description="points kept per map voxel")
     map_window: int = Field(30, ge=0, description="scans kept in the local map (0: all within map_radius)")
     map_order: Literal["beam", "random"] = Field(
-        "random", description="order a scan's points go into the map's voxels, first come first kept: random (each "
-        "map_seed one draw) keeps them without regard to the beams; beam order turns the map against the scan "
-        "(-0.5 mdeg a scan in the simulator)"
+        "beam", description="order a scan's points go into the map's voxels, first come first kept: beam order "
+        "turns the map against the scan (-0.5 mdeg a scan in the simulator), random does not (each map_seed one draw)"
     )
     map_seed: int = Field(0, ge=0, description="seed of the random order (map_order random): each seed one draw")
     map_radius: float = Field(30.0, gt=0, description="m; map voxels farther than this from the robot are dropped")
@@ -76,9 +75,10 @@ class IcpConfig(Section):
     )
     point_sigma: float = Field(0.03, gt=0, description="m; std of one point residual: prior weight vs points")
     inlier_distance: float = Field(0.1, gt=0, description="m; residual of a point counted as matched")
-    retry_below: float = Field(
-        0.6, ge=0, le=1, description="matched fraction below which other guesses are tried (as also when odometry "
-        "lies beyond the ICP's reach from them)"
+    retry_below: float = Field(0.6, ge=0, le=1, description="matched fraction below which other guesses are tried")
+    retry_beyond_reach: bool = Field(
+        False, description="try the constant-velocity and no-motion predictions as starts also when odometry lies "
+        "beyond the ICP's reach from them (a match from odometry can stop short with enough points matched)"
     )
     min_points: int = Field(20, ge=3, description="fewer valid points than this -> odometry fallback")
     min_inlier_fraction: float = Field(0.2, ge=0, le=1, description="fewer matched points -> fallback")

@@ -172,8 +172,8 @@ class IcpFrontend:
         """(pose, fit, start) of the best start, or None if all failed.
 
         Starts from the odometry ``guess``; if under ``retry_below`` of the
-        points match, or either prediction lies beyond the ICP's reach from
-        ``guess`` (``_beyond_reach``), also from the constant-velocity and the
+        points match, or with ``retry_beyond_reach`` either prediction lies beyond
+        the ICP's reach from ``guess`` (``_beyond_reach``), also from the constant-velocity and the
         no-motion predictions (prior still at ``guess``), keeping the result
         matching most points. If that result diverges from ``guess``, odometry may be
         lying (frozen then jumping, a wild step, slip): each of the two
@@ -185,7 +185,8 @@ class IcpFrontend:
         cfg = self.config
         best = self.registration.match(source, guess, guess, threshold, grid, self.map)
         predictions = (geometry.compose(self.pose, self._last_delta), self.pose)
-        if best is None or best[1].matched < cfg.retry_below or self._beyond_reach(guess, predictions, threshold):
+        beyond = cfg.retry_beyond_reach and self._beyond_reach(guess, predictions, threshold)
+        if best is None or best[1].matched < cfg.retry_below or beyond:
             for start in predictions:
                 other = self.registration.match(source, start, guess, threshold, grid, self.map)
                 if other is not None and (best is None or other[1].matched > best[1].matched):
