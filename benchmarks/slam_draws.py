@@ -1,7 +1,7 @@
 """The Radish logs under several draws of the ICP local map's point order: how much a log's figure is one draw.
 
-Usage: .venv/bin/python benchmarks/slam_draws.py [intel aces fr079 fr-clinic csail] [--draws 4] [--first-draw 0] [--workers 2]
-       [--set KEY=VALUE ...] [--out results/bench-draws]
+Usage: .venv/bin/python benchmarks/slam_draws.py [intel aces fr079 fr-clinic csail] [--draws 4] [--first-draw 0]
+       [--workers 2] [--set KEY=VALUE ...] [--out results/bench-draws]
 
 Runs each experiments/<log>.yaml with ``frontend.options.map_order=random`` and ``map_seed`` first … first +
 draws − 1 (and the ``--set`` overrides, so that a change can be judged over draws rather than on one run), each
