@@ -80,9 +80,8 @@ def test_icp_pose_graph_beats_odometry_on_the_start_of_intel(data_file):
     assert est["rot_abs_mean"] < 0.5, est
 
 
-def bent_odometry(scans, bend_deg: float = 0.5):
-    """The scans with wheel odometry bent by ``bend_deg`` per metre travelled (a wheel-radius mismatch)
-    instead of the simulator's: drift beyond the local window, which the frontend (odometry) cannot see."""
+def distorted_odometry(scans, distort):
+    """The scans with wheel odometry composed from ``distort(true delta)`` instead of the simulator's."""
     import dataclasses
 
     odom, last = None, None
@@ -90,19 +89,56 @@ def bent_odometry(scans, bend_deg: float = 0.5):
         if last is None:
             odom = np.asarray(scan.odom, float)
         else:
-            true = geometry.between(last, scan.ground_truth)
-            odom = geometry.compose(odom, true + [0.0, 0.0, np.deg2rad(bend_deg) * np.hypot(true[0], true[1])])
+            odom = geometry.compose(odom, distort(geometry.between(last, scan.ground_truth)))
         last = scan.ground_truth
         yield dataclasses.replace(scan, odom=odom.copy())
 
 
-@register_frontend("test_odometry_half_degree")
-class OdometryHalfDegree:
-    """The wheel odometry's delta with 2 cm and 0.5 deg per scan of information."""
+def bent_odometry(scans, bend_deg: float = 0.5):
+    """The scans with wheel odometry bent by ``bend_deg`` per metre travelled (a wheel-radius mismatch)
+    instead of the simulator's: drift beyond the local window, which the frontend (odometry) cannot see."""
+    return distorted_odometry(scans, lambda d: d + [0.0, 0.0, np.deg2rad(bend_deg) * np.hypot(d[0], d[1])])
+
+
+def overturned_odometry(scans, excess: float):
+    """The scans with wheel odometry turning ``excess`` (a fraction) more than the robot does: a heading error
+    that grows with every turn, as a scan matcher's in fast turns."""
+    return distorted_odometry(scans, lambda d: d * [1.0, 1.0, 1.0 + excess])
+
+
+class _OdometryFrontend:
+    """The wheel odometry's delta with ``SIGMAS`` (m, deg) per scan of information."""
+
+    SIGMAS = (0.02, 0.5)
 
     def process(self, scan, odom_delta):
-        info = np.diag([1 / 0.02**2, 1 / 0.02**2, 1 / np.deg2rad(0.5) ** 2])
+        xy, theta = self.SIGMAS
+        info = np.diag([1 / xy**2, 1 / xy**2, 1 / np.deg2rad(theta) ** 2])
         return FrontendResult(delta=np.asarray(odom_delta, float), information=info, confidence=1.0)
+
+
+@register_frontend("test_odometry_half_degree")
+class OdometryHalfDegree(_OdometryFrontend):
+    """2 cm and 0.5 deg per scan."""
+
+
+@register_frontend("test_odometry_overconfident")
+class OdometryOverconfident(_OdometryFrontend):
+    """1 cm and 0.05 deg per scan, as a scan match claims."""
+
+    SIGMAS = (0.01, 0.05)
+
+
+def lap_run(distorted, frontend: str, *overrides):
+    """The simulator's run with ``distorted`` odometry, ``frontend``, loops searched only after a lap (40 m)."""
+    cfg = config.load(None, ["backend.name=pose_graph", f"frontend.name={frontend}",
+                             "backend.loop_closure.min_travel=40", *overrides])
+    return SlamPipeline(cfg).run(distorted(open_dataset(cfg.dataset, seed=cfg.seed)))
+
+
+def end_error(result) -> float:
+    """The estimate's distance (m) from the truth at the last scan."""
+    return float(np.hypot(*(result.poses[-1, :2] - result.ground_truth[-1, :2])))
 
 
 def test_a_loop_beyond_the_local_window_is_found_by_the_drift_grown_search():
@@ -111,13 +147,8 @@ def test_a_loop_beyond_the_local_window_is_found_by_the_drift_grown_search():
     window. With a window that grows with the path between the keyframes the loops close; with a
     fixed one the return ends more than twice as far off (one late loop, readmitted at the end)."""
     def bent_run(*overrides):
-        cfg = config.load(None, ["backend.name=pose_graph", "dataset.max_scans=800",
-                                 "frontend.name=test_odometry_half_degree", "backend.loop_closure.min_travel=40",
-                                 *overrides])
-        return SlamPipeline(cfg).run(bent_odometry(open_dataset(cfg.dataset, seed=cfg.seed), 0.75))
-
-    def end_error(result):
-        return np.hypot(*(result.poses[-1, :2] - result.ground_truth[-1, :2]))
+        return lap_run(lambda scans: bent_odometry(scans, 0.75), "test_odometry_half_degree", "dataset.max_scans=800",
+                       *overrides)
 
     assert end_error(bent_run("backend.name=none")) > 4.0
     fixed = end_error(bent_run("backend.loop_closure.drift=0"))
@@ -126,43 +157,13 @@ def test_a_loop_beyond_the_local_window_is_found_by_the_drift_grown_search():
     assert grown.stats["loop matcher accepted_grown_window"] > 0
 
 
-def overturned_odometry(scans, excess: float):
-    """The scans with wheel odometry turning ``excess`` (a fraction) more than the robot does: a heading error
-    that grows with every turn, as a scan matcher's in fast turns."""
-    import dataclasses
-
-    odom, last = None, None
-    for scan in scans:
-        if last is None:
-            odom = np.asarray(scan.odom, float)
-        else:
-            true = geometry.between(last, scan.ground_truth)
-            odom = geometry.compose(odom, true * [1.0, 1.0, 1.0 + excess])
-        last = scan.ground_truth
-        yield dataclasses.replace(scan, odom=odom.copy())
-
-
-@register_frontend("test_odometry_overconfident")
-class OdometryOverconfident:
-    """The wheel odometry's delta with 1 cm and 0.05 deg per scan of information, as a scan match claims."""
-
-    def process(self, scan, odom_delta):
-        info = np.diag([1 / 0.01**2, 1 / 0.01**2, 1 / np.deg2rad(0.05) ** 2])
-        return FrontendResult(delta=np.asarray(odom_delta, float), information=info, confidence=1.0)
-
-
 def test_a_heading_error_grown_in_turns_is_undone_by_the_loops():
     """Odometry that turns 4 % too far, each scan claiming 0.05 deg, loops searched only after a lap (40 m
     of travel): with the heading's uncertainty grown by ``turn_sigma`` per rad turned the loops are admitted
     and followed, the robot ends within 0.1 m of the truth (3 mm); without it the graph's marginals are so
     confident that the loops are gated or removed, and it ends 4.1 m off."""
     def overturned_run(*overrides):
-        cfg = config.load(None, ["backend.name=pose_graph", "frontend.name=test_odometry_overconfident",
-                                 "backend.loop_closure.min_travel=40", *overrides])
-        return SlamPipeline(cfg).run(overturned_odometry(open_dataset(cfg.dataset, seed=cfg.seed), 0.04))
-
-    def end_error(result):
-        return np.hypot(*(result.poses[-1, :2] - result.ground_truth[-1, :2]))
+        return lap_run(lambda scans: overturned_odometry(scans, 0.04), "test_odometry_overconfident", *overrides)
 
     assert end_error(overturned_run("backend.turn_sigma=0.03")) < 0.1
     assert end_error(overturned_run("backend.turn_sigma=0")) > 1.0
