@@ -63,6 +63,23 @@ def test_a_tight_door_is_driven_through_its_middle_and_the_way_to_it_keeps_the_m
     assert m["min_clearance"] >= cfg.exploration.safety_margin
 
 
+def test_a_goal_just_beyond_a_tight_door_is_turned_to_only_once_out_of_it(tmp_path):
+    """The 0.55 m door, seed 1, SLAM with the random order and the draws configuration's back end: the first goal
+    is a frontier just beyond the door and 25 cm to its side. Driven to its end with the robot's own disc, the
+    robot turned towards it while still in the door and passed the jamb's far corner 3.7 cm off; the tight stretch
+    now ends where the margin fits again beyond the door, which the robot sees from the door's near side."""
+    draws = {"frontend.options.map_order": "random", "frontend.options.retry_beyond_reach": True,
+             "backend.turn_sigma": 0.03, "backend.loop_closure.drift": 0.05}
+    cfg = explore_config.load(None, {
+        "dataset.simulator.world": str(narrow_door_png(tmp_path, 0.55)), "seed": 1, **draws,
+        "exploration.strategy": "nearest_frontier", "exploration.start": [1.5, 2.0, 0.0], "exploration.max_time": 200,
+        "exploration.animation": False,
+    })  # fmt: skip
+    m = explore(cfg).metrics
+    assert m["tight_goals"] >= 1 and m["coverage"] >= 0.99 and m["collisions"] == 0
+    assert m["min_clearance"] >= cfg.exploration.safety_margin
+
+
 @pytest.mark.parametrize("seed", [0, 2])
 def test_a_door_of_the_disc_and_twice_the_margin_is_passed_though_the_map_draws_it_narrower_close_by(tmp_path, seed):
     """A door 0.50 m wide: 5.0 cm each side of the robot's disc on its middle line and nowhere else. Seen from close
@@ -78,8 +95,10 @@ def test_a_door_of_the_disc_and_twice_the_margin_is_passed_though_the_map_draws_
 
 def test_the_way_to_a_tight_door_is_a_leg_of_its_own_with_the_margin():
     """A room whose only door is 0.45 m wide (the boxed-in room of test_exploration): the tight goal beyond it is
-    driven in two legs, to the room's cell nearest the door with the disc grown by the margin, then through the
-    door with the robot's own disc and the DWA that keeps to the middle. Before, one leg with the bare disc."""
+    driven in three legs, to the room's cell nearest the door with the disc grown by the margin, then through the
+    door with the robot's own disc and the DWA that keeps to the middle, out to the hall's cell nearest the door
+    where the margin fits again (with the leg's tolerance), then on with the margin. Before, one leg with the bare
+    disc, then two (the last through the door to the goal)."""
     from slam2d.exploration.explorer import Explorer
     from slam2d.exploration.gridops import FREE, OCCUPIED, UNKNOWN, GridView
     from slam2d.exploration.loop import TIGHT_MARGIN_WEIGHT, _Loop
@@ -100,11 +119,16 @@ def test_the_way_to_a_tight_door_is_a_leg_of_its_own_with_the_margin():
     assert goal is not None and goal.tight
     loop.slam = SimpleNamespace(pose=pose)  # where the robot stands on this map
     loop.set_goal(goal, 0.0)
-    entry = loop.legs[0]
-    assert len(loop.legs) == 2 and loop.tight_legs == [False, True]
+    entry, way_out = loop.legs[0], loop.legs[1]
+    assert len(loop.legs) == 3 and loop.tight_legs == [False, True, False]
     assert 2.0 < entry[0] < 2.5 and 1.7 < entry[1] < 2.35  # in the room, at the door
+    assert 2.7 < way_out[0] < 3.0 and 1.7 < way_out[1] < 2.35  # in the hall, beyond the wall (x 2.5-2.6 m) ...
+    jambs = np.array([[2.575, 1.775], [2.575, 2.275]])  # ... the disc, margin and leg's tolerance clear of its jambs
+    assert np.hypot(*(jambs - way_out).T).min() > 0.35
     assert loop.nav.robot.radius == pytest.approx(0.25) and loop.nav.local.cfg.margin_weight == 0
     assert not loop.nav.cfg.touch
     loop.next_leg(1.0)
     assert loop.nav.robot.radius == pytest.approx(0.2) and loop.nav.local.cfg.margin_weight == TIGHT_MARGIN_WEIGHT
     assert loop.nav.cfg.touch  # the door's cells the disc touches a blocked centre from are planned through
+    loop.next_leg(2.0)
+    assert loop.nav.robot.radius == pytest.approx(0.25) and not loop.nav.cfg.touch

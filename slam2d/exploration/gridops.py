@@ -66,6 +66,12 @@ class GridView:
             self.clearance, self.clearance_cap = _clearance_cells(self.state != OCCUPIED), np.inf
         return (self.clearance > cells) & (self.state == FREE)
 
+    def roomy(self, radius: float) -> np.ndarray:
+        """Known-free cells farther than ``radius`` m from every cell not known free (H, W) bool: where a disc of
+        that radius fits on what has been seen."""
+        known = self.state == FREE
+        return known & (_clearance_cells(known) > radius / self.resolution)
+
 
 def _clearance_cells(free: np.ndarray) -> np.ndarray:
     return PlanningGrid(free, 1.0, (0.0, 0.0)).clearance()  # in cells: a grid of 1-unit cells

@@ -46,6 +46,7 @@ log = logging.getLogger(__name__)
 
 WARMUP = 2.0  # s the robot stands still at the start while the grid's first cells become free
 POCKET_REACHED = 0.1  # m: a view of a pocket is reached closer than other goals (it may be the only one)
+WAY_OUT_REACHED = 0.1  # m: the end of a tight stretch is reached this close (the margin fits within it)
 POCKET_DWELL = 1.0  # s standing at a view of a pocket (a log-odds cell needs a few scans to turn free)
 ENTRY_MIN = 0.3  # m: a tight goal's way with the safety margin shorter than this is not driven as a leg of its own
 TIGHT_MARGIN_WEIGHT = 3.0  # the DWA's margin_weight in a tight stretch: the arcs along its middle
@@ -137,6 +138,11 @@ class _Loop:
             return
         self.legs = [np.asarray(w, float) for w in goal.waypoints] + [goal.position]
         self.tight_legs = [goal.tight] * len(self.legs)
+        if goal.tight and (way_out := self.way_out(self.legs[-2] if len(self.legs) > 1 else self.slam.pose[:2],
+                                                   goal.position)) is not None:
+            self.legs.insert(len(self.legs) - 1, way_out)  # beyond the tight stretch the margin holds again
+            self.tight_legs[-1] = False
+            self.tight_legs.insert(len(self.legs) - 2, True)
         if goal.tight and (entry := self.entry(self.slam.pose, self.legs[0])) is not None:
             self.legs.insert(0, entry)  # the way to the tight stretch keeps the margin
             self.tight_legs.insert(0, False)
@@ -154,6 +160,9 @@ class _Loop:
         self._count(self.nav)
         self.legs.pop(0)
         self.tight_legs.pop(0)
+        if self.tight_legs == [True] and (ending := self.way_out(self.slam.pose[:2], self.legs[0])) is not None:
+            self.legs.insert(0, ending)  # the far side seen from the gap: beyond it the margin holds again
+            self.tight_legs.append(False)
         self.nav = self.navigator()
         self.goal_t0, self.best = now, (np.inf, now)
 
@@ -180,6 +189,23 @@ class _Loop:
                         np.inf)  # fmt: skip
         best = np.unravel_index(np.argmin(left), left.shape)
         if not np.isfinite(left[best]) or wide[best] < ENTRY_MIN:
+            return None
+        return view.to_world(np.array(best))
+
+    def way_out(self, start, target) -> np.ndarray | None:
+        """Where a tight goal's way from ``start`` (x, y) m to ``target`` comes out of the gap: of the known-free
+        cells the disc grown by the margin (and the leg's tolerance) fits in clear of every cell not known free, those
+        it reaches from ``target``, the one nearest ``start`` along the paths of the robot's own disc; None when there
+        is none or it is ``target``'s own cell."""
+        view = self.view()
+        cells = np.array([view.to_cell(np.asarray(start, float)[:2]), view.to_cell(target)])
+        if not view.inside(cells).all():
+            return None
+        wide = geodesic(view.roomy(self.body.radius + WAY_OUT_REACHED), cells[1], view.resolution)
+        near = np.where(np.isfinite(wide), geodesic(view.traversable(self.robot.cfg.radius), cells[0], view.resolution),
+                        np.inf)  # fmt: skip
+        best = np.unravel_index(np.argmin(near), near.shape)
+        if not np.isfinite(near[best]) or wide[best] <= 0:
             return None
         return view.to_world(np.array(best))
 
@@ -285,7 +311,8 @@ def _drive(loop: _Loop, cfg: ExploreConfig, progress, view, t_wall: float) -> Ex
         if loop.goal is not None:
             d_leg = float(np.hypot(*(pose[:2] - loop.legs[0])))
             view_leg = loop.goal.kind == "pocket" and len(loop.legs) == 1
-            if d_leg < (POCKET_REACHED if view_leg else ecfg.goal_reached):
+            ending = len(loop.legs) > 1 and loop.tight_legs[0] and not loop.tight_legs[1]
+            if d_leg < (POCKET_REACHED if view_leg else WAY_OUT_REACHED if ending else ecfg.goal_reached):
                 if view_leg:  # stand still at a view long enough for the grid's cells to settle
                     loop.dwell = now + POCKET_DWELL if loop.dwell is None else loop.dwell
                     if now < loop.dwell:
