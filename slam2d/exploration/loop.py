@@ -140,9 +140,8 @@ class _Loop:
         self.tight_legs = [goal.tight] * len(self.legs)
         if goal.tight and (way_out := self.way_out(self.legs[-2] if len(self.legs) > 1 else self.slam.pose[:2],
                                                    goal.position)) is not None:
-            self.legs.insert(len(self.legs) - 1, way_out)  # beyond the tight stretch the margin holds again
-            self.tight_legs[-1] = False
-            self.tight_legs.insert(len(self.legs) - 2, True)
+            self.legs[-1:-1] = [way_out]  # beyond the tight stretch the margin holds again
+            self.tight_legs[-1:] = [True, False]
         if goal.tight and (entry := self.entry(self.slam.pose, self.legs[0])) is not None:
             self.legs.insert(0, entry)  # the way to the tight stretch keeps the margin
             self.tight_legs.insert(0, False)
@@ -181,16 +180,10 @@ class _Loop:
         disc (the paths the explorer found it on); None when that is within ``ENTRY_MIN`` of the robot or
         ``target`` is out of the map."""
         view = self.view()
-        cell, goal = view.to_cell(pose[:2]), view.to_cell(target)
+        goal = view.to_cell(target)
         if not view.inside(goal[None])[0]:
             return None
-        wide = geodesic(view.traversable(self.body.radius), cell, view.resolution)
-        left = np.where(np.isfinite(wide), geodesic(view.traversable(self.robot.cfg.radius), goal, view.resolution),
-                        np.inf)  # fmt: skip
-        best = np.unravel_index(np.argmin(left), left.shape)
-        if not np.isfinite(left[best]) or wide[best] < ENTRY_MIN:
-            return None
-        return view.to_world(np.array(best))
+        return self._meeting(view, view.traversable(self.body.radius), view.to_cell(pose[:2]), goal, ENTRY_MIN)
 
     def way_out(self, start, target) -> np.ndarray | None:
         """Where a tight goal's way from ``start`` (x, y) m to ``target`` comes out of the gap: of the known-free
@@ -201,11 +194,17 @@ class _Loop:
         cells = np.array([view.to_cell(np.asarray(start, float)[:2]), view.to_cell(target)])
         if not view.inside(cells).all():
             return None
-        wide = geodesic(view.roomy(self.body.radius + WAY_OUT_REACHED), cells[1], view.resolution)
-        near = np.where(np.isfinite(wide), geodesic(view.traversable(self.robot.cfg.radius), cells[0], view.resolution),
+        return self._meeting(view, view.roomy(self.body.radius + WAY_OUT_REACHED), cells[1], cells[0], 1e-9)
+
+    def _meeting(self, view, room, inside, other, min_way: float) -> np.ndarray | None:
+        """(x, y) m of the cell of ``room`` (H, W) reached from cell ``inside`` that is nearest cell ``other`` along
+        the paths of the robot's own disc; None when there is none or it lies less than ``min_way`` m from
+        ``inside`` within ``room``."""
+        wide = geodesic(room, inside, view.resolution)
+        near = np.where(np.isfinite(wide), geodesic(view.traversable(self.robot.cfg.radius), other, view.resolution),
                         np.inf)  # fmt: skip
         best = np.unravel_index(np.argmin(near), near.shape)
-        if not np.isfinite(near[best]) or wide[best] <= 0:
+        if not np.isfinite(near[best]) or wide[best] < min_way:
             return None
         return view.to_world(np.array(best))
 
