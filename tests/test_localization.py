@@ -19,6 +19,7 @@ from slam2d.localization import (
     ParticleFilter,
     kld_limit,
     mcl,
+    sweep,
 )
 from slam2d.localization.mcl import sample_motion
 from slam2d.localization.scenario import (
@@ -364,14 +365,76 @@ def test_a_kidnap_whose_best_half_still_fits_is_told_by_readings_beyond_the_wall
     stream = wander(world, known, 30.0, seed=5, kidnap_at=[10.0])
     k = stream.kidnaps[0]
     recovered = {}
-    for name, level in (("readings", mcl.SEEN_THROUGH), ("best half only", math.inf)):
+    for name, level, doubt in (("readings", mcl.SEEN_THROUGH, mcl.DOUBTED), ("best half only", math.inf, math.inf)):
         monkeypatch.setattr(mcl, "SEEN_THROUGH", level)
+        monkeypatch.setattr(mcl, "DOUBTED", doubt)
         pf = ParticleFilter(known, MclConfig(), 12.0, seed=5)
         pf.init_pose(stream.truth[0], 0.1, math.radians(3.0))
         back = converged_at(replay(pf, stream), k)
         recovered[name] = None if back is None else (back - k) * 0.1
     assert recovered["readings"] is not None and recovered["readings"] <= 5.0
     assert recovered["best half only"] is None or recovered["best half only"] > 15.0
+
+
+def test_a_kidnap_whose_best_half_fits_as_usual_is_told_by_the_whole_scan_reading_beyond_walls(monkeypatch):
+    """Office seed 3: after the jump the best-fitting half of the beams at the old place fits 0.6-0.95 of
+    its usual and reads beyond the map's walls 0.1-0.3 (below the 0.4 that lowers the threshold), so the
+    cloud stays there and no random particle comes. The whole scan fits at a quarter of its usual while
+    reading beyond the walls, and a probe of the map finds a place fitting it better that reads clear of
+    its walls: judged on every beam (and the old place not kept), the filter recovers within 15 s, never
+    claiming a wrong place. Without that rule it does not recover within 15 s."""
+    world = World.office()
+    known = KnownMap.from_world(world)
+    stream = wander(world, known, 30.0, seed=3, kidnap_at=[10.0])
+    k = stream.kidnaps[0]
+    recovered = {}
+    for name, level in (("whole scan", mcl.DOUBTED), ("best half", math.inf)):
+        monkeypatch.setattr(mcl, "DOUBTED", level)
+        pf = ParticleFilter(known, MclConfig(), 12.0, seed=3)
+        pf.init_pose(stream.truth[0], 0.1, math.radians(3.0))
+        track = replay(pf, stream)
+        back = converged_at(track, k)
+        recovered[name] = None if back is None else (back - k) * 0.1
+        assert not false_convergence(track), name
+    assert recovered["whole scan"] is not None and recovered["whole scan"] <= 15.0
+    assert recovered["best half"] is None or recovered["best half"] > 15.0
+
+
+def misregistered_office(radius: float, shift: float):
+    """The office's map with the walls within ``radius`` (m) of a corner a 40 s wander (seed 3) passes drawn
+    ``shift`` m off along x and y (as a SLAM grid whose stretch of wall was registered off), and that wander."""
+    world = World.office()
+    full = KnownMap.from_world(world)
+    stream = wander(world, full, 40.0, seed=3)
+    corner = stream.truth[len(stream.truth) // 3, :2]
+    cells = np.argwhere(full.occupied)
+    near = cells[np.hypot(*(full.cell_to_world(cells) - corner).T) < radius]
+    occupied = full.occupied.copy()
+    occupied[near[:, 0], near[:, 1]] = False
+    moved = near + round(shift / full.resolution)
+    inside = (moved < occupied.shape).all(axis=1)
+    occupied[moved[inside, 0], moved[inside, 1]] = True
+    return KnownMap(occupied, full.free | full.occupied, full.resolution, full.origin, "misregistered"), stream
+
+
+def test_walls_registered_off_are_no_kidnap_while_no_place_elsewhere_reads_clear(monkeypatch):
+    """The office's walls within 3.5 m of a corner drawn 0.4 m off: passing them, the laser reads beyond the
+    map's walls (0.2-0.3 of the beams) and every beam fits 40 % worse than usual, as at a kidnap's old place.
+    The places a probe of the whole map finds fitting the scan better read beyond their walls too (0.15-0.6),
+    so the filter keeps its place: no random particle, no wrong claim. Taking any better-fitting place for
+    the sign of a kidnap, it draws random particles and claims a place 15 m off."""
+    known, stream = misregistered_office(3.5, 0.4)
+    outcomes = {}
+    for name, clear in (("clear", sweep.CLEAR), ("any", math.inf)):
+        monkeypatch.setattr(sweep, "CLEAR", clear)
+        pf = ParticleFilter(known, MclConfig(), 12.0, seed=3)
+        pf.init_pose(stream.truth[0], 0.1, 0.05)
+        track = replay(pf, stream)
+        outcomes[name] = (pf.injected, track.position_error.max(), false_convergence(track))
+    injected, worst, false = outcomes["clear"]
+    assert injected == 0 and worst < 1.0 and not false
+    injected, worst, false = outcomes["any"]
+    assert injected > 1000 and worst > 5.0 and false
 
 
 def test_a_claim_is_held_for_seconds_not_scans_on_a_log_slower_than_the_simulator():

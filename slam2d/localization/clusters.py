@@ -1,5 +1,5 @@
 """Clusters of a particle set: connected histogram bins, their weighted means and the hypotheses a
-filter reports (:class:`Hypothesis`: mean pose, covariance, share of the weight)."""
+filter reports (:class:`Hypothesis`: mean pose, covariance, share of the weight) and its :class:`Estimate`."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from scipy import ndimage
 from slam2d import geometry
 from slam2d.localization.sampling import low_variance_indices
 
-__all__ = ["Hypothesis", "cluster_means", "clusters", "hypotheses", "same_place", "weighted_pose", "with_floors"]
+__all__ = ["Estimate", "Hypothesis", "cluster_means", "clusters", "hypotheses", "same_place", "weighted_pose", "with_floors"]
 
 MAX_HYPOTHESES = 20  # clusters reported and kept alive at resampling, heaviest first
 SAME_PLACE = (1.0, 0.5)  # m, rad: a look-alike image this close to a hypothesis is already held
@@ -31,6 +31,33 @@ class Hypothesis:
     def sd_xy(self) -> float:
         """m, root of the larger position variance."""
         return float(math.sqrt(max(self.covariance[0, 0], self.covariance[1, 1])))
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The filter's pose (3,), its covariance (3, 3), the heaviest cluster's share of the weight,
+    the number of clusters and of particles; the state (``tracking``: one hypothesis holds the
+    evidence; ``ambiguous``: compact hypotheses not yet told apart; ``lost``: no compact one), the
+    hypotheses (heaviest first) and the log evidence ratio of the best over the runner-up."""
+
+    pose: np.ndarray
+    covariance: np.ndarray
+    share: float
+    clusters: int
+    particles: int
+    state: str = "tracking"
+    hypotheses: tuple[Hypothesis, ...] = ()
+    evidence: float = math.inf
+
+    @property
+    def sd_xy(self) -> float:
+        """m, root of the larger position variance."""
+        return float(math.sqrt(max(self.covariance[0, 0], self.covariance[1, 1])))
+
+    @property
+    def sd_theta(self) -> float:
+        """rad."""
+        return float(math.sqrt(self.covariance[2, 2]))
 
 
 def _bins(poses: np.ndarray, bin_xy: float, bin_theta: float) -> np.ndarray:

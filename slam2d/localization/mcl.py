@@ -24,7 +24,6 @@ Vectorised over particles (numba for the sensor models); the same seed gives the
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.special import logsumexp
@@ -35,6 +34,7 @@ from slam2d.errors import InputError
 from slam2d.limits import check_memory
 from slam2d.localization.clusters import (
     MAX_HYPOTHESES,
+    Estimate,
     Hypothesis,
     _bins,
     _distinct_so_far,
@@ -51,7 +51,7 @@ from slam2d.localization.lookalike import add_lookalikes, look_alikes
 from slam2d.localization.maps import KnownMap
 from slam2d.localization.sampling import kld_limit, low_variance_indices, sample_motion
 from slam2d.localization.sensor import LikelihoodField, seen_through, sensor_model
-from slam2d.localization.sweep import add_swept
+from slam2d.localization.sweep import add_swept, clear_elsewhere
 from slam2d.types import Scan
 
 __all__ = ["Estimate", "ParticleFilter", "kld_limit", "low_variance_indices", "sample_motion"]
@@ -61,37 +61,12 @@ CONFIDENT_NOISE = 0.4  # random share below which a confident filter draws no ra
 # walls the laser sees dims the best-fitting half of the beams by up to 30 % (ACES in its SLAM map), a kidnap by ~90 %
 SEEN_THROUGH = 0.4  # short-term average share of beams read beyond the map's walls from which the pose is doubted
 THROUGH_NOISE = 0.1  # random share below which a confident filter whose scans see through walls draws nothing
+DOUBTED = 0.15  # that average from which a confident filter whose every beam asks for random particles probes the
+# map (:meth:`ParticleFilter.contradicted`): a map lacking walls reads short (the worn office <= 0.05)
 LOCAL_SPREAD = np.array([0.3, 0.3, 0.1])  # m, m, rad: sd of recovery candidates around the current particles
 STATES = ("tracking", "ambiguous", "lost")
 FIT_DEFICIT = 0.1  # short-term average likelihood this far below the long-term one: the pose is not claimed
 FIT_ALPHA = 0.3  # decay of that short-term average (w_fast's 0.1 lags a recovery by seconds)
-
-
-@dataclass(frozen=True)
-class Estimate:
-    """The filter's pose (3,), its covariance (3, 3), the heaviest cluster's share of the weight,
-    the number of clusters and of particles; the state (``tracking``: one hypothesis holds the
-    evidence; ``ambiguous``: compact hypotheses not yet told apart; ``lost``: no compact one), the
-    hypotheses (heaviest first) and the log evidence ratio of the best over the runner-up."""
-
-    pose: np.ndarray
-    covariance: np.ndarray
-    share: float
-    clusters: int
-    particles: int
-    state: str = "tracking"
-    hypotheses: tuple[Hypothesis, ...] = ()
-    evidence: float = math.inf
-
-    @property
-    def sd_xy(self) -> float:
-        """m, root of the larger position variance."""
-        return float(math.sqrt(max(self.covariance[0, 0], self.covariance[1, 1])))
-
-    @property
-    def sd_theta(self) -> float:
-        """rad."""
-        return float(math.sqrt(self.covariance[2, 2]))
 
 
 class ParticleFilter:
@@ -136,16 +111,18 @@ class ParticleFilter:
             c = self.cfg.confidence
             self.evidence_threshold = math.log(self.lookalikes.places * c / (1.0 - c))
         self._candidates = False  # the next update weighs global candidates
+        self._contradicted = False  # the last update's scan is contradicted (see contradicted())
 
     # initialisation ------------------------------------------------------
 
-    def random_poses(self, count: int) -> np.ndarray:
-        """``count`` poses uniform over the free cells (kept ``free_clearance`` from walls), any heading."""
-        m = self.map
-        cells = self._free[self.rng.integers(0, len(self._free), count)]
+    def random_poses(self, count: int, rng: np.random.Generator | None = None) -> np.ndarray:
+        """``count`` poses uniform over the free cells (kept ``free_clearance`` from walls), any heading,
+        drawn from ``rng`` (the filter's own by default)."""
+        m, rng = self.map, rng or self.rng
+        cells = self._free[rng.integers(0, len(self._free), count)]
         row, col = np.divmod(cells, m.shape[1])
-        xy = np.column_stack([col, row]) + self.rng.random((count, 2))
-        theta = self.rng.uniform(-np.pi, np.pi, count)
+        xy = np.column_stack([col, row]) + rng.random((count, 2))
+        theta = rng.uniform(-np.pi, np.pi, count)
         return np.column_stack([m.origin[0] + xy[:, 0] * m.resolution, m.origin[1] + xy[:, 1] * m.resolution, theta])
 
     def guided_random_poses(self, count: int, scan: Scan) -> np.ndarray:
@@ -268,6 +245,8 @@ class ParticleFilter:
                 between = coarse[p:] if self.cfg.hypotheses else fine[p:]  # hypotheses weighed on the smooth field
                 joint = joint + (old + between - _group_logsumexp(joint, self._labels, k))[self._labels]
             self.log_w = joint - logsumexp(joint)
+        here = self._estimate_here()
+        self._contradicted = here is not None and self._doubted_here() and clear_elsewhere(self, here, scan)
         if self._resample_due() or (self.confident() and self.random_share() > 0):
             self._resample(scan)
         self._update_estimate(scan)
@@ -283,14 +262,18 @@ class ParticleFilter:
         through = seen_through(self.map, home[0], scan, self.cfg.beams, self.range_max)
         self.home.weigh(home, ll[:len(home)], float(ll[len(home):].max()), through)
 
+    def _estimate_here(self) -> np.ndarray | None:
+        """The last estimate's pose (3,) moved by the odometry since then to this update (None before one)."""
+        est, odom = self._estimate, self._estimate_odom
+        return None if est is None or odom is None else geometry.compose(est.pose, geometry.between(odom, self._odom))
+
     def _watch_through(self, scan: Scan) -> None:
         """Average into ``through`` the share of beams the scan reads beyond the map's walls at the last
         estimate moved by the odometry since (only with recovery on)."""
-        est, odom = self._estimate, self._estimate_odom
-        if not self._recovering() or est is None or odom is None:
+        here = self._estimate_here()
+        if not self._recovering() or here is None:
             return
-        share = seen_through(self.map, geometry.compose(est.pose, geometry.between(odom, self._odom)), scan,
-                             self.cfg.beams, self.range_max)  # fmt: skip
+        share = seen_through(self.map, here, scan, self.cfg.beams, self.range_max)
         if share is not None:
             self.through += FIT_ALPHA * (share - self.through)
 
@@ -335,14 +318,31 @@ class ParticleFilter:
         least ``SEEN_THROUGH``) mean a wrong pose, and then a share above ``THROUGH_NOISE`` draws.
         A search (no ``tracking`` since the global start or the last random particles) whose cloud has
         settled where the scans fit worse than usual is not confident either: after a kidnap the cloud
-        can settle on a wrong place whose best half of the beams fits."""
-        confident = self.cfg.recovery_best_beams < 1.0 and self.confident() and not (self._searching and not self._fits())
+        can settle on a wrong place whose best half of the beams fits. Nor is a filter whose scans are
+        :meth:`contradicted`: after a kidnap the best half can fit the old place as usual (office kidnap
+        seed 3: 0.6-0.95 of it, the whole scan 0.2-0.4)."""
+        doubted = (self._searching and not self._fits()) or self._contradicted
+        confident = self.cfg.recovery_best_beams < 1.0 and self.confident() and not doubted
         i = 1 if confident else 0
         if not self._recovering() or self.w_slow[i] <= 0:
             return 0.0
         share = 1.0 - self.w_fast[i] / self.w_slow[i]
         noise = (THROUGH_NOISE if self.through >= SEEN_THROUGH else CONFIDENT_NOISE) if confident else 0.0
         return share if share > noise else 0.0
+
+    def contradicted(self) -> bool:
+        """Whether the last update's scan contradicts the estimate: every beam's averages ask for random
+        particles as a confident filter's best half must (a share above ``CONFIDENT_NOISE``) while the
+        scans read beyond the map's walls at the estimate (``through`` at least ``DOUBTED``), and a probe
+        of the whole map finds a place that fits the scan better and reads clear of its walls
+        (:func:`~slam2d.localization.sweep.clear_elsewhere`). A map lacking walls reads short; a SLAM map seen through at the right place reads long too,
+        but so do the places that fit better; a kidnap's true place reads clear."""
+        return self._contradicted
+
+    def _doubted_here(self) -> bool:
+        """The first two signs of :meth:`contradicted` (every beam misfits, readings beyond the walls)."""
+        w_slow, w_fast = self.w_slow[0], self.w_fast[0]
+        return self._recovering() and self.through >= DOUBTED and w_slow > 0 and 1 - w_fast / w_slow > CONFIDENT_NOISE
 
     def _resample(self, scan: Scan) -> None:
         """Low-variance resampling with random free-space poses, as many as KLD sampling asks.
@@ -454,9 +454,12 @@ class ParticleFilter:
     def _follow_home(self, est: Estimate) -> bool:
         """Move the place last tracked along with ``est`` (:class:`Home`), giving it back particles
         (``hypothesis_particles`` round it, exp(-evidence) times the best hypothesis's weight) once its
-        recent evidence over the best reaches the threshold; True when the estimate is to be made again."""
+        recent evidence over the best reaches the threshold; True when the estimate is to be made again.
+        A place not yet left whose scans are :meth:`contradicted` is forgotten: a wrong pose, no map defect."""
         if not self.cfg.hypotheses or self._odom is None:
             return False
+        if self._contradicted and not self.home.away:
+            self.home = Home()
         held, home = self.home.holds(self.evidence_threshold), self.home
         if not home.update(est.pose, est.state, self._odom, self.map, self.evidence_threshold, SEEN_THROUGH):
             return home.holds(self.evidence_threshold) != held

@@ -23,14 +23,17 @@ from scipy.special import logsumexp
 
 from slam2d import geometry
 from slam2d.localization.clusters import MAX_HYPOTHESES, same_place
+from slam2d.localization.sensor import seen_through
 from slam2d.types import Scan
 
-__all__ = ["add_swept"]
+__all__ = ["add_swept", "best_elsewhere", "clear_elsewhere"]
 
 SHORTLIST = 2000  # best-fitting candidates whose places are refined, at most MAX_HYPOTHESES places
 REFINE = ((0.3, 0.1), (0.15, 0.05), (0.05, 0.02))  # m, rad: sd of each local round's poses
 REFINE_POSES = 30  # poses per place and round
 SPREAD = np.array([0.05, 0.05, 0.02])  # m, m, rad: sd of the particles given to a place found
+CLEAR = 0.05  # share of readings beyond the walls at most at a place that contradicts the estimate: a kidnap's
+# true place reads none (0.02 on the office), where a SLAM map is seen through the places fitting better 0.5-0.9
 
 
 def add_swept(pf, est, scan: Scan) -> int:
@@ -60,6 +63,29 @@ def add_swept(pf, est, scan: Scan) -> int:
     return len(added)
 
 
+def best_elsewhere(pf, pose: np.ndarray, scan: Scan, rng: np.random.Generator) -> tuple[np.ndarray, float] | None:
+    """The best place (3,) a sweep of filter ``pf``'s map (drawn from ``rng``) finds for ``scan`` away from
+    ``pose``, refined, and its log-likelihood over ``pose`` refined alike (the smoother field); None if none."""
+    pool = pf.random_poses(pf.cfg.global_candidates * pf.cfg.max_particles, rng)
+    places = _places(pool, pf.coarse.log_likelihood(pool, scan)[0], pose)
+    if not places:
+        return None
+    found, fit = _refine(pf, np.vstack([pose, places]), scan, rng)
+    i = 1 + int(np.argmax(fit[1:]))
+    return found[i], float(fit[i] - fit[0])
+
+
+def clear_elsewhere(pf, pose: np.ndarray, scan: Scan) -> bool:
+    """Whether the best place a sweep of filter ``pf``'s map finds for ``scan`` fits it better than ``pose``
+    (3,) and reads at most CLEAR beyond the map's walls. The sweep draws from a generator of its own (seeded
+    by the update), so that the filter's draws do not change."""
+    found = best_elsewhere(pf, pose, scan, np.random.default_rng(pf.updates))
+    if found is None or found[1] <= 0:
+        return False
+    through = seen_through(pf.map, found[0], scan, pf.cfg.beams, pf.range_max)
+    return through is not None and through <= CLEAR
+
+
 def _places(pool: np.ndarray, ll: np.ndarray, best: np.ndarray) -> list:
     """Up to MAX_HYPOTHESES poses of ``pool``, best log-likelihood ``ll`` first among the SHORTLIST best,
     each at a place of its own and none at ``best``'s."""
@@ -72,14 +98,14 @@ def _places(pool: np.ndarray, ll: np.ndarray, best: np.ndarray) -> list:
     return out
 
 
-def _refine(pf, poses: np.ndarray, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
-    """Each pose (K, 3) moved to the best-fitting of REFINE_POSES poses round it, round after round of
-    REFINE; the poses and their log-likelihoods (K,)."""
+def _refine(pf, poses: np.ndarray, scan: Scan, rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Each pose (K, 3) moved to the best-fitting of REFINE_POSES poses round it (drawn from ``rng``, the
+    filter's by default), round after round of REFINE; the poses and their log-likelihoods (K,)."""
     best = poses.copy()
     fit = pf.coarse.log_likelihood(best, scan)[0]
     for sd_xy, sd_theta in REFINE:
         sd = np.array([sd_xy, sd_xy, sd_theta])
-        trial = best[:, None, :] + pf.rng.standard_normal((len(best), REFINE_POSES, 3)) * sd
+        trial = best[:, None, :] + (rng or pf.rng).standard_normal((len(best), REFINE_POSES, 3)) * sd
         trial[..., 2] = geometry.wrap_angle(trial[..., 2])
         tll = pf.coarse.log_likelihood(trial.reshape(-1, 3), scan)[0].reshape(len(best), REFINE_POSES)
         j = np.argmax(tll, axis=1)
