@@ -277,9 +277,10 @@ def test_walls_missing_from_the_map_do_not_pass_for_a_kidnapping():
     assert injected > 100 and worst > 5.0  # random particles, the global sweep, and a place 5 m off
 
 
-def worn_office(radius: float):
-    """The office's map without the walls within ``radius`` (m) of a corner a 40 s wander (seed 3) passes,
-    and that wander."""
+def worn_office(radius: float, shift: float = 0.0):
+    """The office's map without the walls within ``radius`` (m) of a corner a 40 s wander (seed 3) passes (with
+    ``shift``: those walls drawn ``shift`` m off along x and y instead, as a SLAM grid whose stretch of wall was
+    registered off), and that wander."""
     world = World.office()
     full = KnownMap.from_world(world)
     stream = wander(world, full, 40.0, seed=3)
@@ -288,6 +289,10 @@ def worn_office(radius: float):
     gone = cells[np.hypot(*(full.cell_to_world(cells) - corner).T) < radius]
     occupied = full.occupied.copy()
     occupied[gone[:, 0], gone[:, 1]] = False
+    if shift:
+        moved = gone + round(shift / full.resolution)
+        moved = moved[(moved < occupied.shape).all(axis=1)]
+        occupied[moved[:, 0], moved[:, 1]] = True
     return KnownMap(occupied, full.free | full.occupied, full.resolution, full.origin, "worn"), stream
 
 
@@ -400,30 +405,13 @@ def test_a_kidnap_whose_best_half_fits_as_usual_is_told_by_the_whole_scan_readin
     assert recovered["best half"] is None or recovered["best half"] > 15.0
 
 
-def misregistered_office(radius: float, shift: float):
-    """The office's map with the walls within ``radius`` (m) of a corner a 40 s wander (seed 3) passes drawn
-    ``shift`` m off along x and y (as a SLAM grid whose stretch of wall was registered off), and that wander."""
-    world = World.office()
-    full = KnownMap.from_world(world)
-    stream = wander(world, full, 40.0, seed=3)
-    corner = stream.truth[len(stream.truth) // 3, :2]
-    cells = np.argwhere(full.occupied)
-    near = cells[np.hypot(*(full.cell_to_world(cells) - corner).T) < radius]
-    occupied = full.occupied.copy()
-    occupied[near[:, 0], near[:, 1]] = False
-    moved = near + round(shift / full.resolution)
-    inside = (moved < occupied.shape).all(axis=1)
-    occupied[moved[inside, 0], moved[inside, 1]] = True
-    return KnownMap(occupied, full.free | full.occupied, full.resolution, full.origin, "misregistered"), stream
-
-
 def test_walls_registered_off_are_no_kidnap_while_no_place_elsewhere_reads_clear(monkeypatch):
     """The office's walls within 3.5 m of a corner drawn 0.4 m off: passing them, the laser reads beyond the
     map's walls (0.2-0.3 of the beams) and every beam fits 40 % worse than usual, as at a kidnap's old place.
     The places a probe of the whole map finds fitting the scan better read beyond their walls too (0.15-0.6),
     so the filter keeps its place: no random particle, no wrong claim. Taking any better-fitting place for
     the sign of a kidnap, it draws random particles and claims a place 15 m off."""
-    known, stream = misregistered_office(3.5, 0.4)
+    known, stream = worn_office(3.5, shift=0.4)
     outcomes = {}
     for name, clear in (("clear", sweep.CLEAR), ("any", math.inf)):
         monkeypatch.setattr(sweep, "CLEAR", clear)

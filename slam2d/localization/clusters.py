@@ -12,7 +12,8 @@ from scipy import ndimage
 from slam2d import geometry
 from slam2d.localization.sampling import low_variance_indices
 
-__all__ = ["Estimate", "Hypothesis", "cluster_means", "clusters", "hypotheses", "same_place", "weighted_pose", "with_floors"]
+__all__ = ["Estimate", "Hypothesis", "cluster_means", "clusters", "hypotheses", "same_place", "weighted_pose",
+           "with_floors"]
 
 MAX_HYPOTHESES = 20  # clusters reported and kept alive at resampling, heaviest first
 SAME_PLACE = (1.0, 0.5)  # m, rad: a look-alike image this close to a hypothesis is already held

@@ -335,8 +335,9 @@ class ParticleFilter:
         particles as a confident filter's best half must (a share above ``CONFIDENT_NOISE``) while the
         scans read beyond the map's walls at the estimate (``through`` at least ``DOUBTED``), and a probe
         of the whole map finds a place that fits the scan better and reads clear of its walls
-        (:func:`~slam2d.localization.sweep.clear_elsewhere`). A map lacking walls reads short; a SLAM map seen through at the right place reads long too,
-        but so do the places that fit better; a kidnap's true place reads clear."""
+        (:func:`~slam2d.localization.sweep.clear_elsewhere`). A map lacking walls reads short; a SLAM map
+        seen through at the right place reads long too, but so do the places that fit better there; a
+        kidnap's true place reads clear."""
         return self._contradicted
 
     def _doubted_here(self) -> bool:
