@@ -425,6 +425,32 @@ def test_walls_registered_off_are_no_kidnap_while_no_place_elsewhere_reads_clear
     assert injected > 1000 and worst > 5.0 and false
 
 
+
+def test_a_place_whose_scans_read_through_the_maps_walls_is_not_claimed(monkeypatch):
+    """The office's map crossed by thin walls every 2 m that the world lacks: the laser reads beyond them
+    (on half the beams, as at a wrong pose), while the likelihood field, scoring end points only, fits as
+    well as ever. The filter holds the pose but claims it (`tracking`) only while its scans read beyond the
+    walls less than a wrong pose does; counting the readings out, it claims it on every update."""
+    world = World.office()
+    full = KnownMap.from_world(world)
+    stream = wander(world, full, 30.0, seed=3)
+    occupied = full.occupied.copy()
+    occupied[:, ::40] = True
+    known = KnownMap(occupied, full.free | full.occupied, full.resolution, full.origin, "seen through")
+    claims, wrong = {}, mcl.SEEN_THROUGH
+    for name, level in (("readings", wrong), ("no readings", math.inf)):
+        monkeypatch.setattr(mcl, "SEEN_THROUGH", level)
+        pf = ParticleFilter(known, MclConfig(), 12.0, seed=3)
+        pf.init_pose(stream.truth[0], 0.1, 0.05)
+        states = []
+        for scan in stream.scans:
+            if pf.add(scan):
+                states.append((pf.state, pf.through, float(np.hypot(*(pf.estimate.pose[:2] - stream.truth[scan.index, :2])))))
+        claims[name] = [(through, error) for state, through, error in states if state == "tracking"]
+        assert len(states) > 100 and max(error for _, _, error in states) < 0.3, name
+    assert all(through < wrong for through, _ in claims["readings"]) and len(claims["readings"]) < 20
+    assert sum(through >= wrong for through, _ in claims["no readings"]) > 100
+
 def test_a_claim_is_held_for_seconds_not_scans_on_a_log_slower_than_the_simulator():
     """A log scanning every 0.2 s: a wrong `tracking` claim held 6 s is a false convergence (30 scans, fewer
     than the simulator's 50 in 5 s), one held 4 s is not; a right one held 6 s converges."""

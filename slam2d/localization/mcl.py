@@ -406,14 +406,16 @@ class ParticleFilter:
         """``lost`` without a compact best hypothesis; ``tracking`` once its evidence over the runner-up
         reaches the threshold, its look-alike places were tested and the scans fit as well as they
         usually do (short-term average likelihood of every beam, ``w_fit``, within FIT_DEFICIT of the
-        long-term one: after a kidnap the best of wrong places is no pose); else ``ambiguous``. Without
+        long-term one: after a kidnap the best of wrong places is no pose) and they read beyond the map's
+        walls less than a wrong pose does (``through`` below SEEN_THROUGH); else ``ambiguous``. Without
         ``hypotheses``: tracking whenever the best holds 90 % within converged_sd (as amcl claims)."""
         compact = best.sd_xy < self.cfg.converged_sd
         if not self.cfg.hypotheses:
             return "tracking" if compact and best.weight >= 0.9 else "lost"
         if not compact:
             return "lost"
-        claimed = self._tested and self._fits() and evidence >= self.evidence_threshold
+        claimed = (self._tested and self._fits() and evidence >= self.evidence_threshold
+                   and self.through < SEEN_THROUGH)  # fmt: skip
         return "tracking" if claimed and not self.home.holds(self.evidence_threshold) else "ambiguous"
 
     def _fits(self) -> bool:
