@@ -12,6 +12,8 @@ many as a global start weighs) are scored by the scan on the smooth field, the b
 threshold of the best refined one gets ``hypothesis_particles`` particles, each weighing as one of
 the random particles drawn with it (a place the map's imperfection makes fit better than the tracked
 one must not outweigh it at once); the floors keep them until the scans that follow tell them apart.
+The same sweep, on a random stream of its own, probes for a place that contradicts a tracked estimate
+(:func:`clear_elsewhere`: one that fits the scan better and reads clear of the map's walls).
 """
 
 from __future__ import annotations
