@@ -445,7 +445,8 @@ def test_a_place_whose_scans_read_through_the_maps_walls_is_not_claimed(monkeypa
         states = []
         for scan in stream.scans:
             if pf.add(scan):
-                states.append((pf.state, pf.through, float(np.hypot(*(pf.estimate.pose[:2] - stream.truth[scan.index, :2])))))
+                error = float(np.hypot(*(pf.estimate.pose[:2] - stream.truth[scan.index, :2])))
+                states.append((pf.state, pf.through, error))
         claims[name] = [(through, error) for state, through, error in states if state == "tracking"]
         assert len(states) > 100 and max(error for _, _, error in states) < 0.3, name
     assert all(through < wrong for through, _ in claims["readings"]) and len(claims["readings"]) < 20

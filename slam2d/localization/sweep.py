@@ -43,8 +43,7 @@ def add_swept(pf, est, scan: Scan) -> int:
     sweep finds fitting ``scan`` within ``pf.evidence_threshold`` (log) of the best place found, but
     the best hypothesis's, each weighing as a random particle (one over the particles); how many places."""
     best = est.hypotheses[0]
-    pool = pf.random_poses(pf.cfg.global_candidates * pf.cfg.max_particles)
-    places = _places(pool, pf.coarse.log_likelihood(pool, scan)[0], best.pose)
+    places = _sweep(pf, best.pose, scan, pf.rng)
     if not places:
         return 0
     found, fit = _refine(pf, np.array(places), scan)
@@ -68,8 +67,7 @@ def add_swept(pf, est, scan: Scan) -> int:
 def best_elsewhere(pf, pose: np.ndarray, scan: Scan, rng: np.random.Generator) -> tuple[np.ndarray, float] | None:
     """The best place (3,) a sweep of filter ``pf``'s map (drawn from ``rng``) finds for ``scan`` away from
     ``pose``, refined, and its log-likelihood over ``pose`` refined alike (the smoother field); None if none."""
-    pool = pf.random_poses(pf.cfg.global_candidates * pf.cfg.max_particles, rng)
-    places = _places(pool, pf.coarse.log_likelihood(pool, scan)[0], pose)
+    places = _sweep(pf, pose, scan, rng)
     if not places:
         return None
     found, fit = _refine(pf, np.vstack([pose, places]), scan, rng)
@@ -86,6 +84,13 @@ def clear_elsewhere(pf, pose: np.ndarray, scan: Scan) -> bool:
         return False
     through = seen_through(pf.map, found[0], scan, pf.cfg.beams, pf.range_max)
     return through is not None and through <= CLEAR
+
+
+def _sweep(pf, pose: np.ndarray, scan: Scan, rng: np.random.Generator) -> list:
+    """The sweep: ``global_candidates`` x ``max_particles`` poses uniform over filter ``pf``'s free space (drawn
+    from ``rng``) scored by ``scan`` on the smooth field, the best of up to MAX_HYPOTHESES places none at ``pose``."""
+    pool = pf.random_poses(pf.cfg.global_candidates * pf.cfg.max_particles, rng)
+    return _places(pool, pf.coarse.log_likelihood(pool, scan)[0], pose)
 
 
 def _places(pool: np.ndarray, ll: np.ndarray, best: np.ndarray) -> list:
