@@ -29,7 +29,12 @@ from slam2d.localization.scenario import (
     replay,
     wander,
 )
-from slam2d.localization.sensor import BeamModel, LikelihoodField, seen_through
+from slam2d.localization.sensor import (
+    BeamModel,
+    LikelihoodField,
+    counted_beams,
+    seen_through,
+)
 from slam2d.sim import Robot, RobotConfig, World
 from slam2d.types import Scan
 
@@ -91,6 +96,58 @@ def test_a_pose_inside_a_wall_scores_as_every_beam_missing():
         if model == "likelihood_field":  # every end point in the block is "on a wall": it fits perfectly
             assert amcl_like.log_likelihood(poses, scan)[0][1] > ll[0]
             assert ll[1] == pytest.approx(beams * LikelihoodField(known, MclConfig(), 12.0).outside)
+
+
+def test_an_obstacle_the_map_lacks_pulls_no_particle_with_beam_skipping():
+    """A panel stands 1.4 m before a room's far wall and the map lacks it. Without beam skipping the
+    particles 1.4 m further on, which put its readings on that wall, outweigh the truth; with it those
+    readings count for no particle (few particles end them near a wall), and the truth weighs the same."""
+    occupied = np.zeros((60, 100), bool)  # a 5 m x 3 m room, walls one cell thick
+    occupied[0] = occupied[-1] = occupied[:, 0] = occupied[:, -1] = True
+    known = KnownMap(occupied, ~occupied, 0.05, (0.0, 0.0))
+    world = occupied.copy()
+    world[10:50, 70] = True  # the panel at x = 3.5 m, y = 0.5-2.5 m
+    angles = np.linspace(-2.0, 2.0, 120)
+    truth = np.array([1.5, 1.5, 0.0])
+    seen = KnownMap(world, ~world, 0.05, (0.0, 0.0))
+    ranges = BeamModel(seen, MclConfig(), 12.0).expected_ranges(truth[None], np.zeros(3), angles)[0]
+    scan = Scan(stamp=0.0, ranges=ranges, angles=angles, range_min=0.0, range_max=12.0)
+    rng = np.random.default_rng(0)
+    near = truth + rng.normal(0.0, [0.03, 0.03, 0.01], (200, 3))
+    pulled = truth + [1.45, 0.0, 0.0] + rng.normal(0.0, [0.03, 0.03, 0.01], (20, 3))
+    particles = np.concatenate([near, pulled])
+    for model in ("likelihood_field", "beam"):
+        gap = {}
+        for skip in (0.0, MclConfig().beam_skip):
+            sensor = ParticleFilter(known, MclConfig(model=model, beam_skip=skip), 12.0).sensor
+            ll = sensor.log_likelihood(particles, scan, skip=skip)[0]
+            gap[skip] = np.median(ll[200:]) - np.median(ll[:200])
+        assert gap[0.0] > 2.0, model  # the panel's readings pull the particles onto the far wall
+        assert gap[MclConfig().beam_skip] < 0.5, model
+
+
+def test_beam_skipping_counts_the_beams_most_particles_end_near_a_wall_or_all_of_them():
+    near = np.zeros((10, 20), bool)
+    near[:4, :5] = True  # beams 0-4: 40 % of the particles end them near a wall
+    near[:3, 5:10] = True  # beams 5-9: 30 %, not more than the share
+    near[:, 10:] = True
+    assert counted_beams(near, 0.3).tolist() == [True] * 5 + [False] * 5 + [True] * 10
+    assert counted_beams(near, 0.0).all()
+    few = np.zeros((10, 20), bool)
+    few[:, :2] = True  # 18 of 20 beams would be left out: the pose is wrong, every beam counts
+    assert counted_beams(few, 0.3).all()
+    few[:, 2] = True
+    assert counted_beams(few, 0.3).sum() == 3
+    occupied = np.zeros((40, 40), bool)
+    occupied[0] = occupied[-1] = occupied[:, 0] = occupied[:, -1] = True
+    known = KnownMap(occupied, ~occupied, 0.05, (0.0, 0.0))
+    field = LikelihoodField(known, MclConfig(), 12.0)
+    poses = np.array([[1.0, 1.0, 0.0], [1.02, 0.98, 0.1], [0.9, 1.1, -0.1]])
+    points = np.array([[0.95, 0.0], [0.0, 0.95], [0.3, 0.2], [-0.95, 0.0], [0.0, -0.95], [0.2, 0.3]])
+    ll, counted = field.log_likelihood(poses, _scan_at(points), skip=0.3)
+    every = np.array([field.log_likelihood(poses, _scan_at(p[None]))[0] for p in points]).T
+    keep = (every >= field.near).mean(axis=0) > 0.3
+    assert counted == keep.sum() == 4 and np.allclose(ll, every[:, keep].sum(axis=1))
 
 
 @pytest.mark.parametrize("k", [2, 5, 20, 100, 1000])

@@ -86,6 +86,10 @@ class MclConfig(Section):
                                                 "to beam_weight), or amcl's 1 + sum of cubes")
     beam_weight: float = Field(0.2, gt=0, le=1, description="exponent of each beam's likelihood (beams are "
                                 "correlated: 1 overstates the evidence)")
+    beam_skip: float = Field(0.3, ge=0, lt=1, description="while the pose is certain, a beam counts only if more "
+                             "than this share of the particles end it within beam_skip_distance of a wall (amcl's "
+                             "beam skipping: what the map lacks pulls no particle); 0: off")
+    beam_skip_distance: float = Field(0.5, gt=0, description="m, see beam_skip")
     wall_poses: bool = Field(False, description="score poses inside occupied cells as any other (amcl); False: "
                              "as if every beam missed by the most (a robot cannot stand in a wall)")
     # initial pose of tracking
@@ -102,7 +106,8 @@ def amcl_config(recovery: bool = False) -> MclConfig:
         alpha_fast=0.1 if recovery else 0.0, free_clearance=0.0, alpha1=0.2, alpha2=0.2, alpha3=0.2, alpha4=0.2,
         model="likelihood_field", beams=30, z_hit=0.95, z_rand=0.05, sigma_hit=0.2, sigma_hit_uncertain=0.2,
         max_dist=2.0, combine="amcl", wall_poses=True, hypothesis_fit=False, hypotheses=False,
-        beam_weight=1.0, global_candidates=1, recovery_candidates=1, recovery_best_beams=1.0, initial_sd_xy=0.5,
+        beam_weight=1.0, beam_skip=0.0, global_candidates=1, recovery_candidates=1, recovery_best_beams=1.0,
+        initial_sd_xy=0.5,
         initial_sd_theta=math.pi / 12,
     )  # fmt: skip
 

@@ -93,6 +93,7 @@ class ParticleFilter:
         self.w_fit = 0.0  # short-term average likelihood of every beam (FIT_ALPHA), for the state
         self.through = 0.0  # short-term average (FIT_ALPHA) share of beams read beyond the map's walls at the pose
         self.updates = self.resamples = self.injected = 0
+        self.sharp_beams = np.zeros(2, dtype=np.int64)  # beams of the sharp field's weights: selected, skipped
         self.home = Home()  # the place last tracked, weighed against a far estimate (slam2d.localization.home)
         self._odom: np.ndarray | None = None  # odometry at the last update
         self._estimate: Estimate | None = None
@@ -116,8 +117,7 @@ class ParticleFilter:
     # initialisation ------------------------------------------------------
 
     def random_poses(self, count: int, rng: np.random.Generator | None = None) -> np.ndarray:
-        """``count`` poses uniform over the free cells (kept ``free_clearance`` from walls), any heading,
-        drawn from ``rng`` (the filter's own by default)."""
+        """``count`` poses uniform over the free cells (``free_clearance`` off walls), any heading, from ``rng``."""
         m, rng = self.map, rng or self.rng
         cells = self._free[rng.integers(0, len(self._free), count)]
         row, col = np.divmod(cells, m.shape[1])
@@ -221,9 +221,9 @@ class ParticleFilter:
         stays high (an uncertain filter resamples only by N_eff, so that look-alike places keep
         their particles).
 
-        While the pose is uncertain the weights come from the smoother field; the likelihood
-        averages always do, so that they stay comparable. With ``hypothesis_fit`` the clusters'
-        mean poses are scored in the same pass as the particles."""
+        While the pose is uncertain the weights come from the smoother field (the likelihood averages
+        always do, to stay comparable), while certain from the sharp one on the beams ``beam_skip``
+        keeps. With ``hypothesis_fit`` the clusters' mean poses are scored in the same pass."""
         self._watch_through(scan)
         sharp = self.confident() and self.coarse is not self.sensor
         refit = self.cfg.hypothesis_fit and self._labels is not None and len(self._labels) == len(self.particles)
@@ -231,7 +231,9 @@ class ParticleFilter:
         means, old = cluster_means(self.particles, self.log_w, self._labels, k) if refit else (np.zeros((0, 3)), None)
         poses, p = np.concatenate([self.particles, means]), len(self.particles)
         coarse, beams = self.coarse.log_likelihood(poses, scan)
-        fine = self.sensor.log_likelihood(poses, scan)[0] if sharp else coarse
+        fine, counted = self.sensor.log_likelihood(poses, scan, skip=self.cfg.beam_skip, voters=p) if sharp else (
+            coarse, beams)
+        self.sharp_beams += (beams, beams - counted) if sharp else 0
         self.updates += 1
         home = self.home.candidates(self._odom, self.rng) if refit and self.cfg.hypotheses else np.zeros((0, 3))
         if beams > 0 and len(home):

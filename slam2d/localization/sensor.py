@@ -9,7 +9,8 @@ standing in an occupied cell scores as if every end point lay at max_dist. The b
 model ray-casts the expected range in the grid and mixes hit, short, max and
 random readings. Beams combine as a product (each likelihood raised to
 ``beam_weight``) or as amcl does, 1 + sum of cubes. Numba kernels, parallel
-over particles.
+over particles. With beam skipping (amcl's ``do_beamskip``) a beam counts only
+where enough of the particles end it near a wall (:func:`counted_beams`).
 """
 
 from __future__ import annotations
@@ -23,10 +24,11 @@ from slam2d.localization.config import MclConfig
 from slam2d.localization.maps import KnownMap
 from slam2d.types import Scan
 
-__all__ = ["BeamModel", "LikelihoodField", "seen_through", "select_beams", "sensor_model"]
+__all__ = ["BeamModel", "LikelihoodField", "counted_beams", "seen_through", "select_beams", "sensor_model"]
 
 THROUGH_MARGIN = 0.3  # m a reading must reach beyond the first wall along its beam to count as seen through
 THROUGH_MIN_BEAMS = 10  # fewer returns than this tell nothing
+SKIP_AT_MOST = 0.9  # share of the beams beam skipping may leave out; beyond it every beam counts (amcl's)
 
 
 def select_beams(scan: Scan, count: int, skip_max: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -48,6 +50,15 @@ def kept_beams(beams: int, best: float) -> int:
     return beams if best >= 1.0 else max(1, math.ceil(best * beams))
 
 
+def counted_beams(near: np.ndarray, share: float) -> np.ndarray:
+    """Beam skipping (amcl's): of ``near`` (P, B), whether each particle ends each beam near a wall, the
+    beams (B,) bool that more than ``share`` of the particles end near one. A beam few particles explain
+    reads what the map lacks (a wall worn off a SLAM grid, a person), and the few it fits would be pulled
+    there; when that leaves out more than SKIP_AT_MOST of the beams, the pose is wrong and every beam counts."""
+    counted = near.mean(axis=0) > share
+    return counted if np.count_nonzero(~counted) < SKIP_AT_MOST * len(counted) else np.ones_like(counted)
+
+
 class LikelihoodField:
     """Per-cell beam scores of the likelihood field: log p (product) or p^3 (amcl), float64 (H, W);
     ``sigma_hit`` (m) overrides the config's."""
@@ -58,34 +69,43 @@ class LikelihoodField:
         d = np.minimum(known.distance(), cfg.max_dist)
         self.table = np.ascontiguousarray(self._score(d, range_max))
         self.outside = float(self._score(np.array(cfg.max_dist), range_max))
+        self.near = float(self._score(np.array(cfg.beam_skip_distance), range_max))  # a score at least this: near
 
     def _score(self, d: np.ndarray, range_max: float) -> np.ndarray:
         cfg = self.cfg
         p = cfg.z_hit * np.exp(-(d**2) / (2 * self.sigma_hit**2)) + cfg.z_rand / range_max
         return p**3 if cfg.combine == "amcl" else cfg.beam_weight * np.log(p)
 
-    def log_likelihood(self, particles: np.ndarray, scan: Scan, best: float = 1.0) -> tuple[np.ndarray, int]:
+    def log_likelihood(self, particles: np.ndarray, scan: Scan, best: float = 1.0, skip: float = 0.0,
+                       voters: int | None = None) -> tuple[np.ndarray, int]:
         """Log-likelihood (P,) of ``scan`` at ``particles`` (P, 3), and the number of beams it counts:
-        all, or with ``best`` < 1 that share of them, the best-scoring at each particle."""
+        all, or with ``best`` < 1 that share of them, the best-scoring at each particle, or with ``skip``
+        > 0 those that more than that share of the first ``voters`` particles (all) end near a wall."""
         ranges, angles = select_beams(scan, self.cfg.beams)
         if len(ranges) == 0:
             return np.zeros(len(particles)), 0
         ends = np.column_stack([ranges * np.cos(angles), ranges * np.sin(angles)])
         keep = kept_beams(len(ranges), best)
         m = self.map
-        total = _field_sum(np.ascontiguousarray(particles), np.asarray(scan.sensor_pose, dtype=np.float64),
-                           ends, self.table, self.outside, m.origin[0], m.origin[1], m.resolution, keep)  # fmt: skip
+        args = (np.ascontiguousarray(particles), np.asarray(scan.sensor_pose, dtype=np.float64), ends, self.table,
+                self.outside, m.origin[0], m.origin[1], m.resolution)  # fmt: skip
+        skipping = skip > 0 and keep == len(ranges)
+        scores = np.empty((len(particles) if skipping or keep < len(ranges) else 0, len(ranges)))
+        total = _field_sum(*args, keep, scores)
+        if skipping:
+            counted = counted_beams(scores[:voters] >= self.near, skip)
+            total, keep = scores[:, counted].sum(axis=1), int(np.count_nonzero(counted))
         total = out_of_walls(m, self.cfg, particles, total, keep * self.outside)
         return (np.log1p(total) if self.cfg.combine == "amcl" else total), keep
 
 
 @numba.njit(parallel=True, fastmath=True, cache=True)
-def _field_sum(particles, sensor, ends, table, outside, ox, oy, res, keep):  # pragma: no cover - compiled
+def _field_sum(particles, sensor, ends, table, outside, ox, oy, res, keep, scores):  # pragma: no cover - compiled
     """Sum over beams of the table's score at each particle's beam end points (the ``keep`` highest
-    of them when fewer than all), (P,)."""
+    of them when fewer than all), (P,); each score also written to ``scores`` when it holds a row
+    per particle ((P, B); (0, B) for none, allowed only with every beam kept)."""
     n, nb, h, w = len(particles), len(ends), table.shape[0], table.shape[1]
     out = np.empty(n)
-    scores = np.empty((n if keep < nb else 0, nb))
     inv = 1.0 / res
     for i in numba.prange(n):
         c, s = math.cos(particles[i, 2]), math.sin(particles[i, 2])
@@ -99,7 +119,7 @@ def _field_sum(particles, sensor, ends, table, outside, ox, oy, res, keep):  # p
             row = int(math.floor((sy + ss * ends[b, 0] + cs * ends[b, 1] - oy) * inv))
             v = table[row, col] if 0 <= row < h and 0 <= col < w else outside
             acc += v
-            if keep < nb:
+            if len(scores):
                 scores[i, b] = v
         out[i] = acc if keep >= nb else np.sort(scores[i])[nb - keep :].sum()
     return out
@@ -115,9 +135,12 @@ class BeamModel:
         """Ranges (P, n) m to the first occupied cell along ``angles`` (sensor frame) from each particle."""
         return expected_ranges(self.map, particles, sensor, angles, self.range_max)
 
-    def log_likelihood(self, particles: np.ndarray, scan: Scan, best: float = 1.0) -> tuple[np.ndarray, int]:
+    def log_likelihood(self, particles: np.ndarray, scan: Scan, best: float = 1.0, skip: float = 0.0,
+                       voters: int | None = None) -> tuple[np.ndarray, int]:
         """Log-likelihood (P,) of ``scan`` at ``particles`` (P, 3), and the number of beams it counts
-        (with ``best`` < 1 that share of them, the best-scoring at each particle)."""
+        (with ``best`` < 1 that share of them, the best-scoring at each particle; with ``skip`` > 0 those
+        that more than that share of the first ``voters`` particles read within beam_skip_distance of
+        the expected range)."""
         ranges, angles = select_beams(scan, self.cfg.beams, skip_max=False)
         if len(ranges) == 0:
             return np.zeros(len(particles)), 0
@@ -126,6 +149,9 @@ class BeamModel:
         n = kept_beams(len(ranges), best)
         if n < p.shape[1]:
             p = np.sort(p, axis=1)[:, p.shape[1] - n :]
+        elif skip > 0:
+            p = p[:, counted_beams(np.abs(ranges - expected[:voters]) < self.cfg.beam_skip_distance, skip)]
+            n = p.shape[1]
         floor, weight = self.cfg.z_rand / self.range_max, self.cfg.beam_weight  # every beam missed
         if self.cfg.combine == "amcl":
             ll, worst = np.log1p((p**3).sum(axis=1)), math.log1p(n * floor**3)

@@ -186,6 +186,7 @@ def metrics_of(stream: Stream, track: Track, pf) -> dict[str, Any]:
         "particles_median": float(np.median(track.particles)),
         "particles_median_converged": float(np.median(track.particles[after])) if after.any() else None,
         "update_ms_median": float(np.median(track.update_ms)) if len(track.update_ms) else None,
+        "beams_skipped_share": float(pf.sharp_beams[1] / pf.sharp_beams[0]) if pf.sharp_beams[0] else 0.0,
         "travelled_m": float(stream.travelled[-1]),
         "kidnaps": [],
     }
