@@ -101,7 +101,7 @@ def test_a_pose_inside_a_wall_scores_as_every_beam_missing():
 def test_an_obstacle_the_map_lacks_pulls_no_particle_with_beam_skipping():
     """A panel stands 1.4 m before a room's far wall and the map lacks it. Without beam skipping the
     particles 1.4 m further on, which put its readings on that wall, outweigh the truth; with it those
-    readings count for no particle (few particles end them near a wall), and the truth weighs the same."""
+    readings count for no particle (few particles end them near a wall), and the truth leads (by 2-4 log units)."""
     occupied = np.zeros((60, 100), bool)  # a 5 m x 3 m room, walls one cell thick
     occupied[0] = occupied[-1] = occupied[:, 0] = occupied[:, -1] = True
     known = KnownMap(occupied, ~occupied, 0.05, (0.0, 0.0))
