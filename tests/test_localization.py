@@ -21,6 +21,7 @@ from slam2d.localization import (
     mcl,
     sweep,
 )
+from slam2d.localization.clusters import with_floors
 from slam2d.localization.mcl import sample_motion
 from slam2d.localization.scenario import (
     Track,
@@ -148,6 +149,19 @@ def test_beam_skipping_counts_the_beams_most_particles_end_near_a_wall_or_all_of
     every = np.array([field.log_likelihood(poses, _scan_at(p[None]))[0] for p in points]).T
     keep = (every >= field.near).mean(axis=0) > 0.3
     assert counted == keep.sum() == 4 and np.allclose(ll, every[:, keep].sum(axis=1))
+
+
+def test_a_runner_up_ten_nats_behind_keeps_its_particles():
+    """After a claim (evidence 4.6-6.2 nats) the runner-up must stay until a few more updates have had their say:
+    on ACES the evidence swung by 10 nats in three updates once long beams came into view, and the true place
+    erased the update after its image was claimed could not win back. 10 nats behind it keeps its particles,
+    beyond 13.8 (hypothesis_keep) it is left to resampling."""
+    cfg, rng = MclConfig(), np.random.default_rng(0)
+    labels = np.repeat([0, 1], [150, 50])
+    for behind, kept_floor in ((10.0, True), (14.5, False)):
+        weights = np.where(labels == 0, 1.0 / 150, math.exp(-behind) / 50)
+        kept = with_floors(np.arange(150), weights, labels, cfg.hypothesis_keep, cfg.hypothesis_particles, rng)
+        assert (np.count_nonzero(labels[kept] == 1) == cfg.hypothesis_particles) == kept_floor
 
 
 @pytest.mark.parametrize("k", [2, 5, 20, 100, 1000])

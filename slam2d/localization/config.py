@@ -58,8 +58,9 @@ class MclConfig(Section):
                               "places of the map that look alike (lookalike analysis; 1 without look-alikes)")
     hypothesis_particles: int = Field(100, ge=0, le=MAX_SAMPLES, description="particles each hypothesis keeps at "
                                       "resampling (with its weight) while it holds hypothesis_keep of the best's")
-    hypothesis_keep: float = Field(1e-4, gt=0, le=1, description="weight relative to the best hypothesis below "
-                                   "which a hypothesis is left to resampling")
+    hypothesis_keep: float = Field(1e-6, gt=0, le=1, description="weight relative to the best hypothesis below "
+                                   "which a hypothesis is left to resampling (1e-6: 13.8 nats, beyond a claim's "
+                                   "threshold and the swing of a few updates)")
     lookalike_radius: float = Field(4.0, gt=0, description="m: two places look alike when the walls within this "
                                     "distance match (turns by 90° multiples and shifts)")
     lookalike_match: float = Field(0.8, gt=0, le=1, description="share of those walls that must land on walls "
