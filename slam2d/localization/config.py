@@ -108,8 +108,7 @@ def amcl_config(recovery: bool = False) -> MclConfig:
         model="likelihood_field", beams=30, z_hit=0.95, z_rand=0.05, sigma_hit=0.2, sigma_hit_uncertain=0.2,
         max_dist=2.0, combine="amcl", wall_poses=True, hypothesis_fit=False, hypotheses=False,
         beam_weight=1.0, beam_skip=0.0, global_candidates=1, recovery_candidates=1, recovery_best_beams=1.0,
-        initial_sd_xy=0.5,
-        initial_sd_theta=math.pi / 12,
+        initial_sd_xy=0.5, initial_sd_theta=math.pi / 12,
     )  # fmt: skip
 
 
