@@ -118,9 +118,8 @@ def test_an_obstacle_the_map_lacks_pulls_no_particle_with_beam_skipping():
     pulled = truth + [1.45, 0.0, 0.0] + rng.normal(0.0, [0.03, 0.03, 0.01], (20, 3))
     particles = np.concatenate([near, pulled])
     for model in ("likelihood_field", "beam"):
-        gap = {}
+        gap, sensor = {}, ParticleFilter(known, MclConfig(model=model), 12.0).sensor
         for skip in (0.0, MclConfig().beam_skip):
-            sensor = ParticleFilter(known, MclConfig(model=model, beam_skip=skip), 12.0).sensor
             ll = sensor.log_likelihood(particles, scan, skip=skip)[0]
             gap[skip] = np.median(ll[200:]) - np.median(ll[:200])
         assert gap[0.0] > 2.0, model  # the panel's readings pull the particles onto the far wall
